@@ -1,0 +1,1 @@
+"""esc layer; see docs/architecture.md."""

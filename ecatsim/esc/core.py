@@ -1,0 +1,816 @@
+"""The emulated TMC8460 EtherCAT Slave Controller: memory, access rules and side effects.
+
+ECAT face: ``ecat_read``/``ecat_read_or``/``ecat_write``/``ecat_logical`` patch a datagram's
+data in place and return the slave's working-counter increment. PDI face: see
+``ecatsim.esc.pdi``. Access rights, reset values and side effects come from the register
+table (``ecatsim/spec/registers.yaml``); side effects are methods named after the table's
+``side_effect`` column: ``_ew_<name>`` (ECAT write), ``_er_<name>`` (ECAT read),
+``_pw_<name>`` (PDI write) and ``_pr_<name>`` (PDI read).
+
+Ref: TMC8460 §4, §5; ETG.1000.4 §6 (DL services and ESC memory).
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import cache
+from typing import TYPE_CHECKING
+
+from ecatsim.esc import regs
+from ecatsim.esc.dc import DcUnit
+from ecatsim.esc.eeprom import EepromUnit
+from ecatsim.esc.fmmu import FmmuMap, compile_fmmus, copy_bits
+from ecatsim.esc.sm import SyncManager
+from ecatsim.esc.watchdog import Watchdog
+from ecatsim.spec.tables import load_registers
+from ecatsim.wire.datagram import Cmd
+
+if TYPE_CHECKING:
+    from ecatsim.spec.tables import Register
+
+_U16 = struct.Struct("<H")
+_U32 = struct.Struct("<I")
+
+#: Side effects whose registers need no hook: the value is maintained by the unit that
+#: owns it, or the function is absent on the TMC8460-BI (masks make it reserved).
+PASSIVE_SIDE_EFFECTS = frozenset(
+    {
+        "write_protect",  # not available with TMC8460-BI (§5.11-5.14)
+        "rw_offset",  # not available with TMC8460-BI (§5.18)
+        "led_override",  # not available with TMC8460-BI (§5.23, 5.24)
+        "al_status_code",  # plain PDI-written value (§5.22)
+        "ecat_event_request",  # maintained by the event logic (§5.31)
+        "al_event_request",  # maintained by the event logic (§5.32)
+        "sm_status",  # maintained by the SyncManager (§5.49 Table 89)
+        "mii_management",  # no PHY management emulated; masks only (§5.46)
+        "dc_system_time_difference",  # maintained by the time loop (§5.50.2 Table 98)
+        "dc_speed_counter_diff",  # maintained by the time loop (Table 100)
+        "dc_latch_mode",  # plain value (Table 103)
+        "dc_next_sync1",  # maintained by the SYNC unit (Table 111)
+        "dc_latch_status",  # maintained by the latch unit (Tables 116, 117)
+        "dc_event_time",  # maintained by the SM event-time logic (§5.50.6)
+        "mfcio_parameter_ram",  # plain RAM until the MFCIO block lands (§5.47)
+        "user_ram",  # plain RAM (§5.52)
+    }
+)
+
+Hook = Callable[["Esc", int, int, bytes], None]
+ReadHook = Callable[["Esc", int, int], None]
+
+
+class FrameContext:
+    """Per-segment state shared by all ESCs: the frame being processed and dirty flags."""
+
+    __slots__ = ("addr_dirty", "frame_no", "irq_dirty", "logical_dirty", "pending", "t_ns",
+                 "topology_dirty", "flush")
+
+    def __init__(self) -> None:
+        self.frame_no = 0
+        self.t_ns = 0
+        self.irq_dirty = True
+        self.addr_dirty = True
+        self.logical_dirty = True
+        self.topology_dirty = True
+        #: positions of ESCs whose PDI interrupt line (AL event & mask) is raised
+        self.pending: set[int] = set()
+        #: positions of ESCs with an EEPROM image to persist
+        self.flush: set[int] = set()
+
+
+@dataclass(frozen=True, slots=True)
+class _Tables:
+    ecat_wmask: bytes
+    pdi_wmask: bytes
+    ecat_w_hooked: bytes
+    ecat_r_hooked: bytes
+    pdi_w_hooked: bytes
+    pdi_r_hooked: bytes
+    ecat_w: tuple[tuple[Hook, int, int] | None, ...]
+    ecat_r: tuple[tuple[ReadHook, int, int] | None, ...]
+    pdi_w: tuple[tuple[Hook, int, int] | None, ...]
+    pdi_r: tuple[tuple[ReadHook, int, int] | None, ...]
+    resets: tuple[tuple[int, int, int], ...]
+
+
+def _mask_bytes(rows: tuple[Register, ...], attr: str) -> bytes:
+    out = bytearray(regs.REGISTER_END)
+    for r in rows:
+        if not r.available:
+            continue
+        m = getattr(r, attr)
+        out[r.addr : r.addr + r.size] = m.to_bytes(r.size, "little")
+    return bytes(out)
+
+
+@cache
+def tables() -> _Tables:
+    """Compile the register table into byte masks and per-address hook lists (once)."""
+    rows = load_registers()
+    maps: dict[str, list[tuple[object, int, int] | None]] = {
+        k: [None] * regs.REGISTER_END for k in ("_ew_", "_er_", "_pw_", "_pr_")
+    }
+    bits = {k: bytearray(regs.REGISTER_END) for k in maps}
+    for r in rows:
+        if r.side_effect is None or not r.available:
+            continue
+        for prefix, lst in maps.items():
+            fn = getattr(Esc, prefix + r.side_effect, None)
+            if fn is None:
+                continue
+            for a in range(r.addr, r.addr + r.size):
+                lst[a] = (fn, r.addr, r.size)
+                bits[prefix][a] = 1
+    return _Tables(
+        ecat_wmask=_mask_bytes(rows, "ecat_wmask"),
+        pdi_wmask=_mask_bytes(rows, "pdi_wmask"),
+        ecat_w_hooked=bytes(bits["_ew_"]),
+        ecat_r_hooked=bytes(bits["_er_"]),
+        pdi_w_hooked=bytes(bits["_pw_"]),
+        pdi_r_hooked=bytes(bits["_pr_"]),
+        ecat_w=tuple(maps["_ew_"]),  # type: ignore[arg-type]
+        ecat_r=tuple(maps["_er_"]),  # type: ignore[arg-type]
+        pdi_w=tuple(maps["_pw_"]),  # type: ignore[arg-type]
+        pdi_r=tuple(maps["_pr_"]),  # type: ignore[arg-type]
+        resets=tuple((r.addr, r.size, r.reset) for r in rows if r.available and r.reset),
+    )
+
+
+def hook_names() -> set[str]:
+    """Side-effect names that have at least one hook method on Esc."""
+    out = set()
+    for name in dir(Esc):
+        for prefix in ("_ew_", "_er_", "_pw_", "_pr_"):
+            if name.startswith(prefix):
+                out.add(name[len(prefix) :])
+    return out
+
+
+class Esc:
+    """One TMC8460 ESC instance (64 KiB address space, 6 FMMUs, 6 SMs)."""
+
+    def __init__(
+        self,
+        position: int,
+        ctx: FrameContext,
+        sii: bytearray,
+        *,
+        dc_start_ns: int = 0,
+        dc_drift_ppm: float = 0.0,
+        dc_hop_ns: int = 500,
+    ) -> None:
+        self.position = position
+        self.ctx = ctx
+        self.mem = bytearray(0x10000)
+        self.t = tables()
+        self.sm = [SyncManager(self, n) for n in range(regs.N_SM)]
+        self.eeprom = EepromUnit(self.mem, sii, self._eeprom_written)
+        self.dc = DcUnit(
+            self.mem, position, start_ns=dc_start_ns, drift_ppm=dc_drift_ppm, hop_ns=dc_hop_ns
+        )
+        self.wd = Watchdog(self.mem)
+        self.fmmus: tuple[FmmuMap, ...] = ()
+        self.sm_windows: tuple[tuple[int, int, SyncManager], ...] = ()
+        self.pdram_ok = False
+        self.slaves_behind = 0
+        self.port1_closed = True
+        self.al_control_locked = False
+        self.reset_progress_frame = -1
+        self.ecat_irq = 0
+        #: byte range [wr_s, wr_e) of the register write being processed (for hooks)
+        self.wr_s = 0
+        self.wr_e = 0
+        self._scratch = bytearray(2048)
+        #: called after a hardware reset ('RES' sequence or power cycle); set by the slave
+        self.on_reset: Callable[[], None] | None = None
+        self.power_on()
+
+    # ================================================================ reset / load
+
+    def power_on(self) -> None:
+        """Power-on reset: registers to reset values, SMs/FMMUs off, EEPROM loaded.
+
+        Ref: TMC8460 §5 reset value columns; §5.45 (EEPROM loaded after reset).
+        """
+        m = self.mem
+        m[:] = bytes(0x10000)
+        for addr, size, value in self.t.resets:
+            m[addr : addr + size] = value.to_bytes(size, "little")
+        for s in self.sm:
+            s.configure(0, 0, 0, False)
+        self.fmmus = ()
+        self.sm_windows = ()
+        self.al_control_locked = False
+        self.wd.deadline_ns = 0
+        self.wd.reconfigure()
+        m[regs.WD_STATUS_PD] &= 0xFE  # "expired" until first triggered (reset value 0)
+        self.pdram_ok = self.eeprom.load(first=True)
+        if self.pdram_ok:
+            m[regs.DL_STATUS] |= 0x02  # PDI watchdog reloaded: the firmware is running
+        self.update_dl_status()
+        self.ctx.addr_dirty = self.ctx.logical_dirty = self.ctx.irq_dirty = True
+        self.ctx.topology_dirty = True
+        self.ctx.pending.discard(self.position)
+        self.ecat_irq = 0
+
+    def _eeprom_written(self) -> None:
+        self.ctx.flush.add(self.position)
+
+    # ================================================================ topology
+
+    def set_topology(self, slaves_behind: int) -> None:
+        """Record how many slaves are connected behind port 1 (0: port 1 has no link)."""
+        self.slaves_behind = slaves_behind
+        self.update_dl_status()
+
+    def update_dl_status(self) -> None:
+        """Compute 0x0110:0x0111 from links and the loop settings in 0x0100.
+
+        Port 0 faces the master and always has a link; port 1 has a link if a slave is
+        behind it; ports 2 and 3 are not implemented (closed, no link).
+        Ref: TMC8460 §5.19 Tables 30, 31; §5.17 Table 28 bits 8-15.
+        """
+        m = self.mem
+        loop = m[regs.DL_CONTROL + 1]
+        link1 = self.slaves_behind > 0
+        lo = m[regs.DL_STATUS] & 0x07
+        lo |= 0x10 | (0x20 if link1 else 0)
+        hi = 0x50  # ports 2 and 3: closed, no communication
+        # port 0
+        p0 = loop & 0x03
+        closed0 = p0 == 0x03
+        hi |= 0x01 if closed0 else 0x02
+        p1 = (loop >> 2) & 0x03
+        closed1 = p1 == 0x03 or (p1 in (0, 1) and not link1)
+        if p1 == 0x02 and not link1:
+            closed1 = False
+        hi |= 0x04 if closed1 else (0x08 if link1 else 0x00)
+        old = m[regs.DL_STATUS] | (m[regs.DL_STATUS + 1] << 8)
+        m[regs.DL_STATUS] = lo
+        m[regs.DL_STATUS + 1] = hi
+        self.port1_closed = closed1
+        if old != (lo | (hi << 8)):
+            self._set_ecat_event(regs.ECAT_EV_DL_STATUS)
+            self.ctx.topology_dirty = True
+
+    # ================================================================ events
+
+    def _set_ecat_event(self, bits: int) -> None:
+        m = self.mem
+        v = m[regs.ECAT_EVENT_REQUEST] | (m[regs.ECAT_EVENT_REQUEST + 1] << 8)
+        if (v | bits) != v:
+            _U16.pack_into(m, regs.ECAT_EVENT_REQUEST, v | bits)
+            self._irq_update()
+
+    def _clr_ecat_event(self, bits: int) -> None:
+        m = self.mem
+        v = m[regs.ECAT_EVENT_REQUEST] | (m[regs.ECAT_EVENT_REQUEST + 1] << 8)
+        if v & bits:
+            _U16.pack_into(m, regs.ECAT_EVENT_REQUEST, v & ~bits)
+            self._irq_update()
+
+    def _irq_update(self) -> None:
+        """IRQ field contribution: ECAT event request AND ECAT event mask. Ref: §5.29, 5.31."""
+        m = self.mem
+        req = m[regs.ECAT_EVENT_REQUEST] | (m[regs.ECAT_EVENT_REQUEST + 1] << 8)
+        mask = m[regs.ECAT_EVENT_MASK] | (m[regs.ECAT_EVENT_MASK + 1] << 8)
+        irq = req & mask
+        if irq != self.ecat_irq:
+            self.ecat_irq = irq
+            self.ctx.irq_dirty = True
+
+    def al_event(self) -> int:
+        return int(_U32.unpack_from(self.mem, regs.AL_EVENT_REQUEST)[0])
+
+    def set_al_event(self, bits: int) -> None:
+        """Raise AL event request bits (the PDI interrupt source). Ref: §5.32 Table 46."""
+        v = self.al_event()
+        _U32.pack_into(self.mem, regs.AL_EVENT_REQUEST, v | bits)
+        self._pdi_irq_update()
+
+    def clr_al_event(self, bits: int) -> None:
+        v = self.al_event()
+        if v & bits:
+            _U32.pack_into(self.mem, regs.AL_EVENT_REQUEST, v & ~bits)
+            self._pdi_irq_update()
+
+    def _pdi_irq_update(self) -> None:
+        mask = int(_U32.unpack_from(self.mem, regs.AL_EVENT_MASK)[0])
+        if self.al_event() & mask:
+            self.ctx.pending.add(self.position)
+        else:
+            self.ctx.pending.discard(self.position)
+
+    def sm_status_changed(self, sm: SyncManager) -> None:
+        """Mirror an SM's interrupt bits into 0x0210 bit 4+n and 0x0220 bit 8+n.
+
+        The write interrupt goes to the reading side, the read interrupt to the writing
+        side, each if enabled in the SM control register. Ref: §5.49 Tables 88, 89.
+        """
+        st = sm.status
+        if sm.ecat_side_writes:
+            to_pdi = st & regs.SM_ST_IRQ_WRITE
+            to_ecat = st & regs.SM_ST_IRQ_READ
+        else:
+            to_pdi = st & regs.SM_ST_IRQ_READ
+            to_ecat = st & regs.SM_ST_IRQ_WRITE
+        ebit = regs.ECAT_EV_SM0 << sm.n
+        abit = regs.EV_SM0 << sm.n
+        if to_ecat and sm.control & regs.SM_CTRL_ECAT_IRQ:
+            self._set_ecat_event(ebit)
+        else:
+            self._clr_ecat_event(ebit)
+        if to_pdi and sm.control & regs.SM_CTRL_PDI_IRQ:
+            self.set_al_event(abit)
+        else:
+            self.clr_al_event(abit)
+
+    def wd_pd_trigger(self) -> None:
+        self.wd.trigger(self.ctx.t_ns)
+
+    def check_timers(self, now_ns: int) -> None:
+        """Run the watchdog; on expiry raise AL event 0x0220.6. Ref: §5.32, §5.42."""
+        if self.wd.deadline_ns and self.wd.expired(now_ns):
+            self.set_al_event(regs.EV_WATCHDOG_PD)
+
+    # ================================================================ ECAT face
+
+    def ecat_read(self, ado: int, out: memoryview) -> int:
+        """Physical read into ``out``; returns the WKC increment (0 or 1)."""
+        end = ado + len(out)
+        for ws, we, _sm in self.sm_windows:
+            if ws < end and ado < we:
+                return self._ecat_read_sm(ado, out)
+        return 1 if self._plain_read(ado, out) else 0
+
+    def ecat_read_or(self, ado: int, data: memoryview) -> int:
+        """Broadcast read: the read data is ORed into the datagram. Ref: ETG.1000.4 §5.4.3."""
+        n = len(data)
+        tmp = memoryview(self._scratch)[:n]
+        if not self.ecat_read(ado, tmp):
+            return 0
+        data[:] = (int.from_bytes(data, "little") | int.from_bytes(tmp, "little")).to_bytes(
+            n, "little"
+        )
+        return 1
+
+    def ecat_write(self, ado: int, data: memoryview) -> int:
+        """Physical write from ``data``; returns the WKC increment (0 or 1)."""
+        end = ado + len(data)
+        for ws, we, _sm in self.sm_windows:
+            if ws < end and ado < we:
+                return self._ecat_write_sm(ado, data)
+        return 1 if self._plain_write(ado, data) else 0
+
+    def ecat_logical(self, cmd: int, lad: int, data: memoryview) -> int:
+        """LRD/LWR/LRW through the FMMUs; returns the WKC increment.
+
+        Writes use the datagram data as received, then reads overlay it. WKC: +1 for a
+        read, +1 (LWR) or +2 (LRW) for a write, per slave. Ref: ETG.1000.4 §5.4.3 Table 12;
+        TMC8460 §5.48.
+        """
+        n = len(data)
+        lo = lad * 8
+        hi = lo + n * 8
+        wr = rd = False
+        if cmd != Cmd.LRD:
+            for f in self.fmmus:
+                if f.write and f.lbit < hi and lo < f.lend and self._fmmu_xfer(f, lad, data, True):
+                    wr = True
+        if cmd != Cmd.LWR:
+            for f in self.fmmus:
+                if f.read and f.lbit < hi and lo < f.lend and self._fmmu_xfer(f, lad, data, False):
+                    rd = True
+        if cmd == Cmd.LRW:
+            return (1 if rd else 0) + (2 if wr else 0)
+        return 1 if (rd or wr) else 0
+
+    def _fmmu_xfer(self, f: FmmuMap, lad: int, data: memoryview, write: bool) -> bool:
+        n = len(data)
+        if f.aligned:
+            lo = max(lad, f.lstart)
+            hi = min(lad + n, f.lstop)
+            phys = f.pstart + (lo - f.lstart)
+            view = data[lo - lad : hi - lad]
+            if write:
+                return bool(self.ecat_write(phys, view))
+            return bool(self.ecat_read(phys, view))
+        b0 = max(lad * 8, f.lbit)
+        b1 = min((lad + n) * 8, f.lend)
+        nb = b1 - b0
+        pb = f.pbit + (b0 - f.lbit)
+        ps = pb >> 3
+        pe = (pb + nb + 7) >> 3
+        fb = b0 - lad * 8
+        if write:
+            cur = bytearray(self.peek(ps, pe - ps))
+            copy_bits(data, fb, cur, pb - ps * 8, nb)
+            return bool(self.ecat_write(ps, memoryview(cur)))
+        tmp = bytearray(pe - ps)
+        if not self.ecat_read(ps, memoryview(tmp)):
+            return False
+        copy_bits(tmp, pb - ps * 8, data, fb, nb)
+        return True
+
+    def peek(self, addr: int, n: int) -> bytes:
+        """Effective memory content without side effects (SM windows redirected)."""
+        for ws, we, sm in self.sm_windows:
+            if ws <= addr and addr + n <= we:
+                return sm.peek(addr - ws, n)
+        return bytes(self.mem[addr : addr + n])
+
+    # -- SM windows ------------------------------------------------------------------
+
+    def _hits(self, ado: int, end: int) -> list[tuple[int, int, SyncManager]]:
+        return [w for w in self.sm_windows if w[0] < end and ado < w[1]]
+
+    def _ecat_write_sm(self, ado: int, data: memoryview) -> int:
+        end = ado + len(data)
+        hits = self._hits(ado, end)
+        for _ws, _we, sm in hits:
+            if not sm.ecat_may_write():
+                return 0
+        pos = ado
+        ok = True
+        for ws, we, sm in hits:
+            if pos < ws:
+                ok &= self._plain_write(pos, data[pos - ado : ws - ado])
+            s = max(pos, ws)
+            e = min(end, we)
+            if s < e:
+                sm.ecat_write(s - ws, data[s - ado : e - ado])
+                pos = e
+        if pos < end:
+            ok &= self._plain_write(pos, data[pos - ado :])
+        return 1 if ok else 0
+
+    def _ecat_read_sm(self, ado: int, out: memoryview) -> int:
+        end = ado + len(out)
+        hits = self._hits(ado, end)
+        for _ws, _we, sm in hits:
+            if not sm.ecat_may_read():
+                return 0
+        pos = ado
+        ok = True
+        for ws, we, sm in hits:
+            if pos < ws:
+                ok &= self._plain_read(pos, out[pos - ado : ws - ado])
+            s = max(pos, ws)
+            e = min(end, we)
+            if s < e:
+                sm.ecat_read(s - ws, out[s - ado : e - ado])
+                pos = e
+        if pos < end:
+            ok &= self._plain_read(pos, out[pos - ado :])
+        return 1 if ok else 0
+
+    def _compile_sm_windows(self) -> None:
+        wins = []
+        for sm in self.sm:
+            w = sm.window()
+            if w is not None:
+                wins.append((w[0], w[1], sm))
+        wins.sort(key=lambda x: x[0])
+        self.sm_windows = tuple(wins)
+
+    # -- plain memory ------------------------------------------------------------------
+
+    def _plain_write(self, ado: int, data: memoryview) -> bool:
+        end = ado + len(data)
+        if end <= regs.REGISTER_END:
+            self._reg_write(ado, data)
+            return True
+        if ado < regs.REGISTER_END:
+            self._reg_write(ado, data[: regs.REGISTER_END - ado])
+            data = data[regs.REGISTER_END - ado :]
+            ado = regs.REGISTER_END
+        if not self.pdram_ok:
+            return False
+        e = min(end, regs.PDRAM_END)
+        if e > ado:
+            self.mem[ado:e] = data[: e - ado]
+        return True
+
+    def _plain_read(self, ado: int, out: memoryview) -> bool:
+        end = ado + len(out)
+        if end <= regs.REGISTER_END:
+            self._reg_read(ado, out)
+            return True
+        if ado < regs.REGISTER_END:
+            self._reg_read(ado, out[: regs.REGISTER_END - ado])
+            out = out[regs.REGISTER_END - ado :]
+            ado = regs.REGISTER_END
+        if not self.pdram_ok:
+            return False
+        e = min(end, regs.PDRAM_END)
+        if e > ado:
+            out[: e - ado] = self.mem[ado:e]
+        if end > e:
+            out[max(e, ado) - ado :] = bytes(end - max(e, ado))
+        return True
+
+    def _reg_write(self, s: int, data: memoryview) -> None:
+        """Masked register write, then the side-effect hooks of the registers touched."""
+        e = s + len(data)
+        t = self.t
+        mem = self.mem
+        old = bytes(mem[s:e])
+        mi = int.from_bytes(t.ecat_wmask[s:e], "little")
+        if mi:
+            oi = int.from_bytes(old, "little")
+            ni = int.from_bytes(data, "little")
+            mem[s:e] = ((oi & ~mi) | (ni & mi)).to_bytes(e - s, "little")
+        self.wr_s = s
+        self.wr_e = e
+        i = t.ecat_w_hooked.find(1, s, e)
+        while i >= 0:
+            entry = t.ecat_w[i]
+            if entry is None:  # pragma: no cover - bitmap and list are built together
+                break
+            fn, ra, rs = entry
+            fn(self, ra, rs, self.old_reg(ra, rs, old, s))
+            i = t.ecat_w_hooked.find(1, ra + rs, e) if ra + rs < e else -1
+
+    def _reg_read(self, s: int, out: memoryview) -> None:
+        e = s + len(out)
+        t = self.t
+        i = t.ecat_r_hooked.find(1, s, e)
+        while i >= 0:
+            entry = t.ecat_r[i]
+            if entry is None:  # pragma: no cover
+                break
+            fn, ra, rs = entry
+            fn(self, ra, rs)
+            i = t.ecat_r_hooked.find(1, ra + rs, e) if ra + rs < e else -1
+        out[:] = self.mem[s:e]
+
+    def old_reg(self, ra: int, rs: int, old: bytes, s: int) -> bytes:
+        """The register's value before the write (bytes outside the write are unchanged)."""
+        lo = max(ra, s)
+        hi = min(ra + rs, s + len(old))
+        return bytes(self.mem[ra:lo]) + old[lo - s : hi - s] + bytes(self.mem[hi : ra + rs])
+
+    # ================================================================ ECAT-side hooks
+
+    def _ew_station_address(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.9: the configured station address used by FPxx commands."""
+        self.ctx.addr_dirty = True
+
+    def _pw_station_alias(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.10: alias written by the PDI, active with 0x0100.24."""
+        self.ctx.addr_dirty = True
+
+    def _ew_reset_ecat(self, ra: int, rs: int, old: bytes) -> None:
+        """'R','E','S' in three consecutive frames resets the ESC. Ref: TMC8460 §5.15."""
+        v = self.mem[ra]
+        prog = old[0] & 0x03
+        f = self.ctx.frame_no
+        consecutive = f == self.reset_progress_frame + 1
+        if v == 0x52:
+            self.mem[ra] = 0x01
+        elif v == 0x45 and prog == 0x01 and consecutive:
+            self.mem[ra] = 0x02
+        elif v == 0x53 and prog == 0x02 and consecutive:
+            self.hardware_reset()
+            return
+        else:
+            self.mem[ra] = 0x00
+        self.reset_progress_frame = f
+
+    def hardware_reset(self) -> None:
+        """Reset the ESC (and, through on_reset, the application behind the PDI)."""
+        self.power_on()
+        self._compile_sm_windows()
+        if self.on_reset is not None:
+            self.on_reset()
+
+    def _ew_dl_control(self, ra: int, rs: int, old: bytes) -> None:
+        """Loop settings change DL status; bit 24 enables the alias. Ref: TMC8460 §5.17."""
+        self.update_dl_status()
+        self.ctx.topology_dirty = True
+        self.ctx.addr_dirty = True
+
+    def _er_dl_status(self, ra: int, rs: int) -> None:
+        """Reading DL status clears ECAT event 0x0210.2. Ref: TMC8460 §5.19 note *."""
+        self._clr_ecat_event(regs.ECAT_EV_DL_STATUS)
+
+    def _ew_al_control(self, ra: int, rs: int, old: bytes) -> None:
+        """AL control: copied to AL status in device emulation, else an AL event to the PDI
+        that locks the register until the PDI reads it. Ref: TMC8460 §5.20, §5.26 bit 0."""
+        m = self.mem
+        if m[regs.ESC_CONFIG] & 0x01:
+            new = m[ra] | (m[ra + 1] << 8)
+            st = m[regs.AL_STATUS] | (m[regs.AL_STATUS + 1] << 8)
+            self.set_al_status((st & ~0x3F) | (new & 0x2F))
+            return
+        if self.al_control_locked:
+            m[ra : ra + rs] = old
+            return
+        self.al_control_locked = True
+        self.set_al_event(regs.EV_AL_CONTROL)
+
+    def set_al_status(self, value: int) -> None:
+        """Write AL status; a change raises ECAT event 0x0210.3. Ref: TMC8460 §5.21, §5.31."""
+        m = self.mem
+        old = m[regs.AL_STATUS] | (m[regs.AL_STATUS + 1] << 8)
+        _U16.pack_into(m, regs.AL_STATUS, value & 0xFFFF)
+        if old != value:
+            self._set_ecat_event(regs.ECAT_EV_AL_STATUS)
+
+    def _er_al_status(self, ra: int, rs: int) -> None:
+        """Reading AL status clears ECAT event 0x0210.3. Ref: TMC8460 §5.21 note *."""
+        self._clr_ecat_event(regs.ECAT_EV_AL_STATUS)
+
+    def _ew_ecat_event_mask(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.29 (mask for the IRQ field)."""
+        self._irq_update()
+
+    def _ew_rx_error_counter(self, ra: int, rs: int, old: bytes) -> None:
+        """Writing any RX error counter clears 0x0300-0x030B. Ref: TMC8460 §5.33, §5.34."""
+        self.mem[regs.RX_ERROR_COUNTER : regs.ECAT_PU_ERROR_COUNTER] = bytes(12)
+
+    def _ew_ecat_pu_error_counter(self, ra: int, rs: int, old: bytes) -> None:
+        """Writing 0x030C clears it. Ref: TMC8460 §5.35."""
+        self.mem[regs.ECAT_PU_ERROR_COUNTER] = 0
+
+    def _ew_pdi_error_counter(self, ra: int, rs: int, old: bytes) -> None:
+        """Writing 0x030D clears it and 0x030E. Ref: TMC8460 §5.36, §5.37."""
+        self.mem[regs.PDI_ERROR_COUNTER] = 0
+        self.mem[regs.PDI_ERROR_CODE] = 0
+
+    def _ew_lost_link_counter(self, ra: int, rs: int, old: bytes) -> None:
+        """Writing any lost link counter clears 0x0310-0x0313. Ref: TMC8460 §5.38."""
+        self.mem[regs.LOST_LINK_COUNTER : regs.LOST_LINK_COUNTER + 4] = bytes(4)
+
+    def _ew_wd_divider(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.39."""
+        self.wd.reconfigure()
+
+    def _ew_wd_time_pdi(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.40 (the PDI watchdog is kept reloaded by the firmware)."""
+
+    def _ew_wd_time_pd(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.41."""
+        self.wd.reconfigure()
+
+    def _pr_wd_status_pd(self, ra: int, rs: int) -> None:
+        """PDI read of 0x0440 clears AL event 0x0220.6. Ref: TMC8460 §5.42 note *."""
+        self.clr_al_event(regs.EV_WATCHDOG_PD)
+
+    def _ew_wd_counter(self, ra: int, rs: int, old: bytes) -> None:
+        """Writing either watchdog counter clears both. Ref: TMC8460 §5.43, §5.44."""
+        self.mem[regs.WD_COUNTER_PD] = 0
+        self.mem[regs.WD_COUNTER_PDI] = 0
+
+    def _ew_eeprom_config(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.45 Table 60."""
+        self.eeprom.ecat_config_written()
+
+    def _pw_eeprom_pdi_access(self, ra: int, rs: int, old: bytes) -> None:
+        """PDI may take the EEPROM only if offered (0x0500.0=1, .1=0). Ref: Table 61."""
+        cfg = self.mem[regs.EEPROM_CONFIG]
+        if not (cfg & 0x01) or cfg & 0x02:
+            self.mem[ra] = old[0]
+
+    def _ew_eeprom_control(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.45 Table 62."""
+        o = old[0] | (old[1] << 8)
+        wrote_cmd = self.wr_s <= ra + 1 < self.wr_e
+        self.eeprom.ecat_control_written(o, self.ctx.frame_no, wrote_cmd)
+
+    def _er_eeprom_control(self, ra: int, rs: int) -> None:
+        """Ref: TMC8460 §5.45 Table 62 note * (write enable self-clears)."""
+        self.eeprom.ecat_refresh_status(self.ctx.frame_no)
+
+    def _ew_eeprom_address(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.45 Table 63."""
+        self.eeprom.ecat_data_written(ra, old)
+
+    def _ew_eeprom_data(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.45 Table 64."""
+        self.eeprom.ecat_data_written(ra, old)
+
+    def _ew_fmmu(self, ra: int, rs: int, old: bytes) -> None:
+        """Recompile the FMMU maps when any FMMU register changes. Ref: TMC8460 §5.48."""
+        self.fmmus = compile_fmmus(self.mem)
+        self.ctx.logical_dirty = True
+
+    def _ew_sm_config(self, ra: int, rs: int, old: bytes) -> None:
+        """SM start/length/control are writable only while the SM is disabled.
+        Ref: TMC8460 §5.49 Tables 86-88 note r/(w)."""
+        n = (ra - regs.SM_BASE) // regs.SM_STRIDE
+        if self.mem[regs.sm_addr(n, 6)] & 0x01:
+            self.mem[ra : ra + rs] = old
+
+    def _ew_sm_activate(self, ra: int, rs: int, old: bytes) -> None:
+        """Enable/disable an SM, repeat request; a change raises AL event 0x0220.4.
+        Ref: TMC8460 §5.49 Table 90, §5.32 bit 4."""
+        n = (ra - regs.SM_BASE) // regs.SM_STRIDE
+        new = self.mem[ra]
+        if (new ^ old[0]) & 0x01:
+            self._sm_restart(n)
+        if new != old[0]:
+            self.set_al_event(regs.EV_SM_ACTIVATION)
+
+    def _sm_restart(self, n: int) -> None:
+        m = self.mem
+        base = regs.sm_addr(n)
+        start, length = struct.unpack_from("<HH", m, base)
+        control = m[base + 4]
+        self.sm[n].configure(
+            start, length, control, bool(m[base + 6] & 0x01), bool(m[base + 7] & 0x01)
+        )
+        self._compile_sm_windows()
+
+    def _pr_sm_activate(self, ra: int, rs: int) -> None:
+        """PDI read of an activation register clears AL event 0x0220.4. Ref: Table 90 *."""
+        self.clr_al_event(regs.EV_SM_ACTIVATION)
+
+    def _pw_sm_pdi_control(self, ra: int, rs: int, old: bytes) -> None:
+        """PDI deactivate (bit 0) resets and locks the SM; bit 1 is the repeat ack.
+        Ref: TMC8460 §5.49 Table 91."""
+        n = (ra - regs.SM_BASE) // regs.SM_STRIDE
+        if (self.mem[ra] ^ old[0]) & 0x01:
+            self._sm_restart(n)
+
+    def _pr_al_control(self, ra: int, rs: int) -> None:
+        """PDI read of AL control clears AL event 0x0220.0 and unlocks the register.
+        Ref: TMC8460 §5.20 note, §5.32 bit 0."""
+        self.al_control_locked = False
+        self.clr_al_event(regs.EV_AL_CONTROL)
+
+    def _pw_al_status(self, ra: int, rs: int, old: bytes) -> None:
+        """PDI writes AL status only with device emulation off. Ref: TMC8460 §5.21 note."""
+        m = self.mem
+        if m[regs.ESC_CONFIG] & 0x01:
+            m[ra : ra + rs] = old
+            return
+        if bytes(m[ra : ra + rs]) != old:
+            self._set_ecat_event(regs.ECAT_EV_AL_STATUS)
+
+    def _pw_al_event_mask(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.30 (mask for the PDI interrupt)."""
+        self._pdi_irq_update()
+
+    def _ew_dc_receive_time(self, ra: int, rs: int, old: bytes) -> None:
+        """A write to 0x0900 latches the receive times. Ref: TMC8460 §5.50.1 Table 92."""
+        if ra == regs.DC_RECV_TIME_P0:
+            self.dc.latch_receive_times(self.ctx.t_ns, self.slaves_behind)
+        else:
+            self.mem[ra : ra + rs] = old
+
+    def _er_dc_system_time(self, ra: int, rs: int) -> None:
+        """ECAT read of 0x0910: system time at the frame's SOF. Ref: §5.50.2 Table 95."""
+        self.dc.refresh_system_time(self.ctx.t_ns)
+
+    def _ew_dc_system_time(self, ra: int, rs: int, old: bytes) -> None:
+        """ECAT write of 0x0910 feeds the time control loop. Ref: §5.50.2 Table 95."""
+        value = int.from_bytes(self.mem[ra : ra + rs], "little")
+        nbytes = 8 if self.wr_e >= ra + 8 else 4
+        if self.wr_s > ra:
+            return  # compared only if at least the first byte was written
+        self.dc.system_time_written(self.ctx.t_ns, value, nbytes)
+        self.dc.refresh_system_time(self.ctx.t_ns)
+
+    def _ew_dc_system_time_offset(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.50.2 Table 96."""
+
+    def _ew_dc_system_time_delay(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.50.2 Table 97."""
+
+    def _ew_dc_speed_counter_start(self, ra: int, rs: int, old: bytes) -> None:
+        """Writing 0x0930 resets 0x092C and 0x0932. Ref: TMC8460 §5.50.2 Table 99."""
+        self.dc.reset_filters()
+
+    def _ew_dc_filter_depth(self, ra: int, rs: int, old: bytes) -> None:
+        """Writing 0x0934 resets 0x092C. Ref: TMC8460 §5.50.2 Tables 101, 102."""
+        self.dc.reset_filters()
+
+    def _ew_dc_cyclic_unit_control(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.50.3 Table 104."""
+
+    def _ew_dc_activation(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.50.4 Table 105 (bit 7 self-clearing)."""
+        self.mem[ra] &= 0x7F
+
+    def _pr_dc_sync_status(self, ra: int, rs: int) -> None:
+        """PDI read of 0x098E/0x098F clears AL event 0x0220.2/.3. Ref: Tables 108, 109."""
+        self.clr_al_event(regs.EV_SYNC0 if ra == regs.DC_SYNC0_STATUS else regs.EV_SYNC1)
+
+    def _ew_dc_start_time(self, ra: int, rs: int, old: bytes) -> None:
+        """Start time is writable only while the SYNC unit is off. Ref: Table 110."""
+        if self.mem[regs.DC_ACTIVATION] & 0x01:
+            self.mem[ra : ra + rs] = old
+
+    def _ew_dc_cycle_time(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.50.4 Tables 112, 113."""
+
+    def _ew_dc_latch_control(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.50.5 Tables 114, 115."""
+
+    def _er_dc_latch_time(self, ra: int, rs: int) -> None:
+        """ECAT read of a latch time clears its status flag. Ref: Tables 118-121 note."""
+        idx = (ra - regs.DC_LATCH0_POS) // 8
+        status = regs.DC_LATCH0_STATUS + (idx >> 1)
+        self.mem[status] &= ~(1 << (idx & 1)) & 0xFF

@@ -1,0 +1,175 @@
+"""SII EEPROM interface 0x0500-0x050F: ownership, command machine, load and reload.
+
+Commands complete within the frame that issues them, so the busy bit is never seen
+set by a later datagram. Ref: TMC8460 §5.45 Tables 59-65, §3.7; ETG.2010 (SII layout).
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Callable
+
+from ecatsim.esc import regs
+from ecatsim.sii.crc import crc8
+
+_U16 = struct.Struct("<H")
+_U32 = struct.Struct("<I")
+
+CMD_MASK = 0x0700
+CMD_NOP = 0x0000
+CMD_READ = 0x0100
+CMD_WRITE = 0x0200
+CMD_RELOAD = 0x0400
+ST_WRITE_ENABLE = 0x0001
+ST_READ_8 = 0x0040
+ST_TWO_ADDR_BYTES = 0x0080
+ST_CHECKSUM_ERROR = 0x0800
+ST_NOT_LOADED = 0x1000
+ST_ACK_ERROR = 0x2000
+ST_WE_ERROR = 0x4000
+ST_BUSY = 0x8000
+
+#: ESC configuration area words copied into registers on load. Ref: ETG.2010 Table 2.
+CONFIG_WORDS = (
+    (0, regs.PDI_CONTROL),
+    (1, regs.PDI_CONFIG),
+    (2, regs.DC_PULSE_LENGTH),
+    (3, regs.PDI_CONFIG_EXT),
+)
+
+
+class EepromUnit:
+    """The ESC side of the SII EEPROM (an I2C EEPROM behind the ESC, not emulation)."""
+
+    __slots__ = ("image", "mem", "on_write", "we_frame")
+
+    def __init__(
+        self, mem: bytearray, image: bytearray, on_write: Callable[[], None] | None = None
+    ) -> None:
+        self.mem = mem
+        self.image = image
+        self.on_write = on_write
+        self.we_frame = -1
+
+    # -- helpers --------------------------------------------------------------------
+
+    def _status(self) -> int:
+        return int(_U16.unpack_from(self.mem, regs.EEPROM_CONTROL)[0])
+
+    def _set_status(self, v: int) -> None:
+        _U16.pack_into(self.mem, regs.EEPROM_CONTROL, v & 0xFFFF)
+
+    def pdi_owns(self) -> bool:
+        """PDI controls the interface if 0x0500.0 or 0x0501.0 is set. Ref: §5.45."""
+        return bool((self.mem[regs.EEPROM_CONFIG] | self.mem[regs.EEPROM_PDI_ACCESS]) & 1)
+
+    def _word(self, addr: int) -> int:
+        n = len(self.image) // 2
+        if n == 0:
+            return 0xFFFF
+        a = (addr % n) * 2
+        return self.image[a] | (self.image[a + 1] << 8)
+
+    # -- load -----------------------------------------------------------------------
+
+    def checksum_ok(self) -> bool:
+        """CRC-8 over words 0-6 must equal the low byte of word 7. Ref: ETG.2010 §2.1."""
+        img = self.image
+        return len(img) >= 16 and crc8(bytes(img[0:14])) == img[14]
+
+    def load(self, first: bool) -> bool:
+        """Load the ESC configuration area into the registers (power-on or reload).
+
+        Returns True if the checksum was good. On a checksum error nothing is taken
+        over, 0x0502.11 and .12 are set and the PD RAM stays inaccessible.
+        Ref: TMC8460 §5.45 Table 62 bits 11/12, §5.19 Table 30 bit 0, §5.10.
+        """
+        st = self._status() & ~(ST_CHECKSUM_ERROR | ST_NOT_LOADED | CMD_MASK | ST_BUSY)
+        if len(self.image) > 2048:  # more than 16 kbit: two address bytes
+            st |= ST_TWO_ADDR_BYTES
+        if not self.checksum_ok():
+            self._set_status(st | ST_CHECKSUM_ERROR | ST_NOT_LOADED)
+            self.mem[regs.DL_STATUS] &= 0xFE
+            return False
+        m = self.mem
+        for word, reg in CONFIG_WORDS:
+            v = self._word(word)
+            m[reg] = v & 0xFF
+            m[reg + 1] = v >> 8
+        _U16.pack_into(m, regs.STATION_ALIAS, self._word(4))
+        if first:
+            w5 = self._word(5)
+            fifo = ((~w5 >> 9) & 0x7) if w5 != 0xFFFF else 7
+            m[regs.DL_CONTROL + 2] = (m[regs.DL_CONTROL + 2] & 0xF8) | fifo
+        m[regs.PDI_INFORMATION] = (m[regs.PDI_INFORMATION] & ~0x0E) | 0x06  # configured, active
+        m[regs.DL_STATUS] |= 0x01
+        self._set_status(st)
+        return True
+
+    # -- ECAT command machine ---------------------------------------------------------
+
+    def ecat_config_written(self) -> None:
+        """0x0500 bit 1 forces ECAT access: clears 0x0501.0. Ref: §5.45 Table 60."""
+        if self.mem[regs.EEPROM_CONFIG] & 0x02:
+            self.mem[regs.EEPROM_PDI_ACCESS] &= 0xFE
+
+    def ecat_refresh_status(self, frame_no: int) -> None:
+        """Write enable self-clears at the start of the next frame. Ref: §5.45 Table 62 note *."""
+        if self.we_frame != frame_no:
+            self.mem[regs.EEPROM_CONTROL] &= ~ST_WRITE_ENABLE & 0xFF
+
+    def ecat_control_written(self, old: int, frame_no: int, wrote_cmd: bool) -> bool:
+        """Run the command written to 0x0502; return True if the image changed.
+
+        Ref: TMC8460 §5.45 Table 62 (commands 000/001/010/100, error bits, write enable).
+        """
+        new = self._status()
+        if self.pdi_owns():
+            self._set_status(old)
+            return False
+        if new & ST_WRITE_ENABLE:
+            self.we_frame = frame_no
+        if not wrote_cmd:
+            return False
+        cmd = new & CMD_MASK
+        st = (old & ~(CMD_MASK | ST_WRITE_ENABLE)) | (new & ST_WRITE_ENABLE)
+        changed = False
+        if cmd == CMD_NOP:
+            st &= ~(ST_ACK_ERROR | ST_WE_ERROR)
+        elif old & ST_ACK_ERROR:
+            pass  # commands are ignored while an acknowledge error is pending
+        elif cmd == CMD_READ:
+            st &= ~ST_WE_ERROR
+            addr = _U32.unpack_from(self.mem, regs.EEPROM_ADDRESS)[0]
+            m = self.mem
+            _U16.pack_into(m, regs.EEPROM_DATA, self._word(addr))
+            _U16.pack_into(m, regs.EEPROM_DATA + 2, self._word(addr + 1))
+            m[regs.EEPROM_DATA + 4 : regs.EEPROM_DATA + 8] = b"\x00\x00\x00\x00"
+        elif cmd == CMD_WRITE:
+            if self.we_frame != frame_no:
+                st |= ST_WE_ERROR
+            else:
+                st &= ~ST_WE_ERROR
+                addr = _U32.unpack_from(self.mem, regs.EEPROM_ADDRESS)[0]
+                n = len(self.image) // 2
+                if n:
+                    a = (addr % n) * 2
+                    self.image[a : a + 2] = self.mem[regs.EEPROM_DATA : regs.EEPROM_DATA + 2]
+                    changed = True
+        elif cmd == CMD_RELOAD:
+            st &= ~ST_WE_ERROR
+            self._set_status(st)
+            self.load(first=False)
+            st = self._status()
+        else:
+            st |= ST_ACK_ERROR
+        self._set_status(st)
+        if changed and self.on_write is not None:
+            self.on_write()
+        return changed
+
+    def ecat_data_written(self, reg: int, old: bytes) -> None:
+        """Address and data registers are writable by ECAT only while ECAT owns the
+        interface. Ref: §5.45 Tables 63, 64 (r/(w))."""
+        if self.pdi_owns():
+            self.mem[reg : reg + len(old)] = old

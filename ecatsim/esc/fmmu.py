@@ -1,0 +1,81 @@
+"""FMMU: logical-to-physical mapping at bit granularity, compiled when configured.
+
+Ref: TMC8460 §5.48 Tables 75-84; ETG.1000.4 §6.6 (FMMU).
+"""
+
+from __future__ import annotations
+
+import struct
+
+from ecatsim.esc import regs
+
+#: logical start u32, length u16, log start bit u8, log stop bit u8, phys start u16,
+#: phys start bit u8, type u8, activate u8.  Ref: TMC8460 §5.48 Table 75.
+FMMU_REG = struct.Struct("<IHBBHBBB")
+
+TYPE_READ = 0x01
+TYPE_WRITE = 0x02
+
+
+class FmmuMap:
+    """One active FMMU, compiled to bit addresses.
+
+    ``lbit``/``lend`` span the logical bits [lbit, lend); ``pbit`` is the physical bit
+    that the first logical bit maps to. ``aligned`` marks byte-aligned maps (fast path).
+    """
+
+    __slots__ = ("aligned", "lbit", "lend", "lstart", "lstop", "pbit", "pstart", "read", "write")
+
+    def __init__(
+        self, lstart: int, length: int, lsb: int, lstop: int, pstart: int, psb: int, typ: int
+    ) -> None:
+        self.lbit = lstart * 8 + (lsb & 7)
+        self.lend = (lstart + length - 1) * 8 + (lstop & 7) + 1
+        self.pbit = pstart * 8 + (psb & 7)
+        self.read = bool(typ & TYPE_READ)
+        self.write = bool(typ & TYPE_WRITE)
+        self.aligned = (lsb & 7) == 0 and (lstop & 7) == 7 and (psb & 7) == 0
+        self.lstart = lstart
+        self.lstop = lstart + length
+        self.pstart = pstart
+
+
+def compile_fmmus(mem: bytearray) -> tuple[FmmuMap, ...]:
+    """Compile the active FMMUs from their registers.
+
+    An FMMU is active if its activate bit is set, its length is non-zero and it maps
+    for reading or writing. Ref: TMC8460 §5.48 Tables 82, 83.
+    """
+    out: list[FmmuMap] = []
+    for n in range(regs.N_FMMU):
+        lstart, length, lsb, lstop, pstart, psb, typ, act = FMMU_REG.unpack_from(
+            mem, regs.fmmu_addr(n)
+        )
+        if not (act & 1) or length == 0 or not (typ & 3):
+            continue
+        f = FmmuMap(lstart, length, lsb, lstop, pstart, psb, typ)
+        if f.lend > f.lbit:
+            out.append(f)
+    return tuple(out)
+
+
+def copy_bits(
+    src: bytes | bytearray | memoryview,
+    sbit: int,
+    dst: bytearray | memoryview,
+    dbit: int,
+    n: int,
+) -> None:
+    """Copy ``n`` bits from ``src`` at bit ``sbit`` to ``dst`` at bit ``dbit`` (LSB first).
+
+    Ref: TMC8460 §5.48 Tables 78, 79, 81 (bits counted from the least significant bit).
+    """
+    sb = sbit >> 3
+    se = (sbit + n + 7) >> 3
+    v = (int.from_bytes(src[sb:se], "little") >> (sbit & 7)) & ((1 << n) - 1)
+    db = dbit >> 3
+    de = (dbit + n + 7) >> 3
+    sh = dbit & 7
+    m = ((1 << n) - 1) << sh
+    d = int.from_bytes(dst[db:de], "little")
+    dst[db:de] = ((d & ~m) | (v << sh)).to_bytes(de - db, "little")

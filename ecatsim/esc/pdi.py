@@ -1,0 +1,215 @@
+"""The PDI face of the ESC: what the firmware behind the SPI PDI can see and do.
+
+Firmware (``ecatsim.slave``) and devices import the ESC only through this module.
+Accesses follow the PDI columns of the register table and the PDI side of the
+SyncManagers. Ref: TMC8460 §2.3.2, §3.5 (PDI SPI), §5 (PDI access columns).
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from ecatsim.esc import regs
+from ecatsim.esc.regs import (  # re-exported for the firmware
+    AL_CONTROL,
+    AL_EVENT_MASK,
+    AL_EVENT_REQUEST,
+    AL_STATUS,
+    AL_STATUS_CODE,
+    DL_STATUS,
+    ESC_CONFIG,
+    EV_AL_CONTROL,
+    EV_SM0,
+    EV_SM_ACTIVATION,
+    EV_SYNC0,
+    EV_WATCHDOG_PD,
+    SM_CTRL_PDI_IRQ,
+    WD_STATUS_PD,
+    sm_addr,
+)
+
+if TYPE_CHECKING:
+    from ecatsim.esc.core import Esc
+
+__all__ = [
+    "AL_CONTROL",
+    "AL_EVENT_MASK",
+    "AL_EVENT_REQUEST",
+    "AL_STATUS",
+    "AL_STATUS_CODE",
+    "DL_STATUS",
+    "ESC_CONFIG",
+    "EV_AL_CONTROL",
+    "EV_SM0",
+    "EV_SM_ACTIVATION",
+    "EV_SYNC0",
+    "EV_WATCHDOG_PD",
+    "SM_CTRL_PDI_IRQ",
+    "WD_STATUS_PD",
+    "Pdi",
+    "SmSettings",
+    "sm_addr",
+]
+
+_U16 = struct.Struct("<H")
+_U32 = struct.Struct("<I")
+
+
+@dataclass(frozen=True, slots=True)
+class SmSettings:
+    """What the master programmed into SyncManager n (0x0800+8n). Ref: §5.49 Table 85."""
+
+    start: int
+    length: int
+    control: int
+    enabled: bool
+    pdi_deactivated: bool
+
+
+class Pdi:
+    """PDI access to one ESC (register reads/writes with PDI rights, SM PDI side)."""
+
+    __slots__ = ("_esc",)
+
+    def __init__(self, esc: Esc) -> None:
+        self._esc = esc
+
+    @property
+    def position(self) -> int:
+        return self._esc.position
+
+    def operational(self) -> bool:
+        """DL status 0x0110.0: EEPROM loaded, PDI operational. Ref: §5.19 Table 30."""
+        return bool(self._esc.mem[regs.DL_STATUS] & 0x01)
+
+    # -- raw access with PDI rules ----------------------------------------------------
+
+    def read(self, addr: int, n: int) -> bytes:
+        """PDI read of ``n`` bytes (SM windows redirected; PDI read side effects run)."""
+        esc = self._esc
+        end = addr + n
+        for ws, we, sm in esc.sm_windows:
+            if ws <= addr and end <= we:
+                if not sm.pdi_may_read():
+                    return bytes(n)
+                out = bytearray(n)
+                sm.reader_read(addr - ws, memoryview(out))
+                return bytes(out)
+        if addr >= regs.REGISTER_END:
+            if not esc.pdram_ok:
+                return bytes(n)
+            return bytes(esc.mem[addr:end])
+        t = esc.t
+        i = t.pdi_r_hooked.find(1, addr, end)
+        while i >= 0:
+            entry = t.pdi_r[i]
+            if entry is None:  # pragma: no cover
+                break
+            fn, ra, rs = entry
+            fn(esc, ra, rs)
+            i = t.pdi_r_hooked.find(1, ra + rs, end) if ra + rs < end else -1
+        return bytes(esc.mem[addr:end])
+
+    def write(self, addr: int, data: bytes) -> bool:
+        """PDI write (SM windows redirected; masks and PDI write side effects apply).
+
+        Returns False if an SM refused the access (mailbox full, wrong direction).
+        """
+        esc = self._esc
+        n = len(data)
+        end = addr + n
+        for ws, we, sm in esc.sm_windows:
+            if ws <= addr and end <= we:
+                if not sm.pdi_may_write():
+                    return False
+                sm.writer_write(addr - ws, data)
+                return True
+        if addr >= regs.REGISTER_END:
+            if not esc.pdram_ok:
+                return False
+            esc.mem[addr:end] = data
+            return True
+        t = esc.t
+        mem = esc.mem
+        old = bytes(mem[addr:end])
+        mi = int.from_bytes(t.pdi_wmask[addr:end], "little")
+        if mi:
+            oi = int.from_bytes(old, "little")
+            ni = int.from_bytes(data, "little")
+            mem[addr:end] = ((oi & ~mi) | (ni & mi)).to_bytes(n, "little")
+        esc.wr_s = addr
+        esc.wr_e = end
+        i = t.pdi_w_hooked.find(1, addr, end)
+        while i >= 0:
+            entry = t.pdi_w[i]
+            if entry is None:  # pragma: no cover
+                break
+            fn, ra, rs = entry
+            fn(esc, ra, rs, esc.old_reg(ra, rs, old, addr))
+            i = t.pdi_w_hooked.find(1, ra + rs, end) if ra + rs < end else -1
+        return True
+
+    # -- typed helpers -------------------------------------------------------------
+
+    def u8(self, addr: int) -> int:
+        return self.read(addr, 1)[0]
+
+    def u16(self, addr: int) -> int:
+        return int(_U16.unpack(self.read(addr, 2))[0])
+
+    def u32(self, addr: int) -> int:
+        return int(_U32.unpack(self.read(addr, 4))[0])
+
+    def w16(self, addr: int, value: int) -> None:
+        self.write(addr, _U16.pack(value & 0xFFFF))
+
+    def w32(self, addr: int, value: int) -> None:
+        self.write(addr, _U32.pack(value & 0xFFFFFFFF))
+
+    def al_event(self) -> int:
+        """AL event request 0x0220 (reading it has no side effect). Ref: §5.32."""
+        return self._esc.al_event()
+
+    # -- SyncManager PDI side --------------------------------------------------------
+
+    def sm_settings(self, n: int) -> SmSettings:
+        """Read SM n's configuration registers. Ref: §5.49 Tables 86-91."""
+        raw = self.read(sm_addr(n), 8)
+        start, length = struct.unpack_from("<HH", raw)
+        return SmSettings(start, length, raw[4], bool(raw[6] & 1), bool(raw[7] & 1))
+
+    def sm_read(self, n: int) -> bytes | None:
+        """Read SM n's whole buffer from the PDI side, or None if not readable now."""
+        sm = self._esc.sm[n]
+        if not sm.pdi_may_read():
+            return None
+        out = bytearray(sm.length)
+        sm.reader_read(0, memoryview(out))
+        return bytes(out)
+
+    def sm_write(self, n: int, data: bytes) -> bool:
+        """Write SM n's whole buffer from the PDI side (padded/truncated to its length)."""
+        sm = self._esc.sm[n]
+        if not sm.pdi_may_write():
+            return False
+        buf = bytes(data[: sm.length]).ljust(sm.length, b"\x00")
+        sm.writer_write(0, buf)
+        return True
+
+    def sm_deactivate(self, n: int, off: bool) -> None:
+        """Set or clear the PDI deactivate bit 0x0807+8n.0. Ref: §5.49 Table 91."""
+        a = sm_addr(n, 7)
+        v = self.u8(a)
+        self.write(a, bytes([(v | 1) if off else (v & ~1)]))
+
+    def sm_repeat_request(self, n: int) -> bool:
+        """The master's repeat request bit 0x0806+8n.1. Ref: §5.49 Table 90."""
+        return bool(self.read(sm_addr(n, 6), 1)[0] & 0x02)
+
+    def sm_repeat_ack(self, n: int, value: bool) -> None:
+        """Write the repeat ack bit 0x0807+8n.1. Ref: §5.49 Table 91."""
+        a = sm_addr(n, 7)
+        v = self.u8(a)
+        self.write(a, bytes([(v | 2) if value else (v & ~2)]))

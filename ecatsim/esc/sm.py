@@ -1,0 +1,239 @@
+"""SyncManager: mailbox (single buffer) and buffered (3-buffer) mode, both faces.
+
+The SM controls a window of ESC memory. In mailbox mode the window is one buffer that
+alternates between full and empty; in buffered mode the window is backed by three
+buffers at ``start``, ``start + len`` and ``start + 2 * len`` and accesses are
+redirected, so the reader always sees the latest complete buffer.
+
+Ref: TMC8460 §5.49 Tables 85-91; ETG.1000.4 §6.7 (SyncManager).
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+from ecatsim.esc import regs
+
+
+class SmHost(Protocol):
+    """What an SM needs from its ESC: memory and event lines."""
+
+    mem: bytearray
+
+    def sm_status_changed(self, sm: SyncManager) -> None: ...
+
+    def wd_pd_trigger(self) -> None: ...
+
+
+class SyncManager:
+    """One SyncManager channel (state machine and redirection)."""
+
+    __slots__ = (
+        "active",
+        "locked",
+        "ecat_side_writes",
+        "host",
+        "l",
+        "length",
+        "mailbox",
+        "mbx_full",
+        "n",
+        "r",
+        "r_open",
+        "start",
+        "status",
+        "control",
+        "w",
+        "w_open",
+    )
+
+    def __init__(self, host: SmHost, n: int) -> None:
+        self.host = host
+        self.n = n
+        self.start = 0
+        self.length = 0
+        self.control = 0
+        self.active = False
+        self.locked = False
+        self.mailbox = False
+        self.ecat_side_writes = False
+        self.mbx_full = False
+        # buffered mode roles: w = being written, l = latest complete (-1 none), r = being read
+        self.w = 0
+        self.l = -1
+        self.r = 0
+        self.r_open = False
+        self.w_open = False
+        self.status = 0
+
+    # -- configuration -------------------------------------------------------------
+
+    def configure(
+        self, start: int, length: int, control: int, active: bool, locked: bool = False
+    ) -> None:
+        """(Re)start the SM with its register values; resets the buffer state.
+
+        ``active`` is the ECAT enable (0x0806.0); ``locked`` the PDI deactivate bit
+        (0x0807.0), which resets the SM and locks its memory area for both sides.
+        Ref: TMC8460 §5.49 Table 90 (activation resets the SM), Table 91 (PDI deactivate).
+        """
+        self.locked = locked
+        self.start = start
+        self.length = length
+        self.control = control
+        self.mailbox = (control & regs.SM_MODE_MASK) == regs.SM_MODE_MAILBOX
+        self.ecat_side_writes = (control & regs.SM_DIR_MASK) == regs.SM_DIR_WRITE
+        self.active = active and length > 0
+        self.mbx_full = False
+        self.w = 0
+        self.l = -1
+        self.r = 0
+        self.r_open = False
+        self.w_open = False
+        self.status = 0
+        self._sync()
+
+    def window(self) -> tuple[int, int] | None:
+        """The ECAT-visible window [start, end) while active."""
+        if not self.active:
+            return None
+        return self.start, self.start + self.length
+
+    # -- shared helpers --------------------------------------------------------------
+
+    def _sync(self) -> None:
+        st = self.status & (regs.SM_ST_IRQ_WRITE | regs.SM_ST_IRQ_READ)
+        if self.mailbox:
+            if self.mbx_full:
+                st |= regs.SM_ST_MBX_FULL
+        else:
+            st |= (self.l if self.l >= 0 else 3) << regs.SM_ST_BUF_SHIFT
+            if self.r_open:
+                st |= regs.SM_ST_READ_OPEN
+            if self.w_open:
+                st |= regs.SM_ST_WRITE_OPEN
+        self.status = st
+        self.host.mem[regs.sm_addr(self.n, 5)] = st
+        self.host.sm_status_changed(self)
+
+    def _writer_access(self, first: bool, last: bool) -> None:
+        if self.mailbox:
+            if first:
+                self.status &= ~regs.SM_ST_IRQ_READ
+            if last:
+                self.mbx_full = True
+                self.status |= regs.SM_ST_IRQ_WRITE
+        else:
+            if first:
+                self.w_open = True
+                self.status &= ~regs.SM_ST_IRQ_READ
+            if last:
+                self.w_open = False
+                self.l = self.w
+                busy = (self.l, self.r) if self.r_open else (self.l,)
+                self.w = next(b for b in (0, 1, 2) if b not in busy)
+                self.status |= regs.SM_ST_IRQ_WRITE
+        if first or last:
+            self._sync()
+
+    def _reader_open(self) -> None:
+        if not self.mailbox:
+            if self.l >= 0:
+                self.r = self.l
+            elif self.r == self.w:
+                self.r = (self.w + 1) % 3
+            self.r_open = True
+
+    def _reader_access(self, first: bool, last: bool) -> None:
+        if self.mailbox:
+            if first:
+                self.status &= ~regs.SM_ST_IRQ_WRITE
+            if last:
+                self.mbx_full = False
+                self.status |= regs.SM_ST_IRQ_READ
+        else:
+            if first:
+                self.status &= ~regs.SM_ST_IRQ_WRITE
+            if last:
+                self.r_open = False
+                self.status |= regs.SM_ST_IRQ_READ
+        if first or last:
+            self._sync()
+
+    def _base_for_write(self) -> int:
+        return self.start if self.mailbox else self.start + self.w * self.length
+
+    def _base_for_read(self) -> int:
+        if self.mailbox:
+            return self.start
+        b = self.r if self.r_open else (self.l if self.l >= 0 else self.r)
+        return self.start + b * self.length
+
+    # -- writer/reader side, face-independent -----------------------------------------
+
+    def writer_may(self) -> bool:
+        """A writer access is possible (mailbox: only while empty)."""
+        return self.active and not self.locked and not (self.mailbox and self.mbx_full)
+
+    def reader_may(self) -> bool:
+        """A reader access is possible (mailbox: only while full)."""
+        return self.active and not self.locked and (not self.mailbox or self.mbx_full)
+
+    def writer_write(self, off: int, data: bytes | memoryview) -> None:
+        """Write ``data`` at window offset ``off`` as the writing side.
+
+        Ref: TMC8460 §5.49 Table 89 (buffer exchange when the last byte is written).
+        """
+        first = off == 0
+        last = off + len(data) >= self.length
+        base = self._base_for_write()
+        self.host.mem[base + off : base + off + len(data)] = data
+        self._writer_access(first, last)
+
+    def reader_read(self, off: int, out: memoryview) -> None:
+        """Read into ``out`` from window offset ``off`` as the reading side."""
+        first = off == 0
+        last = off + len(out) >= self.length
+        if first:
+            self._reader_open()
+        base = self._base_for_read()
+        out[:] = self.host.mem[base + off : base + off + len(out)]
+        self._reader_access(first, last)
+
+    def peek(self, off: int, n: int) -> bytes:
+        """The bytes a reader would see, without side effects (for logging and bit FMMUs)."""
+        base = self._base_for_read()
+        return bytes(self.host.mem[base + off : base + off + n])
+
+    # -- ECAT face -------------------------------------------------------------------
+
+    def ecat_may_write(self) -> bool:
+        """Whether an ECAT write into the window is accepted (counts in the WKC)."""
+        return self.ecat_side_writes and self.writer_may()
+
+    def ecat_may_read(self) -> bool:
+        """Whether an ECAT read of the window is accepted (counts in the WKC)."""
+        if self.ecat_side_writes:
+            return self.active and not self.locked and not self.mailbox
+        return self.reader_may()
+
+    def ecat_write(self, off: int, data: bytes | memoryview) -> None:
+        """ECAT write (caller checked ecat_may_write)."""
+        self.writer_write(off, data)
+        if self.control & regs.SM_CTRL_WATCHDOG:
+            self.host.wd_pd_trigger()
+
+    def ecat_read(self, off: int, out: memoryview) -> None:
+        """ECAT read (caller checked ecat_may_read)."""
+        if self.ecat_side_writes:
+            out[:] = self.peek(off, len(out))
+        else:
+            self.reader_read(off, out)
+
+    # -- PDI face --------------------------------------------------------------------
+
+    def pdi_may_write(self) -> bool:
+        return (not self.ecat_side_writes) and self.writer_may()
+
+    def pdi_may_read(self) -> bool:
+        return self.ecat_side_writes and self.reader_may()

@@ -1,0 +1,260 @@
+"""A segment: N ESCs in wire order. Walks each datagram through them in place.
+
+The frame enters port 0 of the first slave and returns from the first slave whose
+port 1 is closed. Each slave the frame passes increments ADP for auto-increment and
+broadcast commands and adds its working-counter increment.
+Ref: ETG.1000.4 §5.3-5.4 (frame and datagram), Table 11 (commands), §5.4.3 (WKC);
+TMC8460 §5.35 (processing unit error counter).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+from ecatsim.clock import Clock
+from ecatsim.esc import regs
+from ecatsim.esc.core import Esc, FrameContext
+from ecatsim.wire.datagram import LEN_MASK, MORE_FOLLOWS
+
+# Command codes as plain ints for the hot path. Ref: ETG.1000.4 Table 11.
+NOP, APRD, APWR, APRW, FPRD, FPWR, FPRW, BRD, BWR, BRW, LRD, LWR, LRW, ARMW, FRMW = range(15)
+
+
+class Serviceable:
+    """What the segment runs after a frame: the firmware behind an ESC's PDI."""
+
+    def service(self, now_ns: int) -> None:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def reset(self) -> None:  # pragma: no cover - interface
+        raise NotImplementedError
+
+
+class Segment:
+    """N slaves in wire order; one call per received frame."""
+
+    def __init__(
+        self,
+        escs: Sequence[Esc],
+        ctx: FrameContext,
+        clock: Clock,
+        firmware: Sequence[Serviceable] = (),
+        persist: Callable[[int], None] | None = None,
+    ) -> None:
+        self.escs = list(escs)
+        self.ctx = ctx
+        self.clock = clock
+        self.firmware = list(firmware)
+        self.persist = persist
+        self.reach = len(self.escs)
+        self.addr_map: dict[int, tuple[int, ...]] = {}
+        self.logical: list[Esc] = []
+        self.irq = 0
+        self.frames = 0
+        self.bad_frames = 0
+        n = len(self.escs)
+        for i, esc in enumerate(self.escs):
+            esc.set_topology(n - 1 - i)
+        self._refresh()
+
+    # ----------------------------------------------------------------- bookkeeping
+
+    def _refresh(self) -> None:
+        ctx = self.ctx
+        if ctx.topology_dirty:
+            ctx.topology_dirty = False
+            reach = len(self.escs)
+            for i, esc in enumerate(self.escs):
+                if esc.port1_closed:
+                    reach = i + 1
+                    break
+            self.reach = reach
+            ctx.addr_dirty = ctx.logical_dirty = ctx.irq_dirty = True
+        if ctx.addr_dirty:
+            ctx.addr_dirty = False
+            amap: dict[int, list[int]] = {}
+            for i in range(self.reach):
+                m = self.escs[i].mem
+                amap.setdefault(m[regs.STATION_ADDRESS] | (m[regs.STATION_ADDRESS + 1] << 8), [])
+                amap[m[regs.STATION_ADDRESS] | (m[regs.STATION_ADDRESS + 1] << 8)].append(i)
+                if m[regs.DL_CONTROL + 3] & 0x01:  # 0x0100 bit 24: alias enabled
+                    alias = m[regs.STATION_ALIAS] | (m[regs.STATION_ALIAS + 1] << 8)
+                    lst = amap.setdefault(alias, [])
+                    if i not in lst:
+                        lst.append(i)
+            self.addr_map = {k: tuple(v) for k, v in amap.items()}
+        if ctx.logical_dirty:
+            ctx.logical_dirty = False
+            self.logical = [e for e in self.escs[: self.reach] if e.fmmus]
+        if ctx.irq_dirty:
+            ctx.irq_dirty = False
+            irq = 0
+            for e in self.escs[: self.reach]:
+                irq |= e.ecat_irq
+            self.irq = irq
+
+    def _count_error(self) -> None:
+        """A malformed frame: the first ESC counts it in 0x030C, the ones behind it see a
+        frame with a broken FCS and count it in their forwarded RX error counter (port 0).
+        Ref: TMC8460 §5.34, §5.35."""
+        self.bad_frames += 1
+        for i in range(self.reach):
+            m = self.escs[i].mem
+            a = regs.ECAT_PU_ERROR_COUNTER if i == 0 else regs.FWD_RX_ERROR_COUNTER
+            if m[a] < 0xFF:
+                m[a] += 1
+
+    # ----------------------------------------------------------------- frame path
+
+    def process(self, buf: bytearray, off: int, n: int) -> bool:
+        """Process the EtherCAT frame at ``buf[off:n]`` in place.
+
+        Returns True if the frame is to be sent back (it may be unmodified), False if it
+        is destroyed (malformed: the master sees it as lost).
+        Ref: ETG.1000.4 §5.3 (EtherCAT header: length, type), §5.4.
+        """
+        ctx = self.ctx
+        ctx.frame_no += 1
+        ctx.t_ns = self.clock.now_ns()
+        self.frames += 1
+        if off + 2 > n:
+            self._count_error()
+            return False
+        hdr = buf[off] | (buf[off + 1] << 8)
+        if (hdr >> 12) != 1:
+            return True  # not a DLPDU frame: forwarded without processing
+        end = off + 2 + (hdr & LEN_MASK)
+        if end > n:
+            self._count_error()
+            return False
+        # Validate the datagram chain before touching anything.
+        p = off + 2
+        while True:
+            if p + 12 > end:
+                self._count_error()
+                return False
+            lf = buf[p + 6] | (buf[p + 7] << 8)
+            q = p + 12 + (lf & LEN_MASK)
+            if q > end:
+                self._count_error()
+                return False
+            if not lf & MORE_FOLLOWS:
+                break
+            p = q
+        self._walk(buf, off + 2)
+        return True
+
+    def _walk(self, buf: bytearray, p: int) -> None:
+        mv = memoryview(buf)
+        ctx = self.ctx
+        escs = self.escs
+        while True:
+            if ctx.topology_dirty or ctx.addr_dirty or ctx.logical_dirty or ctx.irq_dirty:
+                self._refresh()
+            reach = self.reach
+            cmd = buf[p]
+            lf = buf[p + 6] | (buf[p + 7] << 8)
+            dlen = lf & LEN_MASK
+            d0 = p + 10
+            w = d0 + dlen
+            data = mv[d0:w]
+            inc = 0
+            adp = buf[p + 2] | (buf[p + 3] << 8)
+            ado = buf[p + 4] | (buf[p + 5] << 8)
+            if cmd == LRW or cmd == LRD or cmd == LWR:
+                lad = adp | (ado << 16)
+                for esc in self.logical:
+                    inc += esc.ecat_logical(cmd, lad, data)
+            elif cmd == FPRD or cmd == FPWR or cmd == FPRW:
+                for i in self.addr_map.get(adp, ()):
+                    inc += _physical(escs[i], cmd - FPRD, ado, data)
+            elif cmd == APRD or cmd == APWR or cmd == APRW:
+                k = (-adp) & 0xFFFF
+                if k < reach:
+                    inc += _physical(escs[k], cmd - APRD, ado, data)
+                adp = (adp + reach) & 0xFFFF
+                buf[p + 2] = adp & 0xFF
+                buf[p + 3] = adp >> 8
+            elif cmd == BRD:
+                for i in range(reach):
+                    inc += escs[i].ecat_read_or(ado, data)
+                adp = (adp + reach) & 0xFFFF
+                buf[p + 2] = adp & 0xFF
+                buf[p + 3] = adp >> 8
+            elif cmd == BWR:
+                for i in range(reach):
+                    inc += escs[i].ecat_write(ado, data)
+                adp = (adp + reach) & 0xFFFF
+                buf[p + 2] = adp & 0xFF
+                buf[p + 3] = adp >> 8
+            elif cmd == BRW:
+                for i in range(reach):
+                    incoming = memoryview(bytes(data))
+                    inc += escs[i].ecat_read_or(ado, data)
+                    inc += 2 * escs[i].ecat_write(ado, incoming)
+                adp = (adp + reach) & 0xFFFF
+                buf[p + 2] = adp & 0xFF
+                buf[p + 3] = adp >> 8
+            elif cmd == ARMW:
+                k = (-adp) & 0xFFFF
+                for i in range(reach):
+                    if i == k:
+                        inc += escs[i].ecat_read(ado, data)
+                    else:
+                        inc += escs[i].ecat_write(ado, data)
+                adp = (adp + reach) & 0xFFFF
+                buf[p + 2] = adp & 0xFF
+                buf[p + 3] = adp >> 8
+            elif cmd == FRMW:
+                readers = self.addr_map.get(adp, ())
+                for i in range(reach):
+                    if i in readers:
+                        inc += escs[i].ecat_read(ado, data)
+                    else:
+                        inc += escs[i].ecat_write(ado, data)
+            # NOP and unknown commands: no slave acts on them.
+            if cmd:
+                irq = self.irq
+                if irq:
+                    buf[p + 8] |= irq & 0xFF
+                    buf[p + 9] |= irq >> 8
+                if inc:
+                    wkc = (buf[w] | (buf[w + 1] << 8)) + inc
+                    buf[w] = wkc & 0xFF
+                    buf[w + 1] = (wkc >> 8) & 0xFF
+            if not lf & MORE_FOLLOWS:
+                return
+            p = w + 2
+
+    # ----------------------------------------------------------------- after the reply
+
+    def service(self, now_ns: int | None = None) -> None:
+        """Run timers and the firmware of every slave with a raised PDI interrupt, then
+        persist EEPROM images that changed. Never called between receive and reply."""
+        t = self.clock.now_ns() if now_ns is None else now_ns
+        for esc in self.escs:
+            if esc.wd.deadline_ns:
+                esc.check_timers(t)
+        ctx = self.ctx
+        if ctx.pending and self.firmware:
+            for pos in sorted(ctx.pending):
+                self.firmware[pos].service(t)
+        if ctx.flush and self.persist is not None:
+            for pos in sorted(ctx.flush):
+                self.persist(pos)
+            ctx.flush.clear()
+
+    def next_deadline(self) -> int | None:
+        """The earliest timer deadline (ns), for the daemon's poll timeout."""
+        ds = [e.wd.deadline_ns for e in self.escs if e.wd.deadline_ns]
+        return min(ds) if ds else None
+
+
+def _physical(esc: Esc, op: int, ado: int, data: memoryview) -> int:
+    """op 0 read, 1 write, 2 read/write (+1 read, +2 write). Ref: ETG.1000.4 Table 12."""
+    if op == 0:
+        return esc.ecat_read(ado, data)
+    if op == 1:
+        return esc.ecat_write(ado, data)
+    incoming = memoryview(bytes(data))
+    return esc.ecat_read(ado, data) + 2 * esc.ecat_write(ado, incoming)

@@ -1,0 +1,1 @@
+"""sii layer; see docs/architecture.md."""

@@ -1,0 +1,1 @@
+"""slave layer; see docs/architecture.md."""

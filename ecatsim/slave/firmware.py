@@ -1,0 +1,295 @@
+"""The slave firmware: AL state machine and process-data copy, seen through the PDI only.
+
+It runs after the reply has been sent, when the ESC raises a PDI interrupt (AL event
+request AND AL event mask), like the microcontroller behind the TMC8460's SPI PDI.
+Ref: ETG.1000.6 §6.4 (AL state machine); TMC8460 §2.3.2, §5.20-5.22, §5.32, §5.49.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import structlog
+
+from ecatsim.esc.pdi import (
+    AL_CONTROL,
+    AL_EVENT_MASK,
+    AL_STATUS,
+    AL_STATUS_CODE,
+    EV_AL_CONTROL,
+    EV_SM0,
+    EV_SM_ACTIVATION,
+    EV_WATCHDOG_PD,
+    WD_STATUS_PD,
+    Pdi,
+    SmSettings,
+)
+from ecatsim.slave import al
+from ecatsim.slave.al import AlState, Transition
+from ecatsim.slave.app import Application
+
+log = structlog.get_logger("ecatsim.slave")
+
+SM_MBX_OUT = 0
+SM_MBX_IN = 1
+SM_PD_OUT = 2
+SM_PD_IN = 3
+
+#: Control register low nibble (mode + direction) each SM must have.
+#: Ref: TMC8460 §5.49 Table 88; ETG.2010 SyncM category types.
+CTRL_MBX_OUT = 0x06  # mailbox, ECAT writes
+CTRL_MBX_IN = 0x02  # mailbox, ECAT reads
+CTRL_PD_OUT = 0x04  # buffered, ECAT writes
+CTRL_PD_IN = 0x00  # buffered, ECAT reads
+
+#: Events the firmware serves (AL event mask). Ref: TMC8460 §5.30, §5.32 Table 46.
+EVENT_MASK = (
+    EV_AL_CONTROL | EV_SM_ACTIVATION | EV_WATCHDOG_PD | (0x0F * EV_SM0)  # SM0..SM3
+)
+
+
+@dataclass(frozen=True, slots=True)
+class MailboxLayout:
+    """Where the SII says the mailboxes are (words 0x18-0x1B and 0x14-0x17)."""
+
+    rx_offset: int
+    rx_size: int
+    tx_offset: int
+    tx_size: int
+    boot_rx_offset: int = 0
+    boot_rx_size: int = 0
+    boot_tx_offset: int = 0
+    boot_tx_size: int = 0
+
+    @property
+    def present(self) -> bool:
+        return self.rx_size > 0 and self.tx_size > 0
+
+    @property
+    def bootstrap(self) -> bool:
+        return self.boot_rx_size > 0 and self.boot_tx_size > 0
+
+
+class Firmware:
+    """AL state machine and process data, for one slave."""
+
+    def __init__(
+        self,
+        pdi: Pdi,
+        app: Application,
+        mailbox: MailboxLayout,
+        *,
+        bootstrap_supported: bool = False,
+    ) -> None:
+        self.pdi = pdi
+        self.app = app
+        self.mailbox = mailbox
+        self.bootstrap_supported = bootstrap_supported
+        self.state = AlState.INIT
+        self.error = False
+        self.code = al.CODE_NONE
+        self.log = log.bind(slave=pdi.position)
+        self.reset()
+
+    # ----------------------------------------------------------------- lifecycle
+
+    def reset(self) -> None:
+        """Firmware start (power-on or ESC reset): INIT, all SMs locked, events masked.
+
+        Ref: ETG.1000.6 §6.4.1 (INIT after power-on); TMC8460 §5.49 Table 91.
+        """
+        self.state = AlState.INIT
+        self.error = False
+        self.code = al.CODE_NONE
+        p = self.pdi
+        if not p.operational():
+            return
+        p.w32(AL_EVENT_MASK, EVENT_MASK)
+        for n in (SM_MBX_OUT, SM_MBX_IN, SM_PD_OUT, SM_PD_IN):
+            p.sm_deactivate(n, True)
+        self._publish()
+
+    def _publish(self) -> None:
+        status = int(self.state) | (al.AL_ERROR if self.error else 0)
+        self.pdi.w16(AL_STATUS_CODE, self.code)
+        self.pdi.w16(AL_STATUS, status)
+
+    # ----------------------------------------------------------------- events
+
+    def service(self, now_ns: int) -> None:
+        """Serve pending PDI events. Called after the reply to a frame has been sent."""
+        p = self.pdi
+        if not p.operational():
+            return
+        ev = p.al_event()
+        if ev & EV_AL_CONTROL:
+            self._al_control(p.u16(AL_CONTROL), now_ns)
+        if ev & EV_SM_ACTIVATION:
+            self._sm_activation()
+        if ev & EV_WATCHDOG_PD:
+            p.u16(WD_STATUS_PD)  # acknowledges the event
+            if self.state == AlState.OP:
+                self.fail(AlState.SAFEOP, al.CODE_SM_WATCHDOG, now_ns)
+        if ev & (EV_SM0 << SM_PD_OUT):
+            out = p.sm_read(SM_PD_OUT)
+            if out is not None and self.state == AlState.OP:
+                self.app.set_outputs(out, now_ns)
+            self._write_inputs(now_ns)
+        if ev & (EV_SM0 << SM_PD_IN):
+            self._write_inputs(now_ns)
+        self.service_mailbox(ev, now_ns)
+
+    def service_mailbox(self, ev: int, now_ns: int) -> None:
+        """Mailbox protocols; none in the base firmware (the CoE firmware overrides this).
+
+        A mailbox written anyway is read and dropped so the event clears.
+        """
+        if ev & (EV_SM0 << SM_MBX_OUT):
+            self.pdi.sm_read(SM_MBX_OUT)
+
+    def _sm_activation(self) -> None:
+        """Reading the activation registers acknowledges the event. Ref: §5.49 Table 90 *."""
+        for n in range(4):
+            self.pdi.sm_settings(n)
+
+    def _write_inputs(self, now_ns: int) -> None:
+        if self.state in (AlState.SAFEOP, AlState.OP):
+            self.pdi.sm_write(SM_PD_IN, self.app.get_inputs(now_ns))
+
+    # ----------------------------------------------------------------- AL control
+
+    def _al_control(self, ctrl: int, now_ns: int) -> None:
+        """Handle a state request from AL control 0x0120.
+
+        With the error indicator set and not acknowledged (bit 4), only requests to a
+        lower state are executed; INIT always clears the error.
+        Ref: ETG.1000.6 §6.4.1.2, §6.4.1.4; TMC8460 §5.20.
+        """
+        req = al.parse_state(ctrl)
+        ack = bool(ctrl & al.AL_ERROR)
+        if req is None:
+            self._refuse(al.CODE_UNKNOWN_STATE)
+            return
+        if self.error and not ack and req != AlState.INIT:
+            if al.RANK[req] >= al.RANK[self.state]:
+                return
+        if ack or req == AlState.INIT:
+            self.error = False
+            self.code = al.CODE_NONE
+        if req == self.state:
+            self._publish()
+            return
+        tr = al.lookup(self.state, req)
+        if tr is None:
+            self._refuse(al.CODE_INVALID_STATE_CHANGE)
+            return
+        code = self._check(tr)
+        if code:
+            self._refuse(code)
+            return
+        self._enter(tr, req, now_ns)
+
+    def _refuse(self, code: int) -> None:
+        """The one place a refusal becomes error bit + AL status code. Ref: ETG.1000.6 §6.4.1.4."""
+        self.error = True
+        self.code = code
+        self.log.info("al_refused", state=self.state.name, code=f"0x{code:04X}")
+        self._publish()
+
+    def fail(self, to: AlState, code: int, now_ns: int) -> None:
+        """A local error: drop to ``to`` with the error bit and ``code``. Ref: §6.4.1.4."""
+        self._stop_for(to, now_ns)
+        self.state = to
+        self.error = True
+        self.code = code
+        self.log.warning("al_error", state=to.name, code=f"0x{code:04X}")
+        self.app.al_state_changed(to, now_ns)
+        self._publish()
+
+    def _check(self, tr: Transition) -> int:
+        """Preconditions of a transition, as an AL status code (0 = ok)."""
+        if tr == Transition.IP:
+            return self.check_mailbox()
+        if tr == Transition.IB:
+            if not (self.bootstrap_supported and self.mailbox.bootstrap):
+                return al.CODE_BOOTSTRAP_NOT_SUPPORTED
+            return 0
+        if tr == Transition.PS:
+            return self.check_process_data()
+        return 0
+
+    def check_mailbox(self) -> int:
+        """SM0/SM1 must be enabled mailboxes at the SII offsets, no larger than the SII
+        sizes. Ref: ETG.1000.6 §6.4.1.2 (IP checks), AL status code 0x0016."""
+        mb = self.mailbox
+        if not mb.present:
+            return 0
+        s0 = self.pdi.sm_settings(SM_MBX_OUT)
+        s1 = self.pdi.sm_settings(SM_MBX_IN)
+        if not _mbx_ok(s0, mb.rx_offset, mb.rx_size, CTRL_MBX_OUT):
+            return al.CODE_INVALID_MBX_PREOP
+        if not _mbx_ok(s1, mb.tx_offset, mb.tx_size, CTRL_MBX_IN):
+            return al.CODE_INVALID_MBX_PREOP
+        return 0
+
+    def check_process_data(self) -> int:
+        """SM2/SM3 must be buffered SMs of exactly the process image sizes.
+
+        Ref: ETG.1000.6 §6.4.1.2 (PS checks), AL status codes 0x001D/0x001E.
+        """
+        rx = self.app.rx_size()
+        tx = self.app.tx_size()
+        s2 = self.pdi.sm_settings(SM_PD_OUT)
+        s3 = self.pdi.sm_settings(SM_PD_IN)
+        if not _pd_ok(s2, rx, CTRL_PD_OUT):
+            return al.CODE_INVALID_OUTPUT_CONFIG
+        if not _pd_ok(s3, tx, CTRL_PD_IN):
+            return al.CODE_INVALID_INPUT_CONFIG
+        return 0
+
+    def _enter(self, tr: Transition, to: AlState, now_ns: int) -> None:
+        """Run a transition's actions and publish the new state. Ref: ETG.1000.6 Table 9."""
+        p = self.pdi
+        if tr in (Transition.IP, Transition.IB):
+            p.sm_deactivate(SM_MBX_OUT, False)
+            p.sm_deactivate(SM_MBX_IN, False)
+            self.on_mailbox_start()
+        elif tr == Transition.PS:
+            p.sm_deactivate(SM_PD_OUT, False)
+            p.sm_deactivate(SM_PD_IN, False)
+            self.state = to
+            self._write_inputs(now_ns)
+        else:
+            self._stop_for(to, now_ns)
+        self.state = to
+        self.log.info("al_state", state=to.name, transition=tr.name)
+        self.app.al_state_changed(to, now_ns)
+        self._publish()
+
+    def on_mailbox_start(self) -> None:
+        """Hook for mailbox protocols when the mailbox starts (IP/IB)."""
+
+    def _stop_for(self, to: AlState, now_ns: int) -> None:
+        """Stop what the target state does not run: PD below SAFEOP, mailbox in INIT."""
+        p = self.pdi
+        if al.RANK[to] < al.RANK[AlState.SAFEOP] and self.state in (AlState.SAFEOP, AlState.OP):
+            p.sm_deactivate(SM_PD_OUT, True)
+            p.sm_deactivate(SM_PD_IN, True)
+        if to == AlState.INIT:
+            p.sm_deactivate(SM_MBX_OUT, True)
+            p.sm_deactivate(SM_MBX_IN, True)
+
+
+def _mbx_ok(s: SmSettings, offset: int, size: int, ctrl: int) -> bool:
+    return (
+        s.enabled
+        and s.start == offset
+        and 0 < s.length <= size
+        and (s.control & 0x0F) == ctrl
+    )
+
+
+def _pd_ok(s: SmSettings, size: int, ctrl: int) -> bool:
+    if size == 0:
+        return not s.enabled or s.length == 0
+    return s.enabled and s.length == size and (s.control & 0x0F) == ctrl
