@@ -1,0 +1,109 @@
+"""Assemble a segment from its configuration: per slave an ESC, its EEPROM, the firmware
+behind the PDI and the device behind the firmware."""
+
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+
+import structlog
+
+from ecatsim.clock import Clock
+from ecatsim.config import SegmentConfig, SlaveConfig
+from ecatsim.description import DescriptionError, DeviceDescription, default_description, load_description
+from ecatsim.device.echo import EchoDevice
+from ecatsim.errors import UserError
+from ecatsim.esc.core import Esc, FrameContext
+from ecatsim.esc.pdi import Pdi
+from ecatsim.segment import Segment
+from ecatsim.sii.image import SiiError, build_image
+from ecatsim.sii.store import EepromStore
+from ecatsim.slave.app import Application
+from ecatsim.slave.firmware import Firmware, MailboxLayout
+
+log = structlog.get_logger("ecatsim.build")
+
+#: Distinct local clock start per slave, so DC offsets are meaningful (ns).
+DC_START_STEP_NS = 1_000_003_000
+
+
+def mailbox_layout(image: bytes | bytearray) -> MailboxLayout:
+    """Mailbox offsets/sizes from SII words 0x14-0x1B. Ref: ETG.2010 Table 2."""
+    if len(image) < 0x38:
+        return MailboxLayout(0, 0, 0, 0)
+    b_rx_o, b_rx_s, b_tx_o, b_tx_s, rx_o, rx_s, tx_o, tx_s = struct.unpack_from("<8H", image, 0x28)
+    return MailboxLayout(rx_o, rx_s, tx_o, tx_s, b_rx_o, b_rx_s, b_tx_o, b_tx_s)
+
+
+def make_device(kind: str, desc: DeviceDescription) -> Application:
+    """The application behind the firmware for a device type."""
+    rx = [(e.index, e.bits) for p in desc.rxpdos for e in p.entries]
+    tx = [(e.index, e.bits) for p in desc.txpdos for e in p.entries]
+    return EchoDevice(rx, tx)
+
+
+class _Persist:
+    def __init__(self, escs: list[Esc], paths: list[Path | None]) -> None:
+        self.escs = escs
+        self.paths = paths
+
+    def __call__(self, pos: int) -> None:
+        path = self.paths[pos]
+        if path is None:
+            return
+        try:
+            EepromStore.save(path, bytes(self.escs[pos].eeprom.image))
+        except OSError as exc:
+            log.error("eeprom_persist_failed", slave=pos, path=str(path), error=str(exc))
+
+
+def _description(sc: SlaveConfig, cache: dict[Path | None, DeviceDescription]) -> DeviceDescription:
+    if sc.description not in cache:
+        try:
+            cache[sc.description] = (
+                default_description() if sc.description is None else load_description(sc.description)
+            )
+        except DescriptionError as exc:
+            raise UserError(str(exc)) from exc
+    return cache[sc.description]
+
+
+def _image(sc: SlaveConfig, desc: DeviceDescription) -> bytearray:
+    if sc.eeprom is not None and sc.eeprom.exists():
+        try:
+            return EepromStore.load(sc.eeprom)
+        except SiiError as exc:
+            raise UserError(str(exc)) from exc
+    img = build_image(desc, serial=sc.serial, alias=sc.alias)
+    if sc.eeprom is not None:
+        try:
+            EepromStore.save(sc.eeprom, img)
+        except OSError as exc:
+            raise UserError(f"{sc.eeprom}: cannot create the EEPROM image ({exc.strerror})") from exc
+        log.info("eeprom_created", path=str(sc.eeprom))
+    return bytearray(img)
+
+
+def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
+    """Build the ESCs, firmware and devices of a segment."""
+    ctx = FrameContext()
+    cache: dict[Path | None, DeviceDescription] = {}
+    escs: list[Esc] = []
+    firmware: list[Firmware] = []
+    paths: list[Path | None] = []
+    for i, sc in enumerate(cfg.slaves):
+        desc = _description(sc, cache)
+        image = _image(sc, desc)
+        esc = Esc(
+            i,
+            ctx,
+            image,
+            dc_start_ns=(i + 1) * DC_START_STEP_NS,
+            dc_drift_ppm=sc.dc_drift_ppm,
+        )
+        fw = Firmware(Pdi(esc), make_device(sc.device, desc), mailbox_layout(image))
+        esc.on_reset = fw.reset
+        escs.append(esc)
+        firmware.append(fw)
+        paths.append(sc.eeprom)
+    return Segment(escs, ctx, clock, firmware, _Persist(escs, paths))

@@ -1,0 +1,143 @@
+"""Command line: ``ecatsim run``, ``ecatsim eeprom ...``, ``ecatsim --version``.
+
+User-caused errors are one line (``ecatsim: error: ...``) and exit status 2; ``--debug``
+adds the traceback.
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+from pathlib import Path
+from typing import Any
+
+import click
+import structlog
+
+from ecatsim import __version__
+from ecatsim.errors import UserError
+
+
+def configure_logging(fmt: str, level: int = logging.INFO) -> None:
+    """structlog: pretty on a TTY, JSON with --log-format json, plain text otherwise."""
+    processors: list[Any] = [
+        structlog.contextvars.merge_contextvars,
+        structlog.processors.add_log_level,
+        structlog.processors.TimeStamper(fmt="iso", utc=True),
+    ]
+    if fmt == "json":
+        processors += [structlog.processors.dict_tracebacks, structlog.processors.JSONRenderer()]
+    else:
+        colors = fmt == "console" and sys.stderr.isatty()
+        processors += [structlog.dev.ConsoleRenderer(colors=colors)]
+    structlog.configure(
+        processors=processors,
+        wrapper_class=structlog.make_filtering_bound_logger(level),
+        logger_factory=structlog.PrintLoggerFactory(file=sys.stderr),
+        cache_logger_on_first_use=False,
+    )
+
+
+class _Ctx:
+    debug = False
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="ecatsim")
+@click.option("--debug", is_flag=True, help="Show tracebacks for errors.")
+@click.pass_context
+def cli(ctx: click.Context, debug: bool) -> None:
+    """ecatsim: EtherCAT slave emulator (TMC8460 ESC, TMC8670 CoE servo drive)."""
+    ctx.obj = _Ctx()
+    ctx.obj.debug = debug
+
+
+@cli.command()
+@click.option("--iface", help="Serve a network interface through a raw AF_PACKET socket.")
+@click.option("--tap", "tap", help="Create and serve a TAP device with this name.")
+@click.option("--udp", "udp", help="Serve EtherCAT over UDP on HOST:PORT (port 34980 = 0x88A4).")
+@click.option("--config", "config_path", type=click.Path(path_type=Path), help="Segment YAML.")
+@click.option("--slaves", type=int, help="Repeat the default device N times.")
+@click.option(
+    "--log-format",
+    type=click.Choice(["auto", "console", "json"]),
+    default="auto",
+    show_default=True,
+)
+@click.option("--trace-frames", is_flag=True, help="Log every frame (slow; for debugging).")
+@click.option("--allow-ip-iface", is_flag=True, help="Allow an interface with an IPv4 address.")
+@click.option("--busy-poll", is_flag=True, help="Spin instead of blocking (lowest latency).")
+@click.option("--cpu", type=int, help="Pin the daemon to this CPU.")
+@click.pass_obj
+def run(
+    obj: _Ctx,
+    iface: str | None,
+    tap: str | None,
+    udp: str | None,
+    config_path: Path | None,
+    slaves: int | None,
+    log_format: str,
+    trace_frames: bool,
+    allow_ip_iface: bool,
+    busy_poll: bool,
+    cpu: int | None,
+) -> None:
+    """Emulate the segment on an interface until SIGINT/SIGTERM."""
+    from ecatsim.runner import RunOptions, run_daemon
+
+    configure_logging(
+        "console" if log_format == "auto" else log_format,
+        logging.DEBUG if trace_frames else logging.INFO,
+    )
+    opts = RunOptions(
+        iface=iface,
+        tap=tap,
+        udp=udp,
+        config=config_path,
+        slaves=slaves,
+        trace_frames=trace_frames,
+        allow_ip_iface=allow_ip_iface,
+        busy_poll=busy_poll,
+        cpu=cpu,
+    )
+    run_daemon(opts)
+
+
+@cli.group()
+def eeprom() -> None:
+    """SII EEPROM images."""
+
+
+@eeprom.command("show")
+@click.argument("image", type=click.Path(path_type=Path))
+def eeprom_show(image: Path) -> None:
+    """Decode an SII image: header, CRC, strings and categories."""
+    from ecatsim.sii.image import SiiError, format_image, parse_image
+
+    try:
+        data = image.read_bytes()
+    except OSError as exc:
+        raise UserError(f"{image}: cannot read ({exc.strerror})") from exc
+    try:
+        click.echo(format_image(parse_image(data)))
+    except SiiError as exc:
+        raise UserError(f"{image}: {exc}") from exc
+
+
+def main() -> None:
+    """Entry point: run the CLI, turning user errors into one line."""
+    debug = "--debug" in sys.argv
+    try:
+        cli.main(standalone_mode=False)
+    except click.exceptions.Abort:
+        sys.exit(130)
+    except click.ClickException as exc:
+        exc.show()
+        sys.exit(exc.exit_code)
+    except UserError as exc:
+        if debug:
+            raise
+        click.echo(f"ecatsim: error: {exc}", err=True)
+        sys.exit(2)
+    except KeyboardInterrupt:
+        sys.exit(130)

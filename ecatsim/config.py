@@ -1,0 +1,181 @@
+"""The segment description (YAML): which slaves, in wire order, with what device.
+
+Every problem is one line naming the file, the key path and the fix.
+
+```yaml
+slaves:
+  - device: tmc8670          # device type: tmc8670 | echo
+    count: 2                 # optional: this entry repeated (serials counted up)
+    description: my.yaml     # optional device description (default: the packaged TMC8670)
+    eeprom: drive.bin        # optional SII image file; master writes persist to it
+    alias: 0                 # optional configured station alias (SII word 4)
+    serial: 1                # optional serial number (SII words 0x0E/0x0F)
+    dc_drift_ppm: 0.0        # optional local clock drift
+```
+"""
+
+from __future__ import annotations
+
+import importlib.resources
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from ecatsim.errors import UserError
+
+DEVICE_TYPES = ("tmc8670", "echo")
+MAX_SLAVES = 4096
+
+_SLAVE_KEYS = {
+    "device",
+    "count",
+    "description",
+    "eeprom",
+    "esi",
+    "alias",
+    "serial",
+    "dc_drift_ppm",
+    "name",
+}
+
+
+@dataclass(frozen=True, slots=True)
+class SlaveConfig:
+    """One slave of the segment."""
+
+    device: str = "tmc8670"
+    description: Path | None = None
+    eeprom: Path | None = None
+    esi: Path | None = None
+    alias: int | None = None
+    serial: int | None = None
+    dc_drift_ppm: float = 0.0
+    name: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class SegmentConfig:
+    """The whole segment."""
+
+    slaves: tuple[SlaveConfig, ...]
+    source: str = "<default>"
+    faults: tuple[dict[str, Any], ...] = field(default_factory=tuple)
+
+
+def _err(src: str, key: str, msg: str) -> UserError:
+    return UserError(f"{src}: {key}: {msg}")
+
+
+def _int(src: str, key: str, v: object, lo: int, hi: int) -> int:
+    if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
+        raise _err(src, key, f"expected an integer {lo}..{hi}, got {v!r}")
+    return v
+
+
+def _path(src: str, base: Path | None, key: str, v: object) -> Path:
+    if not isinstance(v, str) or not v:
+        raise _err(src, key, f"expected a file path, got {v!r}")
+    p = Path(v)
+    if not p.is_absolute() and base is not None:
+        p = base / p
+    return p
+
+
+def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentConfig:
+    """Validate a loaded YAML document into a SegmentConfig."""
+    if not isinstance(data, dict):
+        raise UserError(f"{src}: expected a mapping with a 'slaves:' list at the top level")
+    unknown = set(data) - {"slaves", "faults"}
+    if unknown:
+        k = sorted(unknown)[0]
+        raise _err(src, k, "unknown key (allowed: slaves, faults)")
+    raw = data.get("slaves")
+    if not isinstance(raw, list) or not raw:
+        raise _err(src, "slaves", "expected a non-empty list of slaves")
+    out: list[SlaveConfig] = []
+    for i, s in enumerate(raw):
+        key = f"slaves[{i}]"
+        if not isinstance(s, dict):
+            raise _err(src, key, "expected a mapping like {device: tmc8670}")
+        bad = set(s) - _SLAVE_KEYS
+        if bad:
+            k = sorted(bad)[0]
+            raise _err(src, f"{key}.{k}", f"unknown key (allowed: {', '.join(sorted(_SLAVE_KEYS))})")
+        dev = s.get("device", "tmc8670")
+        if dev not in DEVICE_TYPES:
+            raise _err(src, f"{key}.device", f"unknown device {dev!r} (use one of: {', '.join(DEVICE_TYPES)})")
+        count = _int(src, f"{key}.count", s.get("count", 1), 1, MAX_SLAVES)
+        desc = _path(src, base, f"{key}.description", s["description"]) if "description" in s else None
+        eeprom = _path(src, base, f"{key}.eeprom", s["eeprom"]) if "eeprom" in s else None
+        esi = _path(src, base, f"{key}.esi", s["esi"]) if "esi" in s else None
+        alias = _int(src, f"{key}.alias", s["alias"], 0, 0xFFFF) if "alias" in s else None
+        serial = _int(src, f"{key}.serial", s["serial"], 0, 0xFFFFFFFF) if "serial" in s else None
+        drift = s.get("dc_drift_ppm", 0.0)
+        if isinstance(drift, bool) or not isinstance(drift, int | float) or abs(drift) > 1000:
+            raise _err(src, f"{key}.dc_drift_ppm", f"expected a number -1000..1000, got {drift!r}")
+        name = s.get("name")
+        if name is not None and not isinstance(name, str):
+            raise _err(src, f"{key}.name", f"expected a string, got {name!r}")
+        if eeprom is not None and count > 1:
+            raise _err(src, f"{key}.eeprom", "one EEPROM file cannot back count > 1 slaves")
+        for j in range(count):
+            out.append(
+                SlaveConfig(
+                    device=dev,
+                    description=desc,
+                    eeprom=eeprom,
+                    esi=esi,
+                    alias=alias,
+                    serial=None if serial is None else serial + j,
+                    dc_drift_ppm=float(drift),
+                    name=name,
+                )
+            )
+    if len(out) > MAX_SLAVES:
+        raise _err(src, "slaves", f"at most {MAX_SLAVES} slaves")
+    faults = data.get("faults") or []
+    if not isinstance(faults, list):
+        raise _err(src, "faults", "expected a list")
+    return SegmentConfig(tuple(out), src, tuple(faults))
+
+
+def load_segment(path: Path) -> SegmentConfig:
+    """Read and validate a segment YAML file."""
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise UserError(f"{path}: cannot read the segment file ({exc.strerror}); check the path") from exc
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" line {mark.line + 1}" if mark is not None else ""
+        raise UserError(f"{path}:{where}: not valid YAML ({getattr(exc, 'problem', exc)})") from exc
+    return parse_segment(data, str(path), path.parent)
+
+
+def default_segment() -> SegmentConfig:
+    """The embedded default segment (config/segment.yaml): one TMC8670 drive."""
+    text = importlib.resources.files("ecatsim.defaults").joinpath("segment.yaml").read_text()
+    return parse_segment(yaml.safe_load(text), "segment.yaml (embedded default)")
+
+
+def repeat_default(n: int) -> SegmentConfig:
+    """``--slaves N``: the default device N times with distinct serial numbers."""
+    if not 1 <= n <= MAX_SLAVES:
+        raise UserError(f"--slaves: expected 1..{MAX_SLAVES}, got {n}")
+    base = default_segment().slaves[0]
+    first = base.serial if base.serial is not None else 1
+    slaves = tuple(
+        SlaveConfig(
+            device=base.device,
+            description=base.description,
+            alias=base.alias,
+            serial=first + i,
+            dc_drift_ppm=base.dc_drift_ppm,
+        )
+        for i in range(n)
+    )
+    return SegmentConfig(slaves, f"--slaves {n}")

@@ -1,0 +1,157 @@
+"""The one loop: receive a frame, process it in place, reply, then let the slaves react.
+
+Blocking wake-up by default (poll on the link's fd, with the next timer as timeout);
+``busy_poll`` spins on a non-blocking receive instead. A failure while processing a frame
+is counted and logged once with the last frames; the loop carries on.
+Ref: design.md "One frame through the layers", habits 3 and 6.
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import signal
+from types import FrameType
+
+import structlog
+
+from ecatsim.link.base import Link
+from ecatsim.recorder import FrameRecorder
+from ecatsim.segment import Segment
+from ecatsim.wire.frame import ecat_offset, mark_processed
+
+log = structlog.get_logger("ecatsim.daemon")
+
+MAX_FRAME = 2048
+IDLE_TIMEOUT_MS = 200
+
+
+class Daemon:
+    """Serve one link with one segment until stopped."""
+
+    def __init__(
+        self,
+        link: Link,
+        segment: Segment,
+        *,
+        busy_poll: bool = False,
+        trace_frames: bool = False,
+    ) -> None:
+        self.link = link
+        self.segment = segment
+        self.busy_poll = busy_poll
+        self.trace_frames = trace_frames
+        self.recorder = FrameRecorder()
+        self.failures = 0
+        self.replies = 0
+        self._failure_logged: set[str] = set()
+        self._stop = False
+        self._wake_r, self._wake_w = os.pipe()
+        os.set_blocking(self._wake_r, False)
+        os.set_blocking(self._wake_w, False)
+
+    def stop(self) -> None:
+        """Ask the loop to return (safe from a signal handler)."""
+        self._stop = True
+        try:
+            os.write(self._wake_w, b"x")
+        except OSError:
+            pass
+
+    def install_signal_handlers(self) -> None:
+        """SIGINT and SIGTERM end the loop cleanly."""
+
+        def handler(signum: int, frame: FrameType | None) -> None:
+            self.stop()
+
+        signal.signal(signal.SIGINT, handler)
+        signal.signal(signal.SIGTERM, handler)
+
+    def handle_one(self, buf: bytearray) -> bool:
+        """Receive and answer one frame if one is waiting; False if none was."""
+        link = self.link
+        n = link.recv_into(buf)
+        if n <= 0:
+            return False
+        off = ecat_offset(buf, n, link.ethernet)
+        if off < 0:
+            return True
+        self.recorder.record(buf, n)
+        if self.trace_frames:
+            log.debug("frame_in", data=bytes(buf[:n]).hex())
+        try:
+            reply = self.segment.process(buf, off, n)
+        except Exception as exc:  # the loop never dies on a frame
+            self._failure("process", exc)
+            return True
+        if reply:
+            if link.ethernet:
+                mark_processed(buf)
+            link.send(memoryview(buf)[:n])
+            self.replies += 1
+            if self.trace_frames:
+                log.debug("frame_out", data=bytes(buf[:n]).hex())
+        self._service()
+        return True
+
+    def _service(self) -> None:
+        try:
+            self.segment.service()
+        except Exception as exc:
+            self._failure("service", exc)
+
+    def _failure(self, where: str, exc: Exception) -> None:
+        self.failures += 1
+        key = f"{where}:{type(exc).__name__}:{exc}"
+        if key in self._failure_logged:
+            return
+        self._failure_logged.add(key)
+        log.error(
+            "frame_failure",
+            where=where,
+            error=repr(exc),
+            count=self.failures,
+            last_frames=self.recorder.hexdump(),
+            exc_info=exc,
+        )
+
+    def run(self) -> None:
+        """Serve until stop() is called."""
+        buf = bytearray(MAX_FRAME)
+        fd = self.link.fileno()
+        poller = select.poll()
+        poller.register(fd, select.POLLIN)
+        poller.register(self._wake_r, select.POLLIN)
+        clock = self.segment.clock
+        while not self._stop:
+            if self.busy_poll:
+                if not self.handle_one(buf):
+                    self._service_timers()
+                continue
+            deadline = self.segment.next_deadline()
+            timeout = IDLE_TIMEOUT_MS
+            if deadline is not None:
+                timeout = max(0, min(timeout, (deadline - clock.now_ns()) // 1_000_000 + 1))
+            events = poller.poll(timeout)
+            for efd, _ev in events:
+                if efd == self._wake_r:
+                    try:
+                        os.read(self._wake_r, 64)
+                    except OSError:
+                        pass
+                elif efd == fd:
+                    while self.handle_one(buf):
+                        pass
+            self._service_timers()
+
+    def _service_timers(self) -> None:
+        if self.segment.next_deadline() is not None or self.segment.ctx.pending:
+            self._service()
+
+    def close(self) -> None:
+        self.link.close()
+        for f in (self._wake_r, self._wake_w):
+            try:
+                os.close(f)
+            except OSError:
+                pass

@@ -1,0 +1,109 @@
+"""``ecatsim run``: open the link, build the segment, serve until told to stop."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import structlog
+
+from ecatsim.build import build_segment
+from ecatsim.clock import MonotonicClock
+from ecatsim.config import SegmentConfig, default_segment, load_segment, repeat_default
+from ecatsim.daemon import Daemon
+from ecatsim.errors import UserError
+from ecatsim.link.base import Link
+from ecatsim.link.errors import LinkError
+
+log = structlog.get_logger("ecatsim")
+
+
+@dataclass(frozen=True, slots=True)
+class RunOptions:
+    """Options of ``ecatsim run``."""
+
+    iface: str | None = None
+    tap: str | None = None
+    udp: str | None = None
+    config: Path | None = None
+    slaves: int | None = None
+    trace_frames: bool = False
+    allow_ip_iface: bool = False
+    busy_poll: bool = False
+    cpu: int | None = None
+
+
+def segment_config(opts: RunOptions) -> SegmentConfig:
+    """The segment from --config, --slaves or the embedded default."""
+    if opts.config is not None and opts.slaves is not None:
+        raise UserError("--config and --slaves exclude each other: put 'count: N' in the YAML")
+    if opts.config is not None:
+        return load_segment(opts.config)
+    if opts.slaves is not None:
+        return repeat_default(opts.slaves)
+    return default_segment()
+
+
+def open_link(opts: RunOptions) -> Link:
+    """Open exactly one of --iface, --tap, --udp. Errors are one line with the fix."""
+    chosen = [x for x in (opts.iface, opts.tap, opts.udp) if x]
+    if len(chosen) != 1:
+        raise UserError("give exactly one of --iface IFACE, --tap NAME or --udp HOST:PORT")
+    try:
+        if opts.iface:
+            from ecatsim.link.raw import RawLink, iface_ipv4_addresses
+
+            addrs = iface_ipv4_addresses(opts.iface)
+            if addrs and not opts.allow_ip_iface:
+                raise UserError(
+                    f"interface {opts.iface} has IPv4 address {addrs[0]}: refusing to take over a "
+                    "configured NIC; use a dedicated interface or pass --allow-ip-iface"
+                )
+            return RawLink(opts.iface)
+        if opts.tap:
+            from ecatsim.link.tap import TapLink
+
+            return TapLink(opts.tap)
+        from ecatsim.link.udp import UdpLink
+
+        host, sep, port = (opts.udp or "").rpartition(":")
+        if not sep or not port.isdigit():
+            raise UserError(f"--udp {opts.udp}: expected HOST:PORT, e.g. 127.0.0.1:34980")
+        return UdpLink(host or "0.0.0.0", int(port))
+    except LinkError as exc:
+        raise UserError(str(exc)) from exc
+
+
+def run_daemon(opts: RunOptions) -> None:
+    """Build everything, log ``ready``, serve until SIGINT/SIGTERM."""
+    cfg = segment_config(opts)
+    clock = MonotonicClock()
+    segment = build_segment(cfg, clock)
+    link = open_link(opts)
+    if opts.cpu is not None:
+        try:
+            os.sched_setaffinity(0, {opts.cpu})
+        except OSError as exc:
+            raise UserError(f"--cpu {opts.cpu}: cannot pin ({exc.strerror})") from exc
+    daemon = Daemon(link, segment, busy_poll=opts.busy_poll, trace_frames=opts.trace_frames)
+    daemon.install_signal_handlers()
+    where = opts.iface or opts.tap or opts.udp
+    log.info(
+        "ready",
+        link=where,
+        slaves=len(segment.escs),
+        config=cfg.source,
+        mode="busy-poll" if opts.busy_poll else "blocking",
+    )
+    try:
+        daemon.run()
+    finally:
+        daemon.close()
+        log.info(
+            "stopped",
+            frames=segment.frames,
+            replies=daemon.replies,
+            bad_frames=segment.bad_frames,
+            failures=daemon.failures,
+        )
