@@ -700,7 +700,7 @@ class Esc:
         """SM start/length/control are writable only while the SM is disabled.
         Ref: TMC8460 §5.49 Tables 86-88 note r/(w)."""
         n = (ra - regs.SM_BASE) // regs.SM_STRIDE
-        if self.mem[regs.sm_addr(n, 6)] & 0x01:
+        if self.sm[n].enabled:  # state before this frame's activate byte is applied
             self.mem[ra : ra + rs] = old
 
     def _ew_sm_activate(self, ra: int, rs: int, old: bytes) -> None:

@@ -43,6 +43,7 @@ class SyncManager:
         "start",
         "status",
         "control",
+        "enabled",
         "w",
         "w_open",
     )
@@ -54,6 +55,7 @@ class SyncManager:
         self.length = 0
         self.control = 0
         self.active = False
+        self.enabled = False
         self.locked = False
         self.mailbox = False
         self.ecat_side_writes = False
@@ -78,6 +80,7 @@ class SyncManager:
         Ref: TMC8460 §5.49 Table 90 (activation resets the SM), Table 91 (PDI deactivate).
         """
         self.locked = locked
+        self.enabled = active
         self.start = start
         self.length = length
         self.control = control
