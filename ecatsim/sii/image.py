@@ -128,6 +128,7 @@ def build_image(
     )
     struct.pack_into("<HH", hdr, 0x7C, e.eeprom_size_kbit - 1, 1)
     strings = _Strings()
+    strings.idx(desc.name)  # string 1 is the device name (SOEM reads the name from it)
     general = bytearray(32)
     general[0] = strings.idx(desc.group)
     general[1] = 0

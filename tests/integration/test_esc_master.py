@@ -49,10 +49,13 @@ def test_finds_slaves_with_sii_identity(daemon_factory: Any, master_factory: Any
     daemon_factory("--slaves", str(n))
     master = master_factory()
     assert master.config_init() == n
+    assert master.state_check(pysoem.PREOP_STATE, 1_000_000) == pysoem.PREOP_STATE
+    master.read_state()
     for i, s in enumerate(master.slaves):
         assert (s.man, s.id, s.rev) == (VENDOR, PRODUCT, REVISION), i
         assert s.name == "TMC8670"
         assert s.state == pysoem.PREOP_STATE
+        assert s.al_status == 0
 
 
 def test_fprd_identity_registers(daemon_factory: Any, master_factory: Any) -> None:
