@@ -10,7 +10,12 @@ import structlog
 
 from ecatsim.clock import Clock
 from ecatsim.config import SegmentConfig, SlaveConfig
-from ecatsim.description import DescriptionError, DeviceDescription, default_description, load_description
+from ecatsim.description import (
+    DescriptionError,
+    DeviceDescription,
+    default_description,
+    load_description,
+)
 from ecatsim.device.echo import EchoDevice
 from ecatsim.errors import UserError
 from ecatsim.esc.core import Esc, FrameContext
@@ -61,7 +66,9 @@ def _description(sc: SlaveConfig, cache: dict[Path | None, DeviceDescription]) -
     if sc.description not in cache:
         try:
             cache[sc.description] = (
-                default_description() if sc.description is None else load_description(sc.description)
+                default_description()
+                if sc.description is None
+                else load_description(sc.description)
             )
         except DescriptionError as exc:
             raise UserError(str(exc)) from exc
@@ -79,7 +86,9 @@ def _image(sc: SlaveConfig, desc: DeviceDescription) -> bytearray:
         try:
             EepromStore.save(sc.eeprom, img)
         except OSError as exc:
-            raise UserError(f"{sc.eeprom}: cannot create the EEPROM image ({exc.strerror})") from exc
+            raise UserError(
+                f"{sc.eeprom}: cannot create the EEPROM image ({exc.strerror})"
+            ) from exc
         log.info("eeprom_created", path=str(sc.eeprom))
     return bytearray(img)
 

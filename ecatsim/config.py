@@ -102,12 +102,20 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
         bad = set(s) - _SLAVE_KEYS
         if bad:
             k = sorted(bad)[0]
-            raise _err(src, f"{key}.{k}", f"unknown key (allowed: {', '.join(sorted(_SLAVE_KEYS))})")
+            raise _err(
+                src, f"{key}.{k}", f"unknown key (allowed: {', '.join(sorted(_SLAVE_KEYS))})"
+            )
         dev = s.get("device", "tmc8670")
         if dev not in DEVICE_TYPES:
-            raise _err(src, f"{key}.device", f"unknown device {dev!r} (use one of: {', '.join(DEVICE_TYPES)})")
+            raise _err(
+                src,
+                f"{key}.device",
+                f"unknown device {dev!r} (use one of: {', '.join(DEVICE_TYPES)})",
+            )
         count = _int(src, f"{key}.count", s.get("count", 1), 1, MAX_SLAVES)
-        desc = _path(src, base, f"{key}.description", s["description"]) if "description" in s else None
+        desc = (
+            _path(src, base, f"{key}.description", s["description"]) if "description" in s else None
+        )
         eeprom = _path(src, base, f"{key}.eeprom", s["eeprom"]) if "eeprom" in s else None
         esi = _path(src, base, f"{key}.esi", s["esi"]) if "esi" in s else None
         alias = _int(src, f"{key}.alias", s["alias"], 0, 0xFFFF) if "alias" in s else None
@@ -146,7 +154,9 @@ def load_segment(path: Path) -> SegmentConfig:
     try:
         text = path.read_text()
     except OSError as exc:
-        raise UserError(f"{path}: cannot read the segment file ({exc.strerror}); check the path") from exc
+        raise UserError(
+            f"{path}: cannot read the segment file ({exc.strerror}); check the path"
+        ) from exc
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:

@@ -191,17 +191,23 @@ class _Reader:
         bad = set(v) - allowed
         if bad:
             k = sorted(bad)[0]
-            raise self.err(f"{key}.{k}" if key else k, f"unknown key (allowed: {', '.join(sorted(allowed))})")
+            raise self.err(
+                f"{key}.{k}" if key else k, f"unknown key (allowed: {', '.join(sorted(allowed))})"
+            )
         return v
 
-    def int_(self, d: dict[str, Any], key: str, path: str, lo: int, hi: int, default: int | None = None) -> int:
+    def int_(
+        self, d: dict[str, Any], key: str, path: str, lo: int, hi: int, default: int | None = None
+    ) -> int:
         if key not in d:
             if default is None:
                 raise self.err(f"{path}.{key}" if path else key, "missing")
             return default
         v = d[key]
         if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
-            raise self.err(f"{path}.{key}" if path else key, f"expected an integer {lo}..{hi}, got {v!r}")
+            raise self.err(
+                f"{path}.{key}" if path else key, f"expected an integer {lo}..{hi}, got {v!r}"
+            )
         return v
 
     def str_(self, d: dict[str, Any], key: str, path: str, default: str | None = None) -> str:
@@ -220,7 +226,8 @@ def _area(r: _Reader, d: dict[str, Any], key: str) -> MailboxArea:
         return MailboxArea(0, 0)
     m = r.mapping(d[key], f"mailbox.{key}", {"offset", "size"})
     return MailboxArea(
-        r.int_(m, "offset", f"mailbox.{key}", 0, 0xFFFF), r.int_(m, "size", f"mailbox.{key}", 0, 0xFFFF)
+        r.int_(m, "offset", f"mailbox.{key}", 0, 0xFFFF),
+        r.int_(m, "size", f"mailbox.{key}", 0, 0xFFFF),
     )
 
 
@@ -239,7 +246,9 @@ def _pdos(r: _Reader, raw: Any, key: str) -> tuple[PdoDescription, ...]:
             e = r.mapping(e, ep, {"index", "subindex", "bits", "type", "name"})
             typ = r.str_(e, "type", ep, "UNSIGNED8")
             if typ not in DATA_TYPES:
-                raise r.err(f"{ep}.type", f"unknown data type {typ!r} (use e.g. UNSIGNED16, INTEGER32)")
+                raise r.err(
+                    f"{ep}.type", f"unknown data type {typ!r} (use e.g. UNSIGNED16, INTEGER32)"
+                )
             entries.append(
                 PdoEntry(
                     r.int_(e, "index", ep, 0, 0xFFFF),
@@ -261,8 +270,17 @@ def _pdos(r: _Reader, raw: Any, key: str) -> tuple[PdoDescription, ...]:
 
 
 _TOP = {
-    "device", "identity", "esc", "mailbox", "sync_managers", "fmmus", "rxpdos", "txpdos", "dc",
-    "od", "motor",
+    "device",
+    "identity",
+    "esc",
+    "mailbox",
+    "sync_managers",
+    "fmmus",
+    "rxpdos",
+    "txpdos",
+    "dc",
+    "od",
+    "motor",
 }
 
 
@@ -270,18 +288,43 @@ def parse_description(data: Any, src: str) -> DeviceDescription:
     """Validate a loaded YAML document."""
     r = _Reader(src)
     d = r.mapping(data, "", _TOP)
-    dev = r.mapping(d.get("device", {}), "device", {"name", "order_code", "group", "group_name", "hardware_version", "software_version"})
-    idn = r.mapping(d.get("identity"), "identity", {"vendor_id", "product_code", "revision", "serial"})
-    esc = r.mapping(d.get("esc", {}), "esc", {"pdi_control", "pdi_config", "sync_impulse_length", "pdi_config2", "alias", "eeprom_size_kbit"})
-    mbx = r.mapping(d.get("mailbox", {}), "mailbox", {"rx", "tx", "bootstrap_rx", "bootstrap_tx", "protocols", "coe_details", "foe"})
+    dev = r.mapping(
+        d.get("device", {}),
+        "device",
+        {"name", "order_code", "group", "group_name", "hardware_version", "software_version"},
+    )
+    idn = r.mapping(
+        d.get("identity"), "identity", {"vendor_id", "product_code", "revision", "serial"}
+    )
+    esc = r.mapping(
+        d.get("esc", {}),
+        "esc",
+        {
+            "pdi_control",
+            "pdi_config",
+            "sync_impulse_length",
+            "pdi_config2",
+            "alias",
+            "eeprom_size_kbit",
+        },
+    )
+    mbx = r.mapping(
+        d.get("mailbox", {}),
+        "mailbox",
+        {"rx", "tx", "bootstrap_rx", "bootstrap_tx", "protocols", "coe_details", "foe"},
+    )
     protocols = tuple(mbx.get("protocols") or ())
     for p in protocols:
         if p not in MAILBOX_PROTOCOLS:
-            raise r.err("mailbox.protocols", f"unknown protocol {p!r} (use: {', '.join(MAILBOX_PROTOCOLS)})")
+            raise r.err(
+                "mailbox.protocols", f"unknown protocol {p!r} (use: {', '.join(MAILBOX_PROTOCOLS)})"
+            )
     details = tuple(mbx.get("coe_details") or ())
     for p in details:
         if p not in COE_DETAILS:
-            raise r.err("mailbox.coe_details", f"unknown detail {p!r} (use: {', '.join(COE_DETAILS)})")
+            raise r.err(
+                "mailbox.coe_details", f"unknown detail {p!r} (use: {', '.join(COE_DETAILS)})"
+            )
     sms = []
     for i, s in enumerate(d.get("sync_managers") or []):
         path = f"sync_managers[{i}]"
@@ -305,7 +348,19 @@ def parse_description(data: Any, src: str) -> DeviceDescription:
     dcs = []
     for i, m in enumerate(d.get("dc") or []):
         path = f"dc[{i}]"
-        m = r.mapping(m, path, {"name", "description", "assign_activate", "sync0_cycle", "sync0_shift", "sync1_cycle", "sync1_shift"})
+        m = r.mapping(
+            m,
+            path,
+            {
+                "name",
+                "description",
+                "assign_activate",
+                "sync0_cycle",
+                "sync0_shift",
+                "sync1_cycle",
+                "sync1_shift",
+            },
+        )
         dcs.append(
             DcOpMode(
                 r.str_(m, "name", path),

@@ -10,6 +10,7 @@ TMC8460 §5.35 (processing unit error counter).
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from typing import Protocol
 
 from ecatsim.clock import Clock
 from ecatsim.esc import regs
@@ -20,14 +21,12 @@ from ecatsim.wire.datagram import LEN_MASK, MORE_FOLLOWS
 NOP, APRD, APWR, APRW, FPRD, FPWR, FPRW, BRD, BWR, BRW, LRD, LWR, LRW, ARMW, FRMW = range(15)
 
 
-class Serviceable:
+class Serviceable(Protocol):
     """What the segment runs after a frame: the firmware behind an ESC's PDI."""
 
-    def service(self, now_ns: int) -> None:  # pragma: no cover - interface
-        raise NotImplementedError
+    def service(self, now_ns: int) -> None: ...
 
-    def reset(self) -> None:  # pragma: no cover - interface
-        raise NotImplementedError
+    def reset(self) -> None: ...
 
 
 class Segment:
@@ -161,14 +160,14 @@ class Segment:
             inc = 0
             adp = buf[p + 2] | (buf[p + 3] << 8)
             ado = buf[p + 4] | (buf[p + 5] << 8)
-            if cmd == LRW or cmd == LRD or cmd == LWR:
+            if cmd in (LRW, LRD, LWR):
                 lad = adp | (ado << 16)
                 for esc in self.logical:
                     inc += esc.ecat_logical(cmd, lad, data)
-            elif cmd == FPRD or cmd == FPWR or cmd == FPRW:
+            elif cmd in (FPRD, FPWR, FPRW):
                 for i in self.addr_map.get(adp, ()):
                     inc += _physical(escs[i], cmd - FPRD, ado, data)
-            elif cmd == APRD or cmd == APWR or cmd == APRW:
+            elif cmd in (APRD, APWR, APRW):
                 k = (-adp) & 0xFFFF
                 if k < reach:
                     inc += _physical(escs[k], cmd - APRD, ado, data)

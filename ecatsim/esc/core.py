@@ -63,8 +63,16 @@ ReadHook = Callable[["Esc", int, int], None]
 class FrameContext:
     """Per-segment state shared by all ESCs: the frame being processed and dirty flags."""
 
-    __slots__ = ("addr_dirty", "frame_no", "irq_dirty", "logical_dirty", "pending", "t_ns",
-                 "topology_dirty", "flush")
+    __slots__ = (
+        "addr_dirty",
+        "flush",
+        "frame_no",
+        "irq_dirty",
+        "logical_dirty",
+        "pending",
+        "t_ns",
+        "topology_dirty",
+    )
 
     def __init__(self) -> None:
         self.frame_no = 0

@@ -30,11 +30,13 @@ class SyncManager:
 
     __slots__ = (
         "active",
-        "locked",
+        "control",
         "ecat_side_writes",
+        "enabled",
         "host",
         "l",
         "length",
+        "locked",
         "mailbox",
         "mbx_full",
         "n",
@@ -42,8 +44,6 @@ class SyncManager:
         "r_open",
         "start",
         "status",
-        "control",
-        "enabled",
         "w",
         "w_open",
     )

@@ -11,7 +11,7 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass, field
 
-from ecatsim.description import DeviceDescription, FMMU_TYPES
+from ecatsim.description import FMMU_TYPES, DeviceDescription
 from ecatsim.sii.crc import crc8
 
 CAT_STRINGS = 10
@@ -193,7 +193,9 @@ class SiiImage:
     size_kbit: int
     version: int
     strings: list[str] = field(default_factory=list)
-    categories: list[tuple[int, int, bytes]] = field(default_factory=list)  # (type, word addr, data)
+    categories: list[tuple[int, int, bytes]] = field(
+        default_factory=list
+    )  # (type, word addr, data)
     general: dict[str, int] = field(default_factory=dict)
     fmmus: list[int] = field(default_factory=list)
     sms: list[tuple[int, int, int, int, int, int]] = field(default_factory=list)
@@ -245,7 +247,8 @@ def parse_image(data: bytes) -> SiiImage:
         end = start + ln * 2
         if end > len(data):
             raise SiiError(
-                f"category {CAT_NAMES.get(typ, typ)} at word 0x{w:04X} ({ln} words) runs past the end"
+                f"category {CAT_NAMES.get(typ, typ)} at word 0x{w:04X} ({ln} words) "
+                "runs past the end"
             )
         img.categories.append((typ, w, bytes(data[start:end])))
         w += 2 + ln
@@ -303,7 +306,9 @@ def _decode(img: SiiImage, typ: int, w: int, body: bytes) -> None:
                 img.pdos.append((kind, idx, img.string(name), sm, entries))
         elif typ == CAT_DC:
             for i in range(len(body) // 24):
-                c0, s0, s1, _f1, act, _f0, name, _desc = struct.unpack_from("<IiihHhBB", body, i * 24)
+                c0, s0, s1, _f1, act, _f0, name, _desc = struct.unpack_from(
+                    "<IiihHhBB", body, i * 24
+                )
                 img.dc.append((c0, s0, s1, act, img.string(name)))
     except struct.error as exc:
         raise SiiError(f"{where}: truncated ({exc})") from exc
@@ -330,22 +335,35 @@ def format_image(img: SiiImage) -> str:
         f"  size               {img.size_kbit} kbit, version {img.version}",
     ]
     for typ, w, body in img.categories:
-        lines.append(f"category {CAT_NAMES.get(typ, str(typ))} (type {typ}) at word 0x{w:04X}, {len(body) // 2} words")
+        lines.append(
+            f"category {CAT_NAMES.get(typ, str(typ))} (type {typ}) at word 0x{w:04X}, "
+            f"{len(body) // 2} words"
+        )
         if typ == CAT_STRINGS:
             lines += [f"  [{i + 1}] {s!r}" for i, s in enumerate(img.strings)]
         elif typ == CAT_GENERAL:
             g = img.general
-            lines.append(f"  name {img.name!r}, order {img.string(g['order_idx'])!r}, group {img.string(g['group_idx'])!r}")
-            lines.append(f"  CoE details 0x{g['coe_details']:02X}, FoE details 0x{g['foe_details']:02X}")
+            lines.append(
+                f"  name {img.name!r}, order {img.string(g['order_idx'])!r}, "
+                f"group {img.string(g['group_idx'])!r}"
+            )
+            lines.append(
+                f"  CoE details 0x{g['coe_details']:02X}, FoE details 0x{g['foe_details']:02X}"
+            )
         elif typ == CAT_FMMU:
             lines += [f"  FMMU{i}: {FMMU_NAMES.get(t, t)}" for i, t in enumerate(img.fmmus)]
         elif typ == CAT_SYNCM:
             for i, (st, ln, ctl, _s, en, t) in enumerate(img.sms):
-                lines.append(f"  SM{i}: start 0x{st:04X} length {ln} control 0x{ctl:02X} enable {en} type {SM_TYPE_NAMES.get(t, t)}")
+                lines.append(
+                    f"  SM{i}: start 0x{st:04X} length {ln} control 0x{ctl:02X} enable {en} "
+                    f"type {SM_TYPE_NAMES.get(t, t)}"
+                )
     for kind, idx, name, sm, entries in img.pdos:
         lines.append(f"  {kind} 0x{idx:04X} {name!r} on SM{sm}")
-        for ei, es, en, et, eb in entries:
-            lines.append(f"    0x{ei:04X}:{es:02X} {eb:2d} bit type 0x{et:04X} {en!r}")
+        for ei, es, ename, et, eb in entries:
+            lines.append(f"    0x{ei:04X}:{es:02X} {eb:2d} bit type 0x{et:04X} {ename!r}")
     for c0, s0, _s1, act, name in img.dc:
-        lines.append(f"  DC opmode {name!r}: assign activate 0x{act:04X}, SYNC0 cycle {c0} ns, shift {s0} ns")
+        lines.append(
+            f"  DC opmode {name!r}: assign activate 0x{act:04X}, SYNC0 cycle {c0} ns, shift {s0} ns"
+        )
     return "\n".join(lines)

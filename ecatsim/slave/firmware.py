@@ -170,9 +170,8 @@ class Firmware:
         if req is None:
             self._refuse(al.CODE_UNKNOWN_STATE)
             return
-        if self.error and not ack and req != AlState.INIT:
-            if al.RANK[req] >= al.RANK[self.state]:
-                return
+        if self.error and not ack and req != AlState.INIT and al.RANK[req] >= al.RANK[self.state]:
+            return
         if ack or req == AlState.INIT:
             self.error = False
             self.code = al.CODE_NONE
@@ -281,12 +280,7 @@ class Firmware:
 
 
 def _mbx_ok(s: SmSettings, offset: int, size: int, ctrl: int) -> bool:
-    return (
-        s.enabled
-        and s.start == offset
-        and 0 < s.length <= size
-        and (s.control & 0x0F) == ctrl
-    )
+    return s.enabled and s.start == offset and 0 < s.length <= size and (s.control & 0x0F) == ctrl
 
 
 def _pd_ok(s: SmSettings, size: int, ctrl: int) -> bool:

@@ -7,6 +7,7 @@ CiA 301 / ETG.1000.6 Table 41 (SDO abort codes); ETG.1000.4 (mailbox error codes
 from __future__ import annotations
 
 import importlib.resources
+import itertools
 from dataclasses import dataclass
 from functools import cache
 from typing import Any
@@ -17,27 +18,81 @@ import yaml
 #: (or is listed there as passive).
 SIDE_EFFECTS = frozenset(
     {
-        "station_address", "station_alias", "write_protect", "reset_ecat", "reset_pdi",
-        "dl_control", "rw_offset", "dl_status", "al_control", "al_status", "al_status_code",
-        "led_override", "ecat_event_mask", "al_event_mask", "ecat_event_request",
-        "al_event_request", "rx_error_counter", "ecat_pu_error_counter", "pdi_error_counter",
-        "lost_link_counter", "wd_divider", "wd_time_pdi", "wd_time_pd", "wd_status_pd",
-        "wd_counter", "eeprom_config", "eeprom_pdi_access", "eeprom_control",
-        "eeprom_address", "eeprom_data", "mii_management", "fmmu", "sm_config", "sm_status",
-        "sm_activate", "sm_pdi_control", "dc_receive_time", "dc_system_time",
-        "dc_system_time_offset", "dc_system_time_delay", "dc_system_time_difference",
-        "dc_speed_counter_start", "dc_speed_counter_diff", "dc_filter_depth",
-        "dc_latch_mode", "dc_cyclic_unit_control", "dc_activation", "dc_sync_status",
-        "dc_start_time", "dc_next_sync1", "dc_cycle_time", "dc_latch_control",
-        "dc_latch_status", "dc_latch_time", "dc_event_time", "mfcio_parameter_ram",
+        "station_address",
+        "station_alias",
+        "write_protect",
+        "reset_ecat",
+        "reset_pdi",
+        "dl_control",
+        "rw_offset",
+        "dl_status",
+        "al_control",
+        "al_status",
+        "al_status_code",
+        "led_override",
+        "ecat_event_mask",
+        "al_event_mask",
+        "ecat_event_request",
+        "al_event_request",
+        "rx_error_counter",
+        "ecat_pu_error_counter",
+        "pdi_error_counter",
+        "lost_link_counter",
+        "wd_divider",
+        "wd_time_pdi",
+        "wd_time_pd",
+        "wd_status_pd",
+        "wd_counter",
+        "eeprom_config",
+        "eeprom_pdi_access",
+        "eeprom_control",
+        "eeprom_address",
+        "eeprom_data",
+        "mii_management",
+        "fmmu",
+        "sm_config",
+        "sm_status",
+        "sm_activate",
+        "sm_pdi_control",
+        "dc_receive_time",
+        "dc_system_time",
+        "dc_system_time_offset",
+        "dc_system_time_delay",
+        "dc_system_time_difference",
+        "dc_speed_counter_start",
+        "dc_speed_counter_diff",
+        "dc_filter_depth",
+        "dc_latch_mode",
+        "dc_cyclic_unit_control",
+        "dc_activation",
+        "dc_sync_status",
+        "dc_start_time",
+        "dc_next_sync1",
+        "dc_cycle_time",
+        "dc_latch_control",
+        "dc_latch_status",
+        "dc_latch_time",
+        "dc_event_time",
+        "mfcio_parameter_ram",
         "user_ram",
     }
 )
 
 ACCESS = frozenset({"r", "rw", "-"})
 _KEYS = {
-    "addr", "size", "name", "ecat", "pdi", "reset", "ecat_wmask", "pdi_wmask",
-    "side_effect", "available", "source", "note", "repeat",
+    "addr",
+    "size",
+    "name",
+    "ecat",
+    "pdi",
+    "reset",
+    "ecat_wmask",
+    "pdi_wmask",
+    "side_effect",
+    "available",
+    "source",
+    "note",
+    "repeat",
 }
 
 
@@ -141,7 +196,7 @@ def parse_registers(text: str) -> tuple[Register, ...]:
     for i, raw in enumerate(data["registers"]):
         rows.extend(_row(raw, i))
     rows.sort(key=lambda r: r.addr)
-    for a, b in zip(rows, rows[1:], strict=False):
+    for a, b in itertools.pairwise(rows):
         if a.addr + a.size > b.addr:
             raise SpecError(f"registers.yaml: {a.name} overlaps {b.name}")
     return tuple(rows)
@@ -162,5 +217,7 @@ def load_codes(name: str) -> dict[int, CodeRow]:
         raise SpecError(f"{name}.yaml: expected a list of codes")
     out = {}
     for r in rows:
-        out[int(r["code"])] = CodeRow(int(r["code"]), str(r["name"]), str(r.get("text", "")), str(r.get("source", "")))
+        out[int(r["code"])] = CodeRow(
+            int(r["code"]), str(r["name"]), str(r.get("text", "")), str(r.get("source", ""))
+        )
     return out

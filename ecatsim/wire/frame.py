@@ -32,9 +32,12 @@ def ecat_offset(buf: bytearray | memoryview, n: int, ethernet: bool) -> int:
     etype = (buf[12] << 8) | buf[13]
     if etype == ETHERTYPE_ECAT:
         return ETH_HEADER_LEN
-    if etype == ETHERTYPE_VLAN and n >= ETH_HEADER_LEN + VLAN_TAG_LEN + ECAT_HEADER_LEN:
-        if ((buf[16] << 8) | buf[17]) == ETHERTYPE_ECAT:
-            return ETH_HEADER_LEN + VLAN_TAG_LEN
+    if (
+        etype == ETHERTYPE_VLAN
+        and n >= ETH_HEADER_LEN + VLAN_TAG_LEN + ECAT_HEADER_LEN
+        and ((buf[16] << 8) | buf[17]) == ETHERTYPE_ECAT
+    ):
+        return ETH_HEADER_LEN + VLAN_TAG_LEN
     return -1
 
 

@@ -124,7 +124,11 @@ def test_more_follows_chain_is_processed_in_order() -> None:
         ]
     )
     assert rs is not None
-    assert [(r.idx, r.data, r.wkc) for r in rs] == [(1, b"\x01", 1), (2, b"\x01", 1), (3, b"\xd0", 1)]
+    assert [(r.idx, r.data, r.wkc) for r in rs] == [
+        (1, b"\x01", 1),
+        (2, b"\x01", 1),
+        (3, b"\xd0", 1),
+    ]
 
 
 def test_truncated_datagram_is_counted_and_destroyed() -> None:

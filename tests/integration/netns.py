@@ -55,15 +55,35 @@ class NetnsPair:
                 _run("ip", "netns", "add", ns)
                 _live.add(ns)
             _run(
-                "ip", "link", "add", self.master_if, "netns", self.master_ns,
-                "type", "veth", "peer", "name", self.slave_if, "netns", self.slave_ns,
+                "ip",
+                "link",
+                "add",
+                self.master_if,
+                "netns",
+                self.master_ns,
+                "type",
+                "veth",
+                "peer",
+                "name",
+                self.slave_if,
+                "netns",
+                self.slave_ns,
             )
             for ns, dev in ((self.master_ns, self.master_if), (self.slave_ns, self.slave_if)):
                 for name in (dev, "lo"):
                     subprocess.run(
-                        ["ip", "netns", "exec", ns, "sysctl", "-q", "-w",
-                         f"net.ipv6.conf.{name}.disable_ipv6=1"],
-                        capture_output=True, check=False,
+                        [
+                            "ip",
+                            "netns",
+                            "exec",
+                            ns,
+                            "sysctl",
+                            "-q",
+                            "-w",
+                            f"net.ipv6.conf.{name}.disable_ipv6=1",
+                        ],
+                        capture_output=True,
+                        check=False,
                     )
                 _run("ip", "-n", ns, "link", "set", dev, "up")
                 _run("ip", "-n", ns, "link", "set", "lo", "up")
@@ -97,7 +117,7 @@ def in_netns(ns: str) -> Iterator[None]:
 
     Sockets created inside stay in that namespace after the block ends.
     """
-    own = os.open(f"/proc/thread-self/ns/net", os.O_RDONLY)
+    own = os.open("/proc/thread-self/ns/net", os.O_RDONLY)
     target = os.open(f"/run/netns/{ns}", os.O_RDONLY)
     try:
         _setns(target)
@@ -123,9 +143,19 @@ class Daemon:
     def start(self, timeout: float = 10.0) -> None:
         self.starts += 1
         cmd = [
-            "ip", "netns", "exec", self.pair.slave_ns,
-            sys.executable, "-m", "ecatsim", "run", "--iface", self.pair.slave_if,
-            "--log-format", "json", *self.args,
+            "ip",
+            "netns",
+            "exec",
+            self.pair.slave_ns,
+            sys.executable,
+            "-m",
+            "ecatsim",
+            "run",
+            "--iface",
+            self.pair.slave_if,
+            "--log-format",
+            "json",
+            *self.args,
         ]
         with open(self.log, "ab") as f:
             f.write(f"--- start {self.starts}: {' '.join(cmd)}\n".encode())
