@@ -15,7 +15,7 @@ from typing import Protocol
 from ecatsim.clock import Clock
 from ecatsim.esc import regs
 from ecatsim.esc.core import Esc, FrameContext
-from ecatsim.wire.datagram import LEN_MASK, MORE_FOLLOWS
+from ecatsim.wire.datagram import CIRCULATING, LEN_MASK, MORE_FOLLOWS
 
 # Command codes as plain ints for the hot path. Ref: ETG.1000.4 Table 11.
 NOP, APRD, APWR, APRW, FPRD, FPWR, FPRW, BRD, BWR, BRW, LRD, LWR, LRW, ARMW, FRMW = range(15)
@@ -49,6 +49,8 @@ class Segment:
         self.addr_map: dict[int, tuple[int, ...]] = {}
         self.logical: list[Esc] = []
         self.irq = 0
+        #: a reachable ESC has its port-0 loop forced closed (circulating-frame handling)
+        self.port0_closed = False
         self.frames = 0
         self.bad_frames = 0
         n = len(self.escs)
@@ -68,6 +70,9 @@ class Segment:
                     reach = i + 1
                     break
             self.reach = reach
+            self.port0_closed = any(
+                (e.mem[regs.DL_CONTROL + 1] & 0x03) == 0x03 for e in self.escs[:reach]
+            )
             ctx.addr_dirty = ctx.logical_dirty = ctx.irq_dirty = True
         if ctx.addr_dirty:
             ctx.addr_dirty = False
@@ -140,8 +145,26 @@ class Segment:
             if not lf & MORE_FOLLOWS:
                 break
             p = q
+        if ctx.topology_dirty:
+            self._refresh()
+        if self.port0_closed and not self._circulate(buf, off + 2):
+            return False
         self._walk(buf, off + 2)
         return True
+
+    def _circulate(self, buf: bytearray, p: int) -> bool:
+        """A frame passing an ESC whose port 0 is closed gets the circulating bit; one that
+        already has it is destroyed, so a frame cannot circle forever.
+        Ref: ETG.1000.4 §5.4 (C bit); TMC8460 §5.17 (loop port 0)."""
+        if buf[p + 7] & (CIRCULATING >> 8):
+            self.bad_frames += 1
+            return False
+        while True:
+            buf[p + 7] |= CIRCULATING >> 8
+            lf = buf[p + 6] | (buf[p + 7] << 8)
+            if not lf & MORE_FOLLOWS:
+                return True
+            p += 12 + (lf & LEN_MASK)
 
     def _walk(self, buf: bytearray, p: int) -> None:
         mv = memoryview(buf)

@@ -193,3 +193,27 @@ def test_pdram_inaccessible_when_eeprom_checksum_bad() -> None:
     st = struct.unpack("<H", m.aprd(0, 0x0502, 2).data)[0]
     assert st & 0x0800 and st & 0x1000
     assert m.aprd(0, 0x0110, 1).data[0] & 0x01 == 0
+
+
+def test_irq_field_carries_masked_ecat_events() -> None:
+    seg, _ = segment_of(2)
+    m = TinyMaster(seg)
+    assert m.brd(0x0000, 1).irq == 0
+    m.apwr(1, 0x0200, b"\x08\x00")  # slave 1: map the AL status event
+    m.apwr(1, 0x0120, b"\x08\x00")  # invalid request: AL status changes (error)
+    assert m.brd(0x0000, 1).irq == 0x0008
+    m.aprd(1, 0x0130, 2)  # reading AL status clears the event
+    assert m.brd(0x0000, 1).irq == 0
+
+
+def test_circulating_bit_with_port0_closed() -> None:
+    seg, _ = segment_of(2)
+    m = TinyMaster(seg)
+    m.apwr(1, 0x0101, b"\x03")  # slave 1: loop port 0 closed
+    r = m.brd(0x0000, 1)
+    assert r.flags & dg.CIRCULATING
+    assert m.frame([dg.build(dg.Cmd.BRD, 0, 0, b"\x00", circulating=True)]) is None
+    m.apwr(1, 0x0101, b"\x00")
+    r = m.brd(0x0000, 1)
+    assert not r.flags & dg.CIRCULATING
+    assert m.frame([dg.build(dg.Cmd.BRD, 0, 0, b"\x00", circulating=True)]) is not None

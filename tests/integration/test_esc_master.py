@@ -193,3 +193,19 @@ def test_malformed_frames_do_not_stop_the_daemon(
     # the first ESC counted processing-unit errors (saturating at 0xFF)
     assert master.slaves[0]._fprd(0x030C, 1)[0] > 0
     to_op(master)
+
+
+def test_64_slaves_reach_op(daemon_factory: Any, master_factory: Any) -> None:
+    daemon_factory("--slaves", "64")
+    master = master_factory()
+    assert master.config_init() == 64
+    serials = set()
+    for i, s in enumerate(master.slaves):
+        assert (s.man, s.id) == (VENDOR, PRODUCT), i
+        serials.add(s.eeprom_read(0x000E))
+    assert len(serials) == 64  # distinct serial numbers
+    to_op(master)
+    assert master.expected_wkc == 3 * 64
+    for _ in range(100):
+        master.send_processdata()
+        assert master.receive_processdata(5000) == 3 * 64

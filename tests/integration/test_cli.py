@@ -1,0 +1,112 @@
+"""Startup problems are one clear line naming the fix; --version; clean exit on signals."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from ecatsim import __version__
+from tests.integration.netns import NetnsPair
+
+pytestmark = pytest.mark.integration
+
+
+def ecatsim(
+    *args: str, ns: str | None = None, user: int | None = None
+) -> subprocess.CompletedProcess[str]:
+    cmd = [sys.executable, "-m", "ecatsim", *args]
+    if user is not None:
+        cmd = ["setpriv", f"--reuid={user}", f"--regid={user}", "--clear-groups", *cmd]
+    if ns is not None:
+        cmd = ["ip", "netns", "exec", ns, *cmd]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=20)
+
+
+def one_error_line(r: subprocess.CompletedProcess[str]) -> str:
+    assert r.returncode == 2, (r.returncode, r.stdout, r.stderr)
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1, r.stderr
+    assert lines[0].startswith("ecatsim: error: ")
+    assert "Traceback" not in r.stderr
+    return lines[0]
+
+
+def test_version() -> None:
+    r = ecatsim("--version")
+    assert r.returncode == 0
+    assert __version__ in r.stdout
+
+
+def test_missing_interface() -> None:
+    line = one_error_line(ecatsim("run", "--iface", "nosuch0"))
+    assert "'nosuch0' does not exist" in line and "--iface" in line
+
+
+def test_interface_with_ipv4_is_refused(netns_pair: NetnsPair) -> None:
+    subprocess.run(
+        [
+            "ip",
+            "-n",
+            netns_pair.slave_ns,
+            "addr",
+            "add",
+            "192.0.2.7/24",
+            "dev",
+            netns_pair.slave_if,
+        ],
+        check=True,
+    )
+    line = one_error_line(ecatsim("run", "--iface", netns_pair.slave_if, ns=netns_pair.slave_ns))
+    assert "192.0.2.7" in line and "--allow-ip-iface" in line
+
+
+def test_no_cap_net_raw(netns_pair: NetnsPair) -> None:
+    line = one_error_line(
+        ecatsim("run", "--iface", netns_pair.slave_if, ns=netns_pair.slave_ns, user=65534)
+    )
+    assert "CAP_NET_RAW" in line
+
+
+def test_bad_yaml_field_names_file_and_key(tmp_path: Path) -> None:
+    cfg = tmp_path / "seg.yaml"
+    cfg.write_text("slaves:\n  - device: tmc8670\n    alias: twelve\n")
+    line = one_error_line(ecatsim("run", "--iface", "lo", "--config", str(cfg)))
+    assert f"{cfg}: slaves[0].alias: expected an integer 0..65535" in line
+    cfg.write_text("slaves:\n  - device: tmc8670\n    colour: red\n")
+    line = one_error_line(ecatsim("run", "--iface", "lo", "--config", str(cfg)))
+    assert "slaves[0].colour: unknown key" in line
+    cfg.write_text("slaves: [\n")
+    line = one_error_line(ecatsim("run", "--iface", "lo", "--config", str(cfg)))
+    assert str(cfg) in line and "not valid YAML" in line
+
+
+def test_bad_device_description(tmp_path: Path) -> None:
+    desc = tmp_path / "dev.yaml"
+    desc.write_text(
+        "identity: {vendor_id: 1, product_code: 2, revision: 3}\nsync_managers: [{control: x}]\n"
+    )
+    cfg = tmp_path / "seg.yaml"
+    cfg.write_text(f"slaves:\n  - device: tmc8670\n    description: {desc}\n")
+    line = one_error_line(ecatsim("run", "--iface", "lo", "--config", str(cfg)))
+    assert "dev.yaml" in line and "sync_managers[0]" in line
+
+
+def test_sigint_exits_cleanly(netns_pair: NetnsPair, tmp_path: Path) -> None:
+    log = tmp_path / "d.log"
+    cmd = ["ip", "netns", "exec", netns_pair.slave_ns, sys.executable, "-m", "ecatsim", "run",
+           "--iface", netns_pair.slave_if, "--log-format", "json"]  # fmt: skip
+    with open(log, "wb") as f:
+        p = subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT)
+    import time
+
+    deadline = time.monotonic() + 10
+    while '"ready"' not in log.read_text() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    p.send_signal(2)
+    assert p.wait(5) == 0
+    text = log.read_text()
+    assert '"event": "stopped"' in text
+    assert "Traceback" not in text
