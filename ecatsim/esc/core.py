@@ -586,6 +586,19 @@ class Esc:
             self.mem[ra] = 0x00
         self.reset_progress_frame = f
 
+    def _pw_reset_pdi(self, ra: int, rs: int, old: bytes) -> None:
+        """'R','E','S' in three consecutive PDI writes resets the ESC. Ref: TMC8460 §5.16."""
+        v = self.mem[ra]
+        prog = old[0] & 0x03
+        if v == 0x52:
+            self.mem[ra] = 0x01
+        elif v == 0x45 and prog == 0x01:
+            self.mem[ra] = 0x02
+        elif v == 0x53 and prog == 0x02:
+            self.hardware_reset()
+        else:
+            self.mem[ra] = 0x00
+
     def hardware_reset(self) -> None:
         """Reset the ESC (and, through on_reset, the application behind the PDI)."""
         self.power_on()

@@ -210,3 +210,17 @@ def test_res_sequence_resets_the_esc() -> None:
         m.apwr(0, 0x0040, bytes([c]))
     assert m.aprd(0, 0x0010, 2).data == b"\x00\x00"  # station address back to reset value
     assert al(m) == (0x01, 0)
+
+
+def test_pdi_res_sequence_resets_the_esc() -> None:
+    seg, _ = segment_of(1)
+    m = TinyMaster(seg)
+    m.apwr(0, 0x0010, b"\x00\x10")
+    pdi = Pdi(seg.escs[0])
+    pdi.write(0x0041, b"R")
+    assert pdi.u8(0x0041) == 0x01
+    pdi.write(0x0041, b"X")
+    assert pdi.u8(0x0041) == 0x00
+    for c in b"RES":
+        pdi.write(0x0041, bytes([c]))
+    assert m.aprd(0, 0x0010, 2).data == b"\x00\x00"

@@ -1,0 +1,72 @@
+"""The register table (data) and the ESC hooks (code) agree; identity values are exact.
+
+Ref: TMC8460 §4 Table 11, §5; design.md habit 1.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import pytest
+
+from ecatsim.esc.core import PASSIVE_SIDE_EFFECTS, hook_names, tables
+from ecatsim.spec.tables import SIDE_EFFECTS, SpecError, load_registers, parse_registers
+
+
+def test_every_side_effect_in_the_table_has_a_hook_and_back() -> None:
+    used = {r.side_effect for r in load_registers() if r.side_effect}
+    hooks = hook_names()
+    assert used - hooks - PASSIVE_SIDE_EFFECTS == set()
+    assert hooks - used == set()
+    assert PASSIVE_SIDE_EFFECTS - used == set()
+    assert hooks & PASSIVE_SIDE_EFFECTS == set()
+    assert used <= SIDE_EFFECTS
+
+
+def test_every_row_cites_the_datasheet_and_rows_do_not_overlap() -> None:
+    rows = load_registers()
+    assert all(r.source.startswith("TMC8460 §") for r in rows)
+    for a, b in itertools.pairwise(rows):
+        assert a.addr + a.size <= b.addr
+
+
+def test_identity_and_repeats() -> None:
+    by = {r.name: r for r in load_registers()}
+    assert by["type"].reset == 0xD0
+    assert by["revision"].reset == 0x60
+    assert by["esc_features"].reset == 0x01CC
+    assert by["product_id"].reset == 0x01008460
+    assert by["vendor_id"].reset == 0x286
+    assert by["sm5_activate"].addr == 0x082E
+    assert by["fmmu5_activate"].addr == 0x065C
+    assert "sm6_activate" not in by and "fmmu6_activate" not in by
+    assert by["dl_control"].ecat_wmask == 0x01FFFF03
+    assert not by["write_register_protection"].available
+
+
+def test_write_masks_compiled() -> None:
+    t = tables()
+    assert t.ecat_wmask[0x0000] == 0  # type: read-only
+    assert t.ecat_wmask[0x0021] == 0  # not available on the TMC8460-BI
+    assert t.ecat_wmask[0x0010] == 0xFF
+    assert t.pdi_wmask[0x0010] == 0  # station address: PDI read-only
+    assert t.pdi_wmask[0x0012] == 0xFF  # alias: PDI writes it
+
+
+@pytest.mark.parametrize(
+    ("text", "fragment"),
+    [
+        ("registers:\n  - {addr: 0x10, size: 2, name: a, ecat: rw, pdi: r, source: x}\n"
+         "  - {addr: 0x11, size: 1, name: b, ecat: r, pdi: r, source: x}\n", "a overlaps b"),
+        ("registers:\n  - {addr: 0x10, size: 1, name: a, ecat: rx, pdi: r, source: x}\n", "(a)"),
+        ("registers:\n  - {addr: 0x10, size: 1, name: a, ecat: r, pdi: r}\n", "missing 'source'"),
+        ("registers:\n  - {addr: 0x10, size: 1, name: a, ecat: r, pdi: r, source: x,"
+         " side_effect: magic}\n", "unknown side_effect"),
+        ("registers:\n  - {addr: 0x10, size: 1, name: a, ecat: rw, pdi: r, source: x,"
+         " ecat_wmask: 0x100}\n", "ecat_wmask"),
+    ],
+)  # fmt: skip
+def test_malformed_rows_are_named(text: str, fragment: str) -> None:
+    with pytest.raises(SpecError) as e:
+        parse_registers(text)
+    assert fragment in str(e.value)
