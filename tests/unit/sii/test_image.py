@@ -59,7 +59,7 @@ def test_round_trip_matches_description() -> None:
     assert [(s[0], s[1], s[2], s[5]) for s in p.sms] == [
         (s.start, s.length, s.control, s.type_code) for s in desc.sync_managers
     ]
-    rx = [pd for pd in p.pdos if pd[0] == "RxPDO"][0]
+    rx = next(pd for pd in p.pdos if pd[0] == "RxPDO")
     assert [(e[0], e[4]) for e in rx[4]] == [(e.index, e.bits) for e in desc.rxpdos[0].entries]
     assert p.fmmus == [1, 2, 3]
     text = format_image(p)
@@ -103,7 +103,7 @@ def test_description_errors_name_file_and_key() -> None:
     with pytest.raises(DescriptionError, match=r"x.yaml: sync_managers\[0\].control: expected"):
         parse_description({**base, "sync_managers": [{"start": 0, "length": 1, "control": "x"}]},
                           "x.yaml")  # fmt: skip
-    with pytest.raises(DescriptionError, match="x.yaml: colour: unknown key"):
+    with pytest.raises(DescriptionError, match=r"x\.yaml: colour: unknown key"):
         parse_description({**base, "colour": 1}, "x.yaml")
 
 
@@ -124,7 +124,7 @@ def test_store_save_is_atomic(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -
 def test_store_rejects_bad_files(tmp_path: Path) -> None:
     p = tmp_path / "odd.bin"
     p.write_bytes(b"\x00" * 17)
-    with pytest.raises(SiiError, match="odd.bin"):
+    with pytest.raises(SiiError, match=r"odd\.bin"):
         EepromStore.load(p)
     with pytest.raises(SiiError, match="cannot read"):
         EepromStore.load(tmp_path / "missing.bin")
