@@ -134,8 +134,8 @@ class Firmware:
             out = p.sm_read(SM_PD_OUT)
             if out is not None and self.state == AlState.OP:
                 self.app.set_outputs(out, now_ns)
-            self._write_inputs(now_ns)
-        if ev & (EV_SM0 << SM_PD_IN):
+        if ev & ((EV_SM0 << SM_PD_OUT) | (EV_SM0 << SM_PD_IN)):
+            # new outputs or inputs consumed: one fresh input image (clears the SM3 event)
             self._write_inputs(now_ns)
         self.service_mailbox(ev, now_ns)
 

@@ -1,0 +1,26 @@
+"""A wide regression guard on the frame path: at most 3x the stored baseline ratio.
+
+Not a timing assertion on absolute numbers: costs are ratios to a calibration loop.
+The baseline lives in tests/perf/baseline.json (update it with tools/microbench.py --save).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from tests.perf.hotpath import calibrate, frame_cost
+
+BASELINE = json.loads((Path(__file__).parent / "baseline.json").read_text())
+
+
+@pytest.mark.parametrize("n_slaves", [1, 16])
+def test_frame_path_not_regressed(n_slaves: int) -> None:
+    unit = calibrate()
+    ratio = frame_cost(n_slaves, iterations=500) / unit
+    base = BASELINE[f"frame_{n_slaves}"]
+    assert ratio <= 3 * base, (
+        f"{n_slaves} slaves: {ratio:.0f} calibration units vs baseline {base:.0f}"
+    )
