@@ -16,7 +16,7 @@ from ecatsim.description import (
     default_description,
     load_description,
 )
-from ecatsim.device.echo import EchoDevice
+from ecatsim.device.echo import EchoDevice, OdEchoDevice
 from ecatsim.errors import UserError
 from ecatsim.esc.core import Esc, FrameContext
 from ecatsim.esc.pdi import Pdi
@@ -24,7 +24,11 @@ from ecatsim.segment import Segment
 from ecatsim.sii.image import SiiError, build_image
 from ecatsim.sii.store import EepromStore
 from ecatsim.slave.app import Application
+from ecatsim.slave.coe import CoeProtocol
 from ecatsim.slave.firmware import Firmware, MailboxLayout
+from ecatsim.slave.mailbox import MailboxEngine
+from ecatsim.slave.od_build import build_od
+from ecatsim.slave.pdo import PdoImage
 
 log = structlog.get_logger("ecatsim.build")
 
@@ -110,7 +114,21 @@ def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
             dc_start_ns=(i + 1) * DC_START_STEP_NS,
             dc_drift_ppm=sc.dc_drift_ppm,
         )
-        fw = Firmware(Pdi(esc), make_device(sc.device, desc), mailbox_layout(image))
+        pdi = Pdi(esc)
+        layout = mailbox_layout(image)
+        if "coe" in desc.mailbox.protocols:
+            serial = sc.serial if sc.serial is not None else desc.identity.serial
+            base = sc.description.parent if sc.description is not None else None
+            try:
+                od = build_od(desc, serial, base)
+            except DescriptionError as exc:
+                raise UserError(str(exc)) from exc
+            mbx = MailboxEngine(pdi)
+            app: Application = PdoImage(od, OdEchoDevice(od))
+            fw = Firmware(pdi, app, layout, mbx=mbx)
+            CoeProtocol(mbx, od, fw.al_state_code)
+        else:
+            fw = Firmware(pdi, make_device(sc.device, desc), layout)
         esc.on_reset = fw.reset
         escs.append(esc)
         firmware.append(fw)

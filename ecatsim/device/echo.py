@@ -10,6 +10,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from ecatsim.slave.al import AlState
+from ecatsim.slave.od import ObjectDictionary
 
 #: tx object <- rx object. Ref: CiA 402 (statusword/controlword, actual/target pairs).
 ECHO_PAIRS = {0x6041: 0x6040, 0x6064: 0x607A, 0x6077: 0x6071, 0x606C: 0x60FF}
@@ -73,4 +74,29 @@ class EchoDevice:
     def al_state_changed(self, state: AlState, now_ns: int) -> None:
         if self.state == AlState.OP and state != AlState.OP:
             self.values.clear()  # safe state: outputs dropped
+        self.state = state
+
+
+class OdEchoDevice:
+    """The echo device for CoE slaves: works on object dictionary values, so any PDO
+    mapping the master configures carries the echoed objects."""
+
+    def __init__(self, od: ObjectDictionary) -> None:
+        self.od = od
+        self.count = 0
+        self.state = AlState.INIT
+
+    def outputs_applied(self, now_ns: int) -> None:
+        od = self.od
+        for tx, rx in ECHO_PAIRS.items():
+            if tx in od and rx in od:
+                od.set(tx, 0, od.value(rx, 0))
+        self.count = (self.count + 1) & 0xFFFFFFFF
+        if COUNTER in od:
+            od.set(COUNTER, 0, self.count)
+
+    def update_inputs(self, now_ns: int) -> None:
+        """Nothing moves: the echo is applied with the outputs."""
+
+    def al_state_changed(self, state: AlState, now_ns: int) -> None:
         self.state = state

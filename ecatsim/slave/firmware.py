@@ -27,6 +27,7 @@ from ecatsim.esc.pdi import (
 from ecatsim.slave import al
 from ecatsim.slave.al import AlState, Transition
 from ecatsim.slave.app import Application
+from ecatsim.slave.mailbox import MailboxEngine
 
 log = structlog.get_logger("ecatsim.slave")
 
@@ -42,10 +43,10 @@ CTRL_MBX_IN = 0x02  # mailbox, ECAT reads
 CTRL_PD_OUT = 0x04  # buffered, ECAT writes
 CTRL_PD_IN = 0x00  # buffered, ECAT reads
 
-#: Events the firmware serves (AL event mask). Ref: TMC8460 §5.30, §5.32 Table 46.
-EVENT_MASK = (
-    EV_AL_CONTROL | EV_SM_ACTIVATION | EV_WATCHDOG_PD | (0x0F * EV_SM0)  # SM0..SM3
-)
+#: Events the firmware serves (AL event mask). SM1 (mailbox read by the master) is only
+#: unmasked while replies are queued. Ref: TMC8460 §5.30, §5.32 Table 46.
+EV_SM1 = EV_SM0 << 1
+EVENT_MASK = EV_AL_CONTROL | EV_SM_ACTIVATION | EV_WATCHDOG_PD | (0x0D * EV_SM0)
 
 
 @dataclass(frozen=True, slots=True)
@@ -79,11 +80,14 @@ class Firmware:
         app: Application,
         mailbox: MailboxLayout,
         *,
+        mbx: MailboxEngine | None = None,
         bootstrap_supported: bool = False,
     ) -> None:
         self.pdi = pdi
         self.app = app
         self.mailbox = mailbox
+        self.mbx = mbx
+        self.event_mask = EVENT_MASK
         self.bootstrap_supported = bootstrap_supported
         self.state = AlState.INIT
         self.error = False
@@ -104,10 +108,15 @@ class Firmware:
         p = self.pdi
         if not p.operational():
             return
+        self.event_mask = EVENT_MASK
         p.w32(AL_EVENT_MASK, EVENT_MASK)
         for n in (SM_MBX_OUT, SM_MBX_IN, SM_PD_OUT, SM_PD_IN):
             p.sm_deactivate(n, True)
         self._publish()
+
+    def al_state_code(self) -> int:
+        """The current AL state as its code (for state-dependent OD access)."""
+        return int(self.state)
 
     def _publish(self) -> None:
         status = int(self.state) | (al.AL_ERROR if self.error else 0)
@@ -140,17 +149,30 @@ class Firmware:
         self.service_mailbox(ev, now_ns)
 
     def service_mailbox(self, ev: int, now_ns: int) -> None:
-        """Mailbox protocols; none in the base firmware (the CoE firmware overrides this).
+        """Serve SM0 (requests) and SM1 (replies taken by the master).
 
-        A mailbox written anyway is read and dropped so the event clears.
+        Without mailbox protocols a request is read and dropped so the event clears.
         """
+        mbx = self.mbx
+        if mbx is None:
+            if ev & (EV_SM0 << SM_MBX_OUT):
+                self.pdi.sm_read(SM_MBX_OUT)
+            return
         if ev & (EV_SM0 << SM_MBX_OUT):
-            self.pdi.sm_read(SM_MBX_OUT)
+            mbx.receive()
+        if ev & EV_SM1:
+            mbx.flush()
+        want = EVENT_MASK | (EV_SM1 if mbx.out else 0)
+        if want != self.event_mask:
+            self.event_mask = want
+            self.pdi.w32(AL_EVENT_MASK, want)
 
     def _sm_activation(self) -> None:
         """Reading the activation registers acknowledges the event. Ref: §5.49 Table 90 *."""
         for n in range(4):
             self.pdi.sm_settings(n)
+        if self.mbx is not None and self.state != AlState.INIT:
+            self.mbx.repeat()
 
     def _write_inputs(self, now_ns: int) -> None:
         if self.state in (AlState.SAFEOP, AlState.OP):
@@ -214,7 +236,9 @@ class Firmware:
                 return al.CODE_BOOTSTRAP_NOT_SUPPORTED
             return 0
         if tr == Transition.PS:
-            return self.check_process_data()
+            prepare = getattr(self.app, "prepare", None)
+            code = int(prepare()) if prepare is not None else 0
+            return code or self.check_process_data()
         return 0
 
     def check_mailbox(self) -> int:
@@ -266,7 +290,9 @@ class Firmware:
         self._publish()
 
     def on_mailbox_start(self) -> None:
-        """Hook for mailbox protocols when the mailbox starts (IP/IB)."""
+        """The mailbox starts (IP/IB): counters and queues reset."""
+        if self.mbx is not None:
+            self.mbx.reset()
 
     def _stop_for(self, to: AlState, now_ns: int) -> None:
         """Stop what the target state does not run: PD below SAFEOP, mailbox in INIT."""

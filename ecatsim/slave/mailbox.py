@@ -1,0 +1,162 @@
+"""The mailbox engine: SM0 in, SM1 out, counters, repeat requests and error replies.
+
+Protocol handlers (CoE now, FoE later) get the mailbox data and return reply bodies;
+mailbox-level problems become an error reply (type 0) in one place.
+Ref: ETG.1000.4 §5.6 (mailbox header, counter, error reply Table 30), §6.7.4 (repeat);
+TMC8460 §5.49 Tables 90/91 (repeat request/ack).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import structlog
+
+from ecatsim.esc.pdi import Pdi
+from ecatsim.wire.mailbox import MBX_HEADER, MBX_HEADER_LEN, MbxError, MbxType, mbx_header
+
+log = structlog.get_logger("ecatsim.mailbox")
+
+SM_OUT = 0  # master -> slave
+SM_IN = 1  # slave -> master
+QUEUE_DEPTH = 16
+
+
+@dataclass(frozen=True, slots=True)
+class Request:
+    """A received mailbox: type, counter and data after the 6-byte header."""
+
+    mtype: int
+    counter: int
+    address: int
+    channel: int
+    data: bytes
+
+
+class MailboxError(Exception):
+    """A mailbox-level failure that becomes an error reply."""
+
+    def __init__(self, code: MbxError) -> None:
+        super().__init__(code.name)
+        self.code = code
+
+
+#: A protocol handler: request -> list of (type, reply data) to send back.
+Handler = Callable[[Request], list[tuple[int, bytes]]]
+
+
+class MailboxEngine:
+    """Serves SM0/SM1 for one slave through its PDI."""
+
+    def __init__(self, pdi: Pdi) -> None:
+        self.pdi = pdi
+        self.handlers: dict[int, Handler] = {}
+        self.out: deque[bytes] = deque()
+        self.last_sent = b""
+        self.counter = 0
+        self.last_in_counter = 0
+        self.repeat_ack = False
+        self.errors = 0
+        self.log = log.bind(slave=pdi.position)
+
+    def reset(self) -> None:
+        """Mailbox start (IP/IB): queues and counters cleared. Ref: ETG.1000.4 §5.6."""
+        self.out.clear()
+        self.last_sent = b""
+        self.counter = 0
+        self.last_in_counter = 0
+        self.repeat_ack = self.pdi.sm_repeat_request(SM_IN)
+        self.pdi.sm_repeat_ack(SM_IN, self.repeat_ack)
+
+    def register(self, mtype: MbxType, handler: Handler) -> None:
+        self.handlers[int(mtype)] = handler
+
+    # ----------------------------------------------------------------- receive
+
+    def receive(self) -> None:
+        """Read SM0 if full and dispatch it."""
+        raw = self.pdi.sm_read(SM_OUT)
+        if raw is None:
+            return
+        try:
+            req = self._parse(raw)
+            if req is None:
+                return
+            handler = self.handlers.get(req.mtype)
+            if handler is None:
+                raise MailboxError(MbxError.UNSUPPORTED_PROTOCOL)
+            for mtype, body in handler(req):
+                self.post(mtype, body)
+        except MailboxError as exc:
+            self.error_reply(exc.code)
+
+    def _parse(self, raw: bytes) -> Request | None:
+        """Validate the header. Ref: ETG.1000.4 §5.6 Table 28, error codes Table 30."""
+        length, address, chan, tc = MBX_HEADER.unpack_from(raw)
+        mtype = tc & 0x0F
+        counter = (tc >> 4) & 0x07
+        if length < 2:
+            raise MailboxError(MbxError.SIZE_TOO_SHORT)
+        if length > len(raw) - MBX_HEADER_LEN:
+            raise MailboxError(MbxError.INVALID_SIZE)
+        if chan & 0x3F:
+            raise MailboxError(MbxError.INVALID_CHANNEL)
+        if tc & 0x80:
+            raise MailboxError(MbxError.INVALID_HEADER)
+        if counter and counter == self.last_in_counter:
+            return None  # a repeated mailbox: already served
+        self.last_in_counter = counter
+        return Request(mtype, counter, address, chan, raw[MBX_HEADER_LEN : MBX_HEADER_LEN + length])
+
+    # ----------------------------------------------------------------- send
+
+    def error_reply(self, code: MbxError) -> None:
+        """The one place a mailbox problem becomes an error reply (type 0, service 1).
+
+        Ref: ETG.1000.4 §5.6 Table 30.
+        """
+        self.errors += 1
+        self.log.info("mailbox_error", code=code.name)
+        self.post(MbxType.ERR, (0x0001).to_bytes(2, "little") + int(code).to_bytes(2, "little"))
+
+    def post(self, mtype: int, body: bytes) -> None:
+        """Queue one reply; sent at once if SM1 is empty."""
+        if len(self.out) >= QUEUE_DEPTH:
+            self.log.warning("mailbox_queue_full")
+            return
+        self.counter = self.counter % 7 + 1
+        self.out.append(mbx_header(len(body), mtype, self.counter) + body)
+        self.flush()
+
+    def flush(self) -> None:
+        """Write the next queued reply into SM1 if it is empty."""
+        if not self.out:
+            return
+        size = self.pdi.sm_settings(SM_IN).length
+        frame = self.out[0]
+        if len(frame) > size:
+            self.out.popleft()
+            self.log.warning("mailbox_reply_too_large", size=len(frame), sm=size)
+            return
+        if self.pdi.sm_write(SM_IN, frame):
+            self.last_sent = frame
+            self.out.popleft()
+
+    def max_body(self) -> int:
+        """Largest reply body that fits SM1 as the master configured it."""
+        return self.pdi.sm_settings(SM_IN).length - MBX_HEADER_LEN
+
+    def repeat(self) -> None:
+        """Repeat request on SM1: put the last reply back and toggle the ack.
+
+        Ref: ETG.1000.4 §6.7.4; TMC8460 §5.49 Tables 90, 91.
+        """
+        req = self.pdi.sm_repeat_request(SM_IN)
+        if req == self.repeat_ack:
+            return
+        if self.last_sent:
+            self.pdi.sm_write(SM_IN, self.last_sent)
+        self.repeat_ack = req
+        self.pdi.sm_repeat_ack(SM_IN, req)

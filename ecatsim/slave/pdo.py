@@ -1,0 +1,181 @@
+"""PDO mapping (0x1600/0x1A00), assignment (0x1C12/0x1C13) and the compiled copy plan.
+
+Mapping writes are validated when they happen (object exists, is mappable, direction,
+length) and the plan is compiled at PREOP->SAFEOP, when the SM lengths are checked.
+Ref: ETG.1000.6 §5.6.7.4 (PDO mapping/assignment objects); CiA 301 §7.5.2.35/36;
+seed 004 §2.1 (max. 9 mapping entries), §4.1.7-4.1.11.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+from ecatsim.slave.al import AlState
+from ecatsim.slave.od import (
+    ABORT_NO_OBJECT,
+    ABORT_NOT_MAPPABLE,
+    ABORT_PDO_LENGTH,
+    ABORT_SI0_NOT_ZERO,
+    Entry,
+    ObjectDictionary,
+    SdoAbort,
+)
+
+RX_MAP = 0x1600
+TX_MAP = 0x1A00
+RX_ASSIGN = 0x1C12
+TX_ASSIGN = 0x1C13
+#: Largest PDO: 32 bytes (see docs/decisions.md C6).
+MAX_PDO_BITS = 256
+
+
+@dataclass(frozen=True, slots=True)
+class Field:
+    """One mapped entry: byte offset, byte size, the OD entry (None = padding)."""
+
+    offset: int
+    size: int
+    entry: Entry | None
+
+
+@dataclass(frozen=True, slots=True)
+class Plan:
+    """The compiled process images."""
+
+    rx: tuple[Field, ...]
+    tx: tuple[Field, ...]
+    rx_size: int
+    tx_size: int
+
+
+def _mapped(od: ObjectDictionary, value: int, rx: bool) -> tuple[Entry | None, int]:
+    """Resolve one mapping entry value (index << 16 | sub << 8 | bits)."""
+    index, sub, bits = value >> 16, (value >> 8) & 0xFF, value & 0xFF
+    if index == 0 or index < 0x0008:  # padding / dummy data types
+        return None, bits
+    if index not in od:
+        raise SdoAbort(ABORT_NO_OBJECT, f"mapped object 0x{index:04X}")
+    e = od.entry(index, sub)
+    if not e.pdo or e.bits != bits or (rx and e.access == "ro"):
+        raise SdoAbort(ABORT_NOT_MAPPABLE, f"0x{index:04X}:{sub} ({bits} bits)")
+    return e, bits
+
+
+def mapping_fields(od: ObjectDictionary, index: int) -> tuple[list[Field], int]:
+    """Fields and total bits of a mapping object. Ref: CiA 301 §7.5.2.36."""
+    obj = od[index]
+    n = int(obj.entries[0].value)
+    fields = []
+    bit = 0
+    for s in range(1, n + 1):
+        e, bits = _mapped(od, int(obj.entries[s].value), index == RX_MAP)
+        if bit % 8 or bits % 8:
+            raise SdoAbort(ABORT_NOT_MAPPABLE, "only byte-aligned mappings are supported")
+        fields.append(Field(bit // 8, bits // 8, e))
+        bit += bits
+    if bit > MAX_PDO_BITS:
+        raise SdoAbort(ABORT_PDO_LENGTH, f"{bit} bits > {MAX_PDO_BITS}")
+    return fields, bit
+
+
+def install(od: ObjectDictionary) -> None:
+    """Validators on the mapping and assignment objects."""
+
+    def mapping_validator(index: int) -> None:
+        def check(sub: int) -> None:
+            if sub > 0 and int(od[index].entries[0].value) != 0:
+                raise SdoAbort(ABORT_SI0_NOT_ZERO, "write subindex 0 = 0 first")
+            mapping_fields(od, index)
+
+        od[index].validate = check
+
+    def assign_validator(index: int, allowed: int) -> None:
+        def check(sub: int) -> None:
+            obj = od[index]
+            if sub > 0 and int(obj.entries[0].value) != 0:
+                raise SdoAbort(ABORT_SI0_NOT_ZERO, "write subindex 0 = 0 first")
+            if int(obj.entries[0].value) >= 1 and int(obj.entries[1].value) != allowed:
+                raise SdoAbort(ABORT_NO_OBJECT, f"PDO 0x{int(obj.entries[1].value):04X}")
+
+        od[index].validate = check
+
+    for idx in (RX_MAP, TX_MAP):
+        if idx in od:
+            mapping_validator(idx)
+    if RX_ASSIGN in od:
+        assign_validator(RX_ASSIGN, RX_MAP)
+    if TX_ASSIGN in od:
+        assign_validator(TX_ASSIGN, TX_MAP)
+
+
+def compile_plan(od: ObjectDictionary) -> Plan:
+    """The copy plan from the assigned PDOs. Ref: ETG.1000.6 §5.6.7.4.7."""
+    rx: list[Field] = []
+    tx: list[Field] = []
+    rx_bits = tx_bits = 0
+    if RX_ASSIGN in od and int(od[RX_ASSIGN].entries[0].value) >= 1:
+        f, rx_bits = mapping_fields(od, RX_MAP)
+        rx = f
+    if TX_ASSIGN in od and int(od[TX_ASSIGN].entries[0].value) >= 1:
+        f, tx_bits = mapping_fields(od, TX_MAP)
+        tx = f
+    return Plan(tuple(rx), tuple(tx), (rx_bits + 7) // 8, (tx_bits + 7) // 8)
+
+
+class CoeDevice(Protocol):
+    """A device that works on object dictionary values."""
+
+    def outputs_applied(self, now_ns: int) -> None:
+        """RxPDO values were just written into the OD (OP only)."""
+        ...
+
+    def update_inputs(self, now_ns: int) -> None:
+        """Refresh the OD values the TxPDO carries."""
+        ...
+
+    def al_state_changed(self, state: AlState, now_ns: int) -> None: ...
+
+
+class PdoImage:
+    """The firmware's Application for a CoE device: process images through the OD."""
+
+    def __init__(self, od: ObjectDictionary, device: CoeDevice) -> None:
+        self.od = od
+        self.device = device
+        self.plan = compile_plan(od)
+        install(od)
+
+    def prepare(self) -> int:
+        """Compile the plan at PREOP->SAFEOP; an invalid mapping is an AL status code.
+
+        Ref: ETG.1000.6 Table 11 (0x0024 invalid input mapping, 0x0025 invalid output).
+        """
+        try:
+            self.plan = compile_plan(self.od)
+        except SdoAbort:
+            return 0x0025
+        return 0
+
+    def rx_size(self) -> int:
+        return self.plan.rx_size
+
+    def tx_size(self) -> int:
+        return self.plan.tx_size
+
+    def set_outputs(self, data: bytes, now_ns: int) -> None:
+        for f in self.plan.rx:
+            if f.entry is not None:
+                f.entry.value = f.entry.decode(data[f.offset : f.offset + f.size])
+        self.device.outputs_applied(now_ns)
+
+    def get_inputs(self, now_ns: int) -> bytes:
+        self.device.update_inputs(now_ns)
+        out = bytearray(self.plan.tx_size)
+        for f in self.plan.tx:
+            if f.entry is not None:
+                out[f.offset : f.offset + f.size] = f.entry.encode()[: f.size]
+        return bytes(out)
+
+    def al_state_changed(self, state: AlState, now_ns: int) -> None:
+        self.device.al_state_changed(state, now_ns)
