@@ -137,7 +137,7 @@ class Entry:
         if len(data) != n:
             raise SdoAbort(ABORT_LENGTH, f"{len(data)} bytes for a {n}-byte entry")
         v = self.decode(data)
-        assert isinstance(v, int)  # noqa: S101 - decode of a non-string is an int
+        assert isinstance(v, int)
         if self.values and v not in self.values:
             raise SdoAbort(ABORT_VALUE_RANGE, f"{v} not one of {self.values}")
         if self.maximum is not None and v > self.maximum:

@@ -27,10 +27,17 @@ def _var(index: int, name: str, dtype: str, value: int | str, access: str = "ro"
 
 def _pdo_mapping(index: int, pdo: PdoDescription | None, name: str) -> OdObject:
     entries = {
-        0: Entry(0, "Number of mapped objects", "UNSIGNED8", access="rw", minimum=0,
-                 maximum=MAX_PDO_ENTRIES, default=len(pdo.entries) if pdo else 0,
-                 write_states=PREOP_ONLY),
-    }  # fmt: skip
+        0: Entry(
+            0,
+            "Number of mapped objects",
+            "UNSIGNED8",
+            access="rw",
+            minimum=0,
+            maximum=MAX_PDO_ENTRIES,
+            default=len(pdo.entries) if pdo else 0,
+            write_states=PREOP_ONLY,
+        ),
+    }
     for s in range(1, MAX_PDO_ENTRIES + 1):
         v = 0
         if pdo and s <= len(pdo.entries):
@@ -44,11 +51,20 @@ def _pdo_mapping(index: int, pdo: PdoDescription | None, name: str) -> OdObject:
 
 def _assign(index: int, pdo_index: int, name: str) -> OdObject:
     entries = {
-        0: Entry(0, "Number of assigned PDOs", "UNSIGNED8", access="rw", minimum=0, maximum=1,
-                 default=1, write_states=PREOP_ONLY),
-        1: Entry(1, "PDO assigned", "UNSIGNED16", access="rw", default=pdo_index,
-                 write_states=PREOP_ONLY),
-    }  # fmt: skip
+        0: Entry(
+            0,
+            "Number of assigned PDOs",
+            "UNSIGNED8",
+            access="rw",
+            minimum=0,
+            maximum=1,
+            default=1,
+            write_states=PREOP_ONLY,
+        ),
+        1: Entry(
+            1, "PDO assigned", "UNSIGNED16", access="rw", default=pdo_index, write_states=PREOP_ONLY
+        ),
+    }
     return OdObject(index, name, ObjectCode.ARRAY, entries, source="seed 004 §4.1.10/§4.1.11")
 
 
@@ -89,7 +105,7 @@ def communication_objects(desc: DeviceDescription, serial: int) -> list[OdObject
             ObjectCode.ARRAY,
             smt,
             source="seed 004 §4.1.9, ETG.1000.6 §5.6.7.4.1",
-        ),  # fmt: skip
+        ),
         _assign(0x1C12, 0x1600, "Sync manager 2 PDO assignment"),
         _assign(0x1C13, 0x1A00, "Sync manager 3 PDO assignment"),
     ]
@@ -140,8 +156,9 @@ def table_objects(data: Any, src: str) -> list[OdObject]:
                     continue
                 entries[sub] = _entry(e, sub, f"{where}.entries[{j}]", r.get("type"))
             if 0 not in entries:
-                entries[0] = Entry(0, "Number of entries", "UNSIGNED8",
-                                   default=max(entries) if entries else 0)  # fmt: skip
+                entries[0] = Entry(
+                    0, "Number of entries", "UNSIGNED8", default=max(entries) if entries else 0
+                )
         out.append(
             OdObject(
                 index,
@@ -150,7 +167,7 @@ def table_objects(data: Any, src: str) -> list[OdObject]:
                 entries,
                 source=str(r.get("source", "")),
                 beyond_sheet=bool(r.get("beyond_sheet", False)),
-            )  # fmt: skip
+            )
         )
     return out
 

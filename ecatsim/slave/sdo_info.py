@@ -105,7 +105,7 @@ class SdoInfo:
 
     def _entry_desc(self, body: bytes) -> bytes:
         """Entry: data type, bit length, access, name. Ref: ETG.1000.6 Tables 49, 50."""
-        index, sub, value_info = struct.unpack_from("<HBB", body)
+        index, sub, _value_info = struct.unpack_from("<HBB", body)
         if index not in self.od:
             raise SdoAbort(ABORT_NO_OBJECT)
         e = self.od[index].entries.get(sub)
