@@ -304,6 +304,15 @@ class ObjectDictionary:
                 raise SdoAbort(ABORT_STATE)
             plan.append((e, e.check_write(bytes(data[p : p + size]))))
             p += size
+        s = n + 1
+        while p < len(data) and s in obj.entries:  # data for the unused subindices too
+            e = obj.entries[s]
+            size = (e.bits + 7) // 8
+            if p + size > len(data) or e.access == "ro":
+                break
+            plan.append((e, e.check_write(bytes(data[p : p + size]))))
+            p += size
+            s += 1
         if p != len(data):
             raise SdoAbort(ABORT_LENGTH_HIGH)
         if sub == 0:

@@ -84,8 +84,14 @@ def install(od: ObjectDictionary) -> None:
 
     def mapping_validator(index: int) -> None:
         def check(sub: int) -> None:
-            if sub > 0 and int(od[index].entries[0].value) != 0:
-                raise SdoAbort(ABORT_SI0_NOT_ZERO, "write subindex 0 = 0 first")
+            obj = od[index]
+            if sub > 0:
+                if int(obj.entries[0].value) != 0:
+                    raise SdoAbort(ABORT_SI0_NOT_ZERO, "write subindex 0 = 0 first")
+                value = int(obj.entries[sub].value)
+                if value:
+                    _mapped(od, value, index == RX_MAP)
+                return
             mapping_fields(od, index)
 
         od[index].validate = check

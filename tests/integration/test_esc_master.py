@@ -208,4 +208,5 @@ def test_64_slaves_reach_op(daemon_factory: Any, master_factory: Any) -> None:
     assert master.expected_wkc == 3 * 64
     for _ in range(100):
         master.send_processdata()
-        assert master.receive_processdata(5000) == 3 * 64
+        # a wide timeout: this checks function at 64 slaves; speed is the benchmark's job
+        assert master.receive_processdata(50_000) == 3 * 64
