@@ -4,6 +4,7 @@ behind the PDI and the device behind the firmware."""
 from __future__ import annotations
 
 import struct
+from collections.abc import Callable
 from pathlib import Path
 
 import structlog
@@ -24,11 +25,14 @@ from ecatsim.segment import Segment
 from ecatsim.sii.image import SiiError, build_image
 from ecatsim.sii.store import EepromStore
 from ecatsim.slave.app import Application
+from ecatsim.slave.al import AlState
 from ecatsim.slave.coe import CoeProtocol
+from ecatsim.slave.foe import FoeServer
 from ecatsim.slave.firmware import Firmware, MailboxLayout
 from ecatsim.slave.mailbox import MailboxEngine
 from ecatsim.slave.od_build import build_od
 from ecatsim.slave.pdo import PdoImage
+from ecatsim.wire.mailbox import MbxType
 
 log = structlog.get_logger("ecatsim.build")
 
@@ -49,6 +53,15 @@ def make_device(kind: str, desc: DeviceDescription) -> Application:
     rx = [(e.index, e.bits) for p in desc.rxpdos for e in p.entries]
     tx = [(e.index, e.bits) for p in desc.txpdos for e in p.entries]
     return EchoDevice(rx, tx)
+
+
+def _accept_for(fw: Firmware) -> Callable[[int], bool]:
+    """In BOOT only FoE is served. Ref: ETG.1000.6 §6.4.1 (bootstrap state)."""
+
+    def accept(mtype: int) -> bool:
+        return fw.state != AlState.BOOT or mtype == MbxType.FOE
+
+    return accept
 
 
 class _Persist:
@@ -125,8 +138,13 @@ def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
                 raise UserError(str(exc)) from exc
             mbx = MailboxEngine(pdi)
             app: Application = PdoImage(od, OdEchoDevice(od))
-            fw = Firmware(pdi, app, layout, mbx=mbx)
+            foe = desc.mailbox.foe or "foe" in desc.mailbox.protocols
+            fw = Firmware(pdi, app, layout, mbx=mbx, bootstrap_supported=foe)
             CoeProtocol(mbx, od, fw.al_state_code)
+            if foe:
+                server = FoeServer(fw.al_state_code, mbx.max_body, sc.foe_dir, sc.foe_password)
+                mbx.register(MbxType.FOE, server.handle)
+            mbx.accept = _accept_for(fw)
         else:
             fw = Firmware(pdi, make_device(sc.device, desc), layout)
         esc.on_reset = fw.reset

@@ -38,6 +38,8 @@ _SLAVE_KEYS = {
     "serial",
     "dc_drift_ppm",
     "name",
+    "foe_dir",
+    "foe_password",
 }
 
 
@@ -53,6 +55,8 @@ class SlaveConfig:
     serial: int | None = None
     dc_drift_ppm: float = 0.0
     name: str | None = None
+    foe_dir: Path | None = None
+    foe_password: int = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -123,6 +127,8 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
         drift = s.get("dc_drift_ppm", 0.0)
         if isinstance(drift, bool) or not isinstance(drift, int | float) or abs(drift) > 1000:
             raise _err(src, f"{key}.dc_drift_ppm", f"expected a number -1000..1000, got {drift!r}")
+        foe_dir = _path(src, base, f"{key}.foe_dir", s["foe_dir"]) if "foe_dir" in s else None
+        foe_pw = _int(src, f"{key}.foe_password", s.get("foe_password", 0), 0, 0xFFFFFFFF)
         name = s.get("name")
         if name is not None and not isinstance(name, str):
             raise _err(src, f"{key}.name", f"expected a string, got {name!r}")
@@ -139,6 +145,10 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
                     serial=None if serial is None else serial + j,
                     dc_drift_ppm=float(drift),
                     name=name,
+                    foe_dir=None
+                    if foe_dir is None
+                    else (foe_dir / f"slave{len(out)}" if count > 1 else foe_dir),
+                    foe_password=foe_pw,
                 )
             )
     if len(out) > MAX_SLAVES:

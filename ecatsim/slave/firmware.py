@@ -234,6 +234,14 @@ class Firmware:
         if tr == Transition.IB:
             if not (self.bootstrap_supported and self.mailbox.bootstrap):
                 return al.CODE_BOOTSTRAP_NOT_SUPPORTED
+            mb = self.mailbox
+            s0 = self.pdi.sm_settings(SM_MBX_OUT)
+            s1 = self.pdi.sm_settings(SM_MBX_IN)
+            if not (
+                _mbx_ok(s0, mb.boot_rx_offset, mb.boot_rx_size, CTRL_MBX_OUT)
+                and _mbx_ok(s1, mb.boot_tx_offset, mb.boot_tx_size, CTRL_MBX_IN)
+            ):
+                return al.CODE_INVALID_MBX_BOOT
             return 0
         if tr == Transition.PS:
             prepare = getattr(self.app, "prepare", None)

@@ -53,6 +53,8 @@ class MailboxEngine:
     def __init__(self, pdi: Pdi) -> None:
         self.pdi = pdi
         self.handlers: dict[int, Handler] = {}
+        #: which mailbox types are served now (BOOT serves FoE only)
+        self.accept: Callable[[int], bool] = lambda mtype: True
         self.out: deque[bytes] = deque()
         self.last_sent = b""
         self.counter = 0
@@ -85,7 +87,7 @@ class MailboxEngine:
             if req is None:
                 return
             handler = self.handlers.get(req.mtype)
-            if handler is None:
+            if handler is None or not self.accept(req.mtype):
                 raise MailboxError(MbxError.UNSUPPORTED_PROTOCOL)
             for mtype, body in handler(req):
                 self.post(mtype, body)

@@ -16,6 +16,7 @@ from tests.integration.test_esc_master import to_op
 pytestmark = pytest.mark.integration
 
 MBX_OUT, MBX_IN = 0x1000, 0x1080
+FOE_ERROR = -5  # SOEM: -EC_ERR_TYPE_FOE_ERROR
 
 
 def up(master_factory: Any, daemon_factory: Any, *args: str) -> tuple[Any, Any]:
@@ -216,3 +217,46 @@ def test_repeat_request_resends_identical_reply(master_factory: Any, daemon_fact
         assert time.monotonic() < deadline, "no repeat ack"
         time.sleep(0.001)
     assert _mbx_read(s) == first
+
+
+def _to_boot(m: Any, s: Any) -> None:
+    m.state = pysoem.INIT_STATE
+    m.write_state()
+    assert m.state_check(pysoem.INIT_STATE, 1_000_000) == pysoem.INIT_STATE
+    s.state = pysoem.BOOT_STATE
+    s.write_state()
+    assert s.state_check(pysoem.BOOT_STATE, 1_000_000) == pysoem.BOOT_STATE
+
+
+def test_foe_firmware_write_in_boot_and_read_back(
+    master_factory: Any, daemon_factory: Any, tmp_path: Any
+) -> None:
+    cfg = tmp_path / "seg.yaml"
+    cfg.write_text(f"slaves:\n  - device: tmc8670\n    foe_dir: {tmp_path / 'fw'}\n"
+                   "    foe_password: 0x12345678\n")  # fmt: skip
+    m, s = up(master_factory, daemon_factory, "--config", str(cfg))
+    image = bytes((i * 7 + 3) & 0xFF for i in range(5000))
+    # outside BOOT: refused; SOEM returns -EC_ERR_TYPE_FOE_ERROR (-5)
+    assert s.foe_write("firmware.bin", 0x12345678, image, 500_000) == FOE_ERROR
+    # the exact FoE error code, seen in a raw FoE exchange: 0x8009 not in bootstrap
+    _mbx_write(s, struct.pack("<BBI", 2, 0, 0x12345678) + b"firmware.bin", 6, mtype=4)
+    r = _mbx_read(s)
+    assert r[5] & 0x0F == 4 and r[6] == 5 and struct.unpack_from("<I", r, 8)[0] == 0x8009
+    # BOOT is reachable only from INIT
+    s.state = pysoem.BOOT_STATE
+    s.write_state()
+    s.state_check(pysoem.BOOT_STATE, 300_000)
+    assert s.al_status == 0x0011
+    _to_boot(m, s)
+    assert s.foe_write("firmware.bin", 1, image, 500_000) == FOE_ERROR  # wrong password
+    assert s.foe_write("firmware.bin", 0x12345678, image, 2_000_000) > 0
+    assert (tmp_path / "fw" / "firmware.bin").read_bytes() == image
+    assert s.foe_read("firmware.bin", 0x12345678, 10_000, 2_000_000) == image
+    # unknown file: FoE error 0x8001 (not found)
+    _mbx_write(s, struct.pack("<BBI", 1, 0, 0x12345678) + b"nosuch.bin", 7, mtype=4)
+    r = _mbx_read(s)
+    assert r[6] == 5 and struct.unpack_from("<I", r, 8)[0] == 0x8001
+    # CoE is not served in BOOT
+    _mbx_write(s, struct.pack("<HBHBI", 2 << 12, 0x40, 0x1000, 0, 0), 1)
+    r = _mbx_read(s)
+    assert r[5] & 0x0F == 0 and struct.unpack_from("<HH", r, 6) == (1, 0x0002)
