@@ -21,14 +21,15 @@ from ecatsim.device.echo import EchoDevice, OdEchoDevice
 from ecatsim.errors import UserError
 from ecatsim.esc.core import Esc, FrameContext
 from ecatsim.esc.pdi import Pdi
+from ecatsim.esi import EsiError, read_esi
 from ecatsim.segment import Segment
 from ecatsim.sii.image import SiiError, build_image
 from ecatsim.sii.store import EepromStore
-from ecatsim.slave.app import Application
 from ecatsim.slave.al import AlState
+from ecatsim.slave.app import Application
 from ecatsim.slave.coe import CoeProtocol
-from ecatsim.slave.foe import FoeServer
 from ecatsim.slave.firmware import Firmware, MailboxLayout
+from ecatsim.slave.foe import FoeServer
 from ecatsim.slave.mailbox import MailboxEngine
 from ecatsim.slave.od_build import build_od
 from ecatsim.slave.pdo import PdoImage
@@ -93,6 +94,11 @@ def _description(sc: SlaveConfig, cache: dict[Path | None, DeviceDescription]) -
 
 
 def _image(sc: SlaveConfig, desc: DeviceDescription) -> bytearray:
+    if sc.esi is not None:
+        try:
+            desc = read_esi(sc.esi)
+        except EsiError as exc:
+            raise UserError(str(exc)) from exc
     if sc.eeprom is not None and sc.eeprom.exists():
         try:
             return EepromStore.load(sc.eeprom)

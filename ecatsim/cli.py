@@ -141,3 +141,54 @@ def main() -> None:
         sys.exit(2)
     except KeyboardInterrupt:
         sys.exit(130)
+
+
+@eeprom.command("build")
+@click.argument("esi_path", metavar="ESI.xml", type=click.Path(path_type=Path))
+@click.option("-o", "--output", required=True, type=click.Path(path_type=Path))
+@click.option("--product", type=str, help="ProductCode of the device (when the ESI has several).")
+@click.option("--revision", type=str, help="RevisionNo of the device.")
+@click.option("--serial", type=int, default=0, show_default=True, help="Serial number (SII 0x0E).")
+@click.option("--alias", type=int, default=None, help="Station alias (SII word 4).")
+def eeprom_build(
+    esi_path: Path,
+    output: Path,
+    product: str | None,
+    revision: str | None,
+    serial: int,
+    alias: int | None,
+) -> None:
+    """Build an SII image from any ESI file (written atomically)."""
+    from ecatsim.esi import EsiError, read_esi
+    from ecatsim.files import atomic_write
+    from ecatsim.sii.image import SiiError, build_image
+
+    def num(v: str | None) -> int | None:
+        return None if v is None else int(v.replace("#x", "0x"), 0)
+
+    try:
+        desc = read_esi(esi_path, num(product), num(revision))
+        image = build_image(desc, serial=serial, alias=alias)
+    except (EsiError, SiiError, ValueError) as exc:
+        raise UserError(str(exc)) from exc
+    atomic_write(output, image)
+    click.echo(f"{output}: {len(image)} bytes for {desc.name} ({desc.identity.product_code:#x})")
+
+
+@cli.group()
+def esi() -> None:
+    """ESI (ETG.2000) files."""
+
+
+@esi.command("export")
+@click.option("-o", "--output", required=True, type=click.Path(path_type=Path))
+def esi_export(output: Path) -> None:
+    """Write the ESI XML of the emulated TMC8670 (written atomically)."""
+    from ecatsim.description import default_description
+    from ecatsim.esi import export_esi
+    from ecatsim.files import atomic_write
+    from ecatsim.slave.od_build import build_od
+
+    desc = default_description()
+    atomic_write(output, export_esi(desc, build_od(desc, desc.identity.serial)))
+    click.echo(f"{output}: ESI of {desc.name}")

@@ -7,15 +7,14 @@ Ref: ETG.1000.6 §5.8 (FoE: RRQ/WRQ/DATA/ACK/ERR/BUSY, error codes Table 92).
 
 from __future__ import annotations
 
-import os
 import re
 import struct
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
 import structlog
 
+from ecatsim.files import atomic_write
 from ecatsim.slave.al import AlState
 from ecatsim.slave.mailbox import MailboxError, Request
 from ecatsim.wire.mailbox import MbxError, MbxType
@@ -72,19 +71,10 @@ class FoeServer:
         if self.directory is None:
             self.files[name] = data
             return
-        self.directory.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{name}.", dir=self.directory)
         try:
-            with os.fdopen(fd, "wb") as f:
-                f.write(data)
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, self.directory / name)
+            self.directory.mkdir(parents=True, exist_ok=True)
+            atomic_write(self.directory / name, data)
         except OSError as exc:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
             raise FoeError(ERR_DISK_FULL, f"cannot store {name}: {exc.strerror}") from exc
 
     def _load(self, name: str) -> bytes:
