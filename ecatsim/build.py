@@ -28,6 +28,7 @@ from ecatsim.sii.store import EepromStore
 from ecatsim.slave.al import AlState
 from ecatsim.slave.app import Application
 from ecatsim.slave.coe import CoeProtocol
+from ecatsim.slave.emcy import Emergency
 from ecatsim.slave.firmware import Firmware, MailboxLayout
 from ecatsim.slave.foe import FoeServer
 from ecatsim.slave.mailbox import MailboxEngine
@@ -147,6 +148,8 @@ def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
             foe = desc.mailbox.foe or "foe" in desc.mailbox.protocols
             fw = Firmware(pdi, app, layout, mbx=mbx, bootstrap_supported=foe)
             CoeProtocol(mbx, od, fw.al_state_code)
+            fw.od = od
+            fw.emergency = Emergency(mbx, od)
             if foe:
                 server = FoeServer(fw.al_state_code, mbx.max_body, sc.foe_dir, sc.foe_password)
                 mbx.register(MbxType.FOE, server.handle)

@@ -27,7 +27,9 @@ from ecatsim.esc.pdi import (
 from ecatsim.slave import al
 from ecatsim.slave.al import AlState, Transition
 from ecatsim.slave.app import Application
+from ecatsim.slave.emcy import Emergency
 from ecatsim.slave.mailbox import MailboxEngine
+from ecatsim.slave.od import ObjectDictionary
 
 log = structlog.get_logger("ecatsim.slave")
 
@@ -88,6 +90,9 @@ class Firmware:
         self.mailbox = mailbox
         self.mbx = mbx
         self.event_mask = EVENT_MASK
+        #: set by the builder for CoE slaves
+        self.od: ObjectDictionary | None = None
+        self.emergency: Emergency | None = None
         self.bootstrap_supported = bootstrap_supported
         self.state = AlState.INIT
         self.error = False

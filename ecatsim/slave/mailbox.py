@@ -107,6 +107,8 @@ class MailboxEngine:
             raise MailboxError(MbxError.INVALID_CHANNEL)
         if tc & 0x80:
             raise MailboxError(MbxError.INVALID_HEADER)
+        if mtype == MbxType.ERR:
+            raise MailboxError(MbxError.SYNTAX)  # a master never sends an error reply
         if counter and counter == self.last_in_counter:
             return None  # a repeated mailbox: already served
         self.last_in_counter = counter
@@ -124,10 +126,16 @@ class MailboxEngine:
         self.post(MbxType.ERR, (0x0001).to_bytes(2, "little") + int(code).to_bytes(2, "little"))
 
     def post(self, mtype: int, body: bytes) -> None:
-        """Queue one reply; sent at once if SM1 is empty."""
+        """Queue one reply; sent at once if SM1 is empty. A full queue answers with the
+        'no more memory' error instead (the last place kept free for it)."""
         if len(self.out) >= QUEUE_DEPTH:
             self.log.warning("mailbox_queue_full")
             return
+        if len(self.out) == QUEUE_DEPTH - 1 and mtype != MbxType.ERR:
+            mtype = MbxType.ERR
+            body = (0x0001).to_bytes(2, "little") + int(MbxError.NO_MORE_MEMORY).to_bytes(
+                2, "little"
+            )
         self.counter = self.counter % 7 + 1
         self.out.append(mbx_header(len(body), mtype, self.counter) + body)
         self.flush()

@@ -190,15 +190,18 @@ def test_raw_aborts_toggle_command_and_mailbox_errors(
     _mbx_write(s, coe + struct.pack("<BHBI", 0xE0, 0x1000, 0, 0), 1)
     r = _mbx_read(s)
     assert r[8] == 0x80 and struct.unpack_from("<I", r, 12)[0] == 0x05040001
-    # toggle error: upload segment with toggle 1 first (after a segmented start)
-    _mbx_write(s, coe + struct.pack("<BHBI", 0x60 | 0x10, 0x1000, 0, 0), 2)
+    # a toggle error in a segmented download
+    new = struct.pack("<H3I", 3, 0x60400010, 0x607A0020, 0x60FF0020)
+    _mbx_write(s, coe + struct.pack("<BHBI", 0x31, 0x1600, 0, len(new)) + new[:4], 2)
+    assert _mbx_read(s)[8] == 0x60
+    _mbx_write(s, coe + bytes([0x10]) + new[4:11], 3)
     r = _mbx_read(s)
-    assert r[8] == 0x80
+    assert r[8] == 0x80 and struct.unpack_from("<I", r, 12)[0] == 0x05030000
     # unsupported mailbox protocol (EoE) and invalid channel
-    _mbx_write(s, b"\x00" * 4, 3, mtype=2)
+    _mbx_write(s, b"\x00" * 4, 4, mtype=2)
     r = _mbx_read(s)
     assert r[5] & 0x0F == 0 and struct.unpack_from("<HH", r, 6) == (1, 0x0002)
-    frame = struct.pack("<HHBB", 10, 0, 5, 3 | (4 << 4)) + coe + bytes(8)
+    frame = struct.pack("<HHBB", 10, 0, 5, 3 | (5 << 4)) + coe + bytes(8)
     s._fpwr(MBX_OUT, frame.ljust(128, b"\x00"))
     r = _mbx_read(s)
     assert struct.unpack_from("<HH", r, 6) == (1, 0x0003)
