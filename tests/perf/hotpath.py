@@ -28,10 +28,12 @@ def calibrate(n: int = 200_000) -> float:
     return best / n
 
 
-def op_segment(n_slaves: int) -> tuple[TinyMaster, bytearray, int]:
-    """A segment with SM2/SM3 and FMMUs programmed as SOEM does, plus a cyclic LRW frame."""
-    seg, _ = segment_of(n_slaves)
-    m = TinyMaster(seg)
+def configure_to_op(m: TinyMaster, n_slaves: int) -> None:
+    """Bring a segment to OP the way SOEM does: INIT, clear FMMUs/SMs, addresses, mailbox
+    SMs, PREOP, process-data SMs and FMMUs, SAFEOP, OP."""
+    m.bwr(0x0120, b"\x11\x00")
+    m.bwr(0x0600, bytes(16 * 6))
+    m.bwr(0x0800, bytes(8 * 6))
     for pos in range(n_slaves):
         m.apwr(pos, 0x0010, struct.pack("<H", 0x1000 + pos))
         m.apwr(pos, 0x0800, struct.pack("<HHBBBB", 0x1000, 128, 0x26, 0, 1, 0))
@@ -45,6 +47,13 @@ def op_segment(n_slaves: int) -> tuple[TinyMaster, bytearray, int]:
         m.apwr(pos, 0x0610, struct.pack("<IHBBHBBB3x", in_lad, 17, 0, 7, 0x1200, 0, 1, 1))
         m.apwr(pos, 0x0120, b"\x04\x00")
         m.apwr(pos, 0x0120, b"\x08\x00")
+
+
+def op_segment(n_slaves: int) -> tuple[TinyMaster, bytearray, int]:
+    """A segment in OP as SOEM leaves it, plus the cyclic LRW frame."""
+    seg, _ = segment_of(n_slaves)
+    m = TinyMaster(seg)
+    configure_to_op(m, n_slaves)
     size = n_slaves * 29
     frame = bytearray(
         dg.ethernet_frame(
