@@ -21,13 +21,13 @@ SEED_FRAMES = [
             dg.build(dg.Cmd.APRD, 0, 0x0130, b"\x00\x00", more=True),
             dg.build(dg.Cmd.FPWR, 0x1000, 0x0120, b"\x02\x00"),
         ]
-    ),  # fmt: skip
+    ),
     dg.ethernet_frame(
         [
             dg.build_logical(dg.Cmd.LRW, 0, bytes(58), more=True),
             dg.build(dg.Cmd.FPRD, 0x1000, 0x0130, b"\x00\x00"),
         ]
-    ),  # fmt: skip
+    ),
     dg.ethernet_frame([dg.build(dg.Cmd.FPWR, 0x1000, 0x0502, b"\x00\x01\x08\x00\x00\x00")]),
     dg.ethernet_frame([dg.build(dg.Cmd.ARMW, 0, 0x0910, bytes(8))]),
 ]
