@@ -22,7 +22,7 @@ def test_random_mailboxes_never_stick_the_mailbox() -> None:
     m, fw = preop()
     rng = random.Random(7)
     counter = 1
-    for i in range(3000):
+    for _ in range(3000):
         kind = rng.randrange(4)
         body = rng.randbytes(rng.randrange(0, 122))
         if kind == 0:  # random everything
