@@ -53,8 +53,15 @@ def test_invalid_and_unknown_requests() -> None:
     request(m, 0x05)
     assert al(m) == (0x11, 0x0012)
     request(m, 0x11)
-    request(m, 0x03)  # BOOT: no bootstrap mailbox in this firmware
-    assert al(m) == (0x11, 0x0013)
+    request(m, 0x03)  # BOOT without the bootstrap mailbox SMs
+    assert al(m) == (0x11, 0x0015)
+    mailbox_sms(m)
+    request(m, 0x13)  # BOOT + ack: the bootstrap mailbox is configured now
+    assert al(m) == (0x03, 0)
+    request(m, 0x02)  # BOOT -> PREOP is not a transition
+    assert al(m) == (0x13, 0x0011)
+    request(m, 0x01)
+    assert al(m) == (0x01, 0)
 
 
 def test_full_walk_to_op_and_back() -> None:

@@ -17,7 +17,7 @@ STATES = [AlState.INIT, AlState.PREOP, AlState.BOOT, AlState.SAFEOP, AlState.OP]
 EXPECTED = {
     (AlState.INIT, AlState.INIT): (0x01, 0),
     (AlState.INIT, AlState.PREOP): (0x02, 0),
-    (AlState.INIT, AlState.BOOT): (0x11, 0x0013),
+    (AlState.INIT, AlState.BOOT): (0x03, 0),
     (AlState.INIT, AlState.SAFEOP): (0x11, 0x0011),
     (AlState.INIT, AlState.OP): (0x11, 0x0011),
     (AlState.PREOP, AlState.INIT): (0x01, 0),
