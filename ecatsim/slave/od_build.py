@@ -7,6 +7,7 @@ Ref: ETG.1000.6 §5.6.7 (communication area 0x1000-0x1FFF); seed 004 §4, §5, �
 from __future__ import annotations
 
 import importlib.resources
+from functools import cache
 from pathlib import Path
 from typing import Any
 
@@ -172,6 +173,16 @@ def table_objects(data: Any, src: str) -> list[OdObject]:
     return out
 
 
+@cache
+def _parse_table_file(path: str, packaged: bool) -> Any:
+    """Parse an object table once per process (slaves share it; values are per slave)."""
+    if packaged:
+        text = importlib.resources.files("ecatsim.defaults").joinpath(path).read_text()
+    else:
+        text = Path(path).read_text()
+    return yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
+
+
 def load_od_table(desc: DeviceDescription, base: Path | None) -> list[OdObject]:
     """The description's ``od:`` section: ``{file: NAME}`` or an inline ``objects:`` list."""
     raw = desc.od_raw
@@ -180,10 +191,8 @@ def load_od_table(desc: DeviceDescription, base: Path | None) -> list[OdObject]:
     if isinstance(raw, dict) and "file" in raw:
         name = str(raw["file"])
         if base is not None and (base / name).exists():
-            text = (base / name).read_text()
-        else:
-            text = importlib.resources.files("ecatsim.defaults").joinpath(name).read_text()
-        return table_objects(yaml.safe_load(text), name)
+            return table_objects(_parse_table_file(str(base / name), False), name)
+        return table_objects(_parse_table_file(name, True), name)
     return table_objects(raw, desc.source)
 
 
