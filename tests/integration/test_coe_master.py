@@ -52,6 +52,7 @@ def test_abort_codes(master_factory: Any, daemon_factory: Any) -> None:
     assert abort_of(s.sdo_write, 0x6060, 0, b"\x05") == 0x06090030
     assert abort_of(s.sdo_write, 0x6081, 0, struct.pack("<I", 300_000)) == 0x06090031
     assert abort_of(s.sdo_write, 0x6082, 0, struct.pack("<i", -300_000)) == 0x06090032
+    assert abort_of(s.sdo_read, 0x2130, 1) == 0x06010001  # write-only action trigger
     # mapping: a non-mappable object, then too long a PDO
     s.sdo_write(0x1A00, 0, b"\x00")
     assert abort_of(s.sdo_write, 0x1A00, 1, struct.pack("<I", 0x60810020)) == 0x06040041
@@ -137,11 +138,13 @@ def test_segmented_upload_with_a_small_mailbox(master_factory: Any, daemon_facto
     m.state = pysoem.INIT_STATE
     m.write_state()
     assert m.state_check(pysoem.INIT_STATE, 1_000_000) == pysoem.INIT_STATE
-    s.amend_mbx(mailbox="in", start_address=MBX_IN, size=32)
+    s.amend_mbx(mailbox="in", start_address=MBX_IN, size=20)
     m.state = pysoem.PREOP_STATE
     m.write_state()
     assert m.state_check(pysoem.PREOP_STATE, 1_000_000) == pysoem.PREOP_STATE
-    ca = s.sdo_read(0x1A00, 0, ca=True)  # 2 + 6 * 4 bytes: more than one 32-byte mailbox
+    # a 7-character string does not fit one 20-byte mailbox after the SDO header
+    assert s.sdo_read(0x1008, 0) == b"TMC8670"
+    ca = s.sdo_read(0x1A00, 0, ca=True)  # 2 + 6 * 4 bytes over several segments
     assert len(ca) == 26
     assert struct.unpack_from("<H", ca)[0] == 6
     assert struct.unpack_from("<I", ca, 2)[0] == 0x60410010

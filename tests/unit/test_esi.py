@@ -92,3 +92,19 @@ def test_sii_mailbox_words_match_the_sms() -> None:
     sm0, sm1 = desc.sync_managers[0], desc.sync_managers[1]
     assert p.mailbox[4:8] == (sm0.start, sm0.length, sm1.start, sm1.length)
     assert p.protocols == 0x04 | 0x08  # CoE, FoE
+
+
+def test_segment_yaml_loads_a_user_esi(tmp_path: Path) -> None:
+    from ecatsim.build import build_segment
+    from ecatsim.clock import ManualClock
+    from ecatsim.config import load_segment
+
+    xml = tmp_path / "d.xml"
+    assert run("esi", "export", "-o", str(xml))[0] == 0
+    text = xml.read_text().replace("<Name>TMC8670</Name>", "<Name>My drive</Name>", 1)
+    xml.write_text(text)
+    seg_yaml = tmp_path / "seg.yaml"
+    seg_yaml.write_text(f"slaves:\n  - device: tmc8670\n    esi: {xml.name}\n")
+    seg = build_segment(load_segment(seg_yaml), ManualClock())
+    p = parse_image(bytes(seg.escs[0].eeprom.image))
+    assert p.name == "My drive" and p.product_code == 8670
