@@ -17,7 +17,8 @@ from ecatsim.description import (
     default_description,
     load_description,
 )
-from ecatsim.device.echo import EchoDevice, OdEchoDevice
+from ecatsim.device.echo import EchoDevice
+from ecatsim.device.factory import make_coe_device
 from ecatsim.errors import UserError
 from ecatsim.esc.core import Esc, FrameContext
 from ecatsim.esc.pdi import Pdi
@@ -144,12 +145,18 @@ def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
             except DescriptionError as exc:
                 raise UserError(str(exc)) from exc
             mbx = MailboxEngine(pdi)
-            app: Application = PdoImage(od, OdEchoDevice(od))
+            emcy = Emergency(mbx, od)
+            try:
+                device = make_coe_device(sc.device, desc, od, emcy)
+            except DescriptionError as exc:
+                raise UserError(str(exc)) from exc
+            app: Application = PdoImage(od, device)
             foe = desc.mailbox.foe or "foe" in desc.mailbox.protocols
             fw = Firmware(pdi, app, layout, mbx=mbx, bootstrap_supported=foe)
             CoeProtocol(mbx, od, fw.al_state_code)
             fw.od = od
-            fw.emergency = Emergency(mbx, od)
+            fw.emergency = emcy
+            fw.device = device
             if foe:
                 server = FoeServer(fw.al_state_code, mbx.max_body, sc.foe_dir, sc.foe_password)
                 mbx.register(MbxType.FOE, server.handle)

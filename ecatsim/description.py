@@ -166,6 +166,7 @@ class DeviceDescription:
     txpdos: tuple[PdoDescription, ...]
     dc: tuple[DcOpMode, ...]
     od_raw: Any = None
+    motor_raw: Any = None
 
     @property
     def rx_bytes(self) -> int:
@@ -409,6 +410,7 @@ def parse_description(data: Any, src: str) -> DeviceDescription:
         txpdos=_pdos(r, d.get("txpdos"), "txpdos"),
         dc=tuple(dcs),
         od_raw=d.get("od"),
+        motor_raw=d.get("motor"),
     )
     for i, s in enumerate(desc.sync_managers):
         want = {"pd_out": desc.rx_bytes, "pd_in": desc.tx_bytes}.get(s.type)

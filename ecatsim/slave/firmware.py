@@ -93,6 +93,7 @@ class Firmware:
         #: set by the builder for CoE slaves
         self.od: ObjectDictionary | None = None
         self.emergency: Emergency | None = None
+        self.device: object | None = None
         self.bootstrap_supported = bootstrap_supported
         self.state = AlState.INIT
         self.error = False

@@ -150,8 +150,12 @@ def test_segmented_upload_with_a_small_mailbox(master_factory: Any, daemon_facto
     assert struct.unpack_from("<I", ca, 2)[0] == 0x60410010
 
 
-def test_pdo_remap_changes_the_process_image(master_factory: Any, daemon_factory: Any) -> None:
-    m, s = up(master_factory, daemon_factory)
+def test_pdo_remap_changes_the_process_image(
+    master_factory: Any, daemon_factory: Any, tmp_path: Any
+) -> None:
+    cfg = tmp_path / "seg.yaml"
+    cfg.write_text("slaves:\n  - device: echo\n")  # outputs echoed into inputs: exact data
+    m, s = up(master_factory, daemon_factory, "--config", str(cfg))
     # RxPDO without 60FF; TxPDO with 6062 added
     s.sdo_write(0x1600, 0, b"\x00")
     s.sdo_write(0x1600, 0, b"\x03")

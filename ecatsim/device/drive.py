@@ -1,0 +1,461 @@
+"""The TMC8670 CiA 402 drive: PDS state machine, modes pp/pv/hm/csp/csv/cst, faults.
+
+It works on object dictionary values (the PDO copy plan moves them) and advances the
+servo on fixed substeps up to the time the process data is exchanged.
+Ref: seed 004 §6-§9 (objects, modes, statusword); CiA 402-2 (PDS FSA §8, modes §10-§12).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import structlog
+
+from ecatsim.device import cia402
+from ecatsim.device.cia402 import Command, PdsState
+from ecatsim.device.servo import RPM, MotorParams, Profile, Servo, ramp
+from ecatsim.slave.al import AlState
+from ecatsim.slave.od import ObjectDictionary
+
+log = structlog.get_logger("ecatsim.drive")
+
+# Modes of operation (6060h). Ref: CiA 402-2 Table 35; seed 004 §6.1.1.
+PP, PV, HM, CSP, CSV, CST = 1, 3, 6, 8, 9, 10
+MODES = (0, PP, PV, HM, CSP, CSV, CST)
+
+# Statusword bits. Ref: seed 004 Tables 80-83, 81 (Trinamic bits 14/15).
+SW_VOLTAGE = 0x0010
+SW_WARNING = 0x0080
+SW_REMOTE = 0x0200
+SW_TARGET_REACHED = 0x0400
+SW_INTERNAL_LIMIT = 0x0800
+SW_OMS12 = 0x1000
+SW_OMS13 = 0x2000
+SW_MOTOR_ACTIVE = 0x4000
+SW_DIRECTION = 0x8000
+
+# CiA 402 error codes (603Fh) and 1001h bits. Ref: CiA 402-2 Annex; CiA 301 Table 21.
+FAULTS: dict[str, tuple[int, int]] = {
+    "overcurrent": (0x2310, 0x02),
+    "following_error": (0x8611, 0x20),
+    "encoder_loss": (0x7305, 0x20),
+    "overtemperature": (0x4310, 0x08),
+}
+
+Emcy = Callable[[int, int, bytes], None]
+
+
+class Drive:
+    """CoeDevice for the TMC8670."""
+
+    def __init__(
+        self,
+        od: ObjectDictionary,
+        params: MotorParams | None = None,
+        emcy: Emcy | None = None,
+        emcy_clear: Callable[[], None] | None = None,
+    ) -> None:
+        self.od = od
+        self.params = params or MotorParams()
+        self.servo = Servo(self.params)
+        self.profile = Profile()
+        self.emcy = emcy
+        self.emcy_clear = emcy_clear
+        self.state = PdsState.SWITCH_ON_DISABLED  # transitions 0 and 1 at power-on
+        self.t_ns: int | None = None
+        self.prev_cw = 0
+        self.mode = 0
+        self.al_state = AlState.INIT
+        self.v_demand_rpm = 0.0  # pv / stop ramps
+        self.p_demand = 0.0  # counts, position modes
+        self.v_ff_rpm = 0.0
+        self.last_target: float | None = None
+        self.last_t_ns: int | None = None
+        self.set_point_ack = False
+        self.homing_done = False
+        self.homing_active = False
+        self.home_offset_counts = 0.0
+        self.active_faults: set[str] = set()
+        self.fault_code = 0
+        self.injected: set[str] = set()
+        self.overcurrent_ma = 0.95 * self.params.max_current_ma
+        self.peak_rpm = 0.0
+        self._init_od()
+
+    # ----------------------------------------------------------------- OD helpers
+    def _v(self, index: int, sub: int = 0) -> int:
+        if index not in self.od:
+            return 0
+        v = self.od.value(index, sub)
+        return int(v) if not isinstance(v, str | bytes) else 0
+
+    def _set(self, index: int, value: int, sub: int = 0) -> None:
+        if index in self.od:
+            e = self.od.entry(index, sub)
+            bits = e.bits
+            if e.dtype.startswith("INTEGER"):
+                lo, hi = -(1 << (bits - 1)), (1 << (bits - 1)) - 1
+            else:
+                lo, hi = 0, (1 << bits) - 1
+            e.value = max(lo, min(hi, int(value)))
+
+    def _init_od(self) -> None:
+        if 0x2020 in self.od:
+            self._set(0x2020, 1 if self.params.motor_type == "stepper" else 0, 1)
+            self._set(0x2020, self.params.pole_pairs, 2)
+        if 0x2081 in self.od:
+            self._set(0x2081, self.params.ppr, 2)
+        if 0x2042 in self.od and self._v(0x2042, 3) == 0:
+            self._set(0x2042, round(self.servo.gains.vel_kp * 256), 3)
+            self._set(0x2042, round(self.servo.gains.vel_ki), 4)
+        if 0x2043 in self.od and self._v(0x2043, 4) == 0:
+            self._set(0x2043, round(self.servo.gains.pos_kp * 4096), 4)
+        self._publish()
+
+    def _load_gains(self) -> None:
+        """Map 2042h/2043h to the loops (see docs/decisions.md D5)."""
+        g = self.servo.gains
+        g.vel_kp = self._v(0x2042, 3) / 256.0
+        g.vel_ki = float(self._v(0x2042, 4))
+        g.pos_kp = self._v(0x2043, 4) / 4096.0
+        lim = self.params.max_current_ma
+        if 0x6072 in self.od:
+            lim = min(lim, self._v(0x6072) or lim)
+        if 0x2050 in self.od:
+            lim = min(lim, self._v(0x2050, 4))
+        self.servo.i_limit_ma = float(lim)
+        vmax = float(self._v(0x607F) or 1e9)
+        if 0x2050 in self.od:
+            vmax = min(vmax, float(self._v(0x2050, 6)))
+        self.servo.vel_limit_rpm = vmax
+
+    # ----------------------------------------------------------------- CoeDevice
+    def outputs_applied(self, now_ns: int) -> None:
+        """New RxPDO values: advance to now, then act on controlword and targets."""
+        self.advance(now_ns)
+        if self.mode == CSP:
+            target = float(self._v(0x607A))
+            if self.last_target is not None and self.last_t_ns is not None:
+                dt = (now_ns - self.last_t_ns) * 1e-9
+                if dt > 0:
+                    self.v_ff_rpm = (target - self.last_target) / dt * 60.0 / self.params.ppr
+            self.last_target = target
+            self.last_t_ns = now_ns
+        self._controlword()
+
+    def update_inputs(self, now_ns: int) -> None:
+        self.advance(now_ns)
+        self._publish()
+
+    def al_state_changed(self, state: AlState, now_ns: int) -> None:
+        """Leaving OP stops the motor (seed 004 §3.2): quick-stop ramp, voltage off."""
+        self.advance(now_ns)
+        if self.al_state == AlState.OP and state != AlState.OP:
+            if self.state in cia402.POWERED:
+                self._enter(PdsState.SWITCH_ON_DISABLED, "al_left_op")
+            self.prev_cw = 0
+        self.al_state = state
+        self._publish()
+
+    # ----------------------------------------------------------------- faults
+    def inject(self, kind: str, active: bool = True) -> None:
+        """Inject (or remove) a drive fault cause. Ref: issue "faults"."""
+        if kind not in FAULTS:
+            raise ValueError(f"unknown drive fault {kind!r} (use: {', '.join(FAULTS)})")
+        if active:
+            self.injected.add(kind)
+            self._fault(kind)
+        else:
+            self.injected.discard(kind)
+
+    def _fault(self, kind: str) -> None:
+        """Transition 13: fault reaction, then fault (14); EMCY, 603Fh, 1001h."""
+        if self.state in (PdsState.FAULT, PdsState.FAULT_REACTION_ACTIVE):
+            return
+        code, reg = FAULTS[kind]
+        self.active_faults.add(kind)
+        self.fault_code = code
+        log.warning("drive_fault", kind=kind, code=f"0x{code:04X}")
+        if self.emcy is not None:
+            self.emcy(code, reg, b"")
+        self.state = PdsState.FAULT_REACTION_ACTIVE
+        self.v_demand_rpm = self.servo.rpm
+
+    # ----------------------------------------------------------------- controlword
+    def _controlword(self) -> None:
+        cw = self._v(0x6040)
+        cmd = cia402.decode(cw, self.prev_cw)
+        self.prev_cw = cw
+        mode = self._v(0x6060)
+        if mode != self.mode and mode in MODES:
+            self._mode_change(mode)
+        if self.al_state != AlState.OP:
+            return
+        if cmd == Command.FAULT_RESET:
+            if self.state == PdsState.FAULT and not self.injected:
+                self.active_faults.clear()
+                self.fault_code = 0
+                if self.emcy_clear is not None:
+                    self.emcy_clear()
+                self._enter(PdsState.SWITCH_ON_DISABLED, "t15")
+            return
+        tr = cia402.step(self.state, cmd)
+        if tr is None:
+            return
+        number, nxt = tr
+        if number == 16 and self._v(0x605A) < 5:
+            return  # back to enabled only for quick stop option codes 5-8
+        self._enter(nxt, f"t{number}")
+        if cmd == Command.SWITCH_ON_ENABLE and self.state == PdsState.SWITCHED_ON:
+            self._enter(PdsState.OPERATION_ENABLED, "t4")
+
+    def _enter(self, nxt: PdsState, why: str) -> None:
+        if nxt == PdsState.OPERATION_ENABLED and self.state != PdsState.QUICK_STOP_ACTIVE:
+            self._hold_here()
+        if nxt not in cia402.POWERED:
+            self.servo.reset_integrators()
+        log.info("pds_state", state=nxt.name, why=why)
+        self.state = nxt
+
+    def _hold_here(self) -> None:
+        """Enable operation: demands start at the actual values (no jump)."""
+        self._load_gains()
+        s = self.servo
+        pos = s.angle / (2 * math.pi) * self.params.ppr
+        self.p_demand = pos
+        self.profile.pos = pos
+        self.profile.target = pos
+        self.profile.vel = 0.0
+        self.v_demand_rpm = 0.0
+        self.last_target = None
+        s.reset_integrators()
+
+    def _mode_change(self, mode: int) -> None:
+        self.mode = mode
+        self.homing_active = False
+        if self.state == PdsState.OPERATION_ENABLED:
+            self._hold_here()
+
+    # ----------------------------------------------------------------- time
+    def advance(self, now_ns: int) -> None:
+        """Integrate on fixed substeps up to ``now_ns`` (never per frame)."""
+        if self.t_ns is None:
+            self.t_ns = now_ns
+            return
+        dt_ns = round(self.params.substep * 1e9)
+        n = (now_ns - self.t_ns) // dt_ns
+        if n <= 0:
+            return
+        s = self.servo
+        if (
+            self.state not in cia402.POWERED
+            and s.omega == 0.0
+            and s.iq_ma == 0.0
+            and abs(self.params.load) <= self.params.coulomb
+        ):
+            self.t_ns += n * dt_ns  # de-energised at rest: nothing moves, skip exactly
+            return
+        n = min(n, 200_000)  # a long pause is caught up at most 20 s
+        for _ in range(n):
+            self._substep()
+        self.t_ns += n * dt_ns if n < 200_000 else now_ns - self.t_ns
+
+    def _substep(self) -> None:
+        s = self.servo
+        dt = self.params.substep
+        st = self.state
+        if "encoder_loss" in self.injected or "overtemperature" in self.injected:
+            pass  # stays faulted while the cause is present
+        iq = 0.0
+        if st == PdsState.OPERATION_ENABLED:
+            iq = self._mode_substep(dt)
+        elif st in (PdsState.QUICK_STOP_ACTIVE, PdsState.FAULT_REACTION_ACTIVE):
+            decel = float(self._v(0x6085) or 2000)
+            self.v_demand_rpm = ramp(self.v_demand_rpm, 0.0, decel, decel, dt)
+            iq = s.current_from_velocity(self.v_demand_rpm)
+            if self.v_demand_rpm == 0.0 and abs(s.rpm) < 1.0:
+                if st == PdsState.FAULT_REACTION_ACTIVE:
+                    self.state = PdsState.FAULT  # transition 14
+                elif self._v(0x605A) < 5:
+                    self.state = PdsState.SWITCH_ON_DISABLED  # transition 12
+        s.step(iq)
+        if abs(s.iq_ma) > self.overcurrent_ma and self.state in cia402.POWERED:
+            self._fault("overcurrent")
+        self.peak_rpm = max(self.peak_rpm, abs(s.rpm))
+
+    def _mode_substep(self, dt: float) -> float:
+        s = self.servo
+        mode = self.mode
+        halt = bool(self.prev_cw & 0x0100)
+        cps = self.params.ppr / 60.0  # counts/s per rpm
+        if mode == PP:
+            self._pp_setpoint()
+            prof = self.profile
+            if halt:
+                prof.target = (
+                    prof.pos + math.copysign(prof.vel * prof.vel / (2 * prof.dec), prof.vel)
+                    if prof.vel
+                    else prof.pos
+                )
+            prof.step(dt)
+            self.p_demand = prof.pos
+            self._check_following()
+            return s.current_from_velocity(s.velocity_from_position(prof.pos, prof.vel / cps))
+        if mode == PV:
+            target = 0.0 if halt else float(self._v(0x60FF))
+            acc = float(self._v(0x6083) or 1)
+            dec = float(self._v(0x6084) or 1)
+            self.v_demand_rpm = ramp(self.v_demand_rpm, target, acc, dec, dt)
+            return s.current_from_velocity(self.v_demand_rpm)
+        if mode == CSV:
+            v = float(self._v(0x60FF) + self._v(0x60B1))
+            self.v_demand_rpm = v
+            return s.current_from_velocity(v)
+        if mode == CSP:
+            self.p_demand = float(self._v(0x607A) + self._v(0x60B0))
+            self._check_following()
+            return s.current_from_velocity(s.velocity_from_position(self.p_demand, self.v_ff_rpm))
+        if mode == CST:
+            return float(self._v(0x6071) + self._v(0x60B2))
+        if mode == HM:
+            return self._homing(dt)
+        return s.current_from_velocity(0.0)
+
+    def _pp_setpoint(self) -> None:
+        """New set point on the rising edge of bit 4; bit 6 relative. Ref: seed 004 Table 76."""
+        cw = self.prev_cw
+        new = bool(cw & 0x10)
+        if new and not self.set_point_ack:
+            target = float(self._v(0x607A))
+            if cw & 0x40:
+                target += self.profile.target
+            lo, hi = self._v(0x607D, 1), self._v(0x607D, 2)
+            if 0x607D in self.od and lo < hi:
+                target = max(lo, min(hi, target))
+            prof = self.profile
+            prof.target = target
+            vmax = float(self._v(0x6081) or self._v(0x607F) or 1)
+            vmax = min(vmax, float(self._v(0x607F) or vmax))
+            cps = self.params.ppr / 60.0
+            prof.vmax = vmax * cps
+            prof.acc = float(self._v(0x6083) or 1) * cps
+            prof.dec = float(self._v(0x6084) or 1) * cps
+            self.set_point_ack = True
+        elif not new:
+            self.set_point_ack = False
+
+    def _homing(self, dt: float) -> float:
+        """Homing on the current position (35/37) or on the index pulse (33/34).
+
+        Ref: CiA 402-2 §11 (homing methods); 6098h, 6099h, 609Ah, 607Ch.
+        """
+        s = self.servo
+        method = self._v(0x6098)
+        start = bool(self.prev_cw & 0x10)
+        if start and not self.homing_active and not self.homing_done:
+            self.homing_active = True
+        if not self.homing_active:
+            return s.current_from_velocity(0.0)
+        if method in (35, 37):
+            self._home_here()
+            return s.current_from_velocity(0.0)
+        direction = -1.0 if method == 33 else 1.0
+        speed = float(self._v(0x6099, 2) or 100)
+        acc = float(self._v(0x609A) or 1000)
+        self.v_demand_rpm = ramp(self.v_demand_rpm, direction * speed, acc, acc, dt)
+        before = s.angle
+        iq = s.current_from_velocity(self.v_demand_rpm)
+        # index pulse once per revolution at angle 0 (mod 2 pi): detect the crossing
+        after = s.angle + s.omega * dt
+        if math.floor(before / (2 * math.pi)) != math.floor(after / (2 * math.pi)):
+            self._home_here()
+        return iq
+
+    def _home_here(self) -> None:
+        s = self.servo
+        offset = self._v(0x607C)
+        pos_counts = s.angle / (2 * math.pi) * self.params.ppr
+        # redefine the encoder zero so the current position reads the home offset
+        s.angle -= (pos_counts - offset) * 2 * math.pi / self.params.ppr
+        self.homing_active = False
+        self.homing_done = True
+        self.v_demand_rpm = 0.0
+        self._hold_here()
+
+    def _check_following(self) -> None:
+        window = self._v(0x6065)
+        if not window or window == 0xFFFFFFFF:
+            return
+        err = self.p_demand - self.servo.angle / (2 * math.pi) * self.params.ppr
+        if abs(err) > window:
+            self._fault("following_error")
+
+    # ----------------------------------------------------------------- statusword
+    def _publish(self) -> None:
+        """Actual values and the statusword into the OD. Ref: seed 004 Tables 80-83."""
+        s = self.servo
+        st = self.state
+        sw = cia402.STATUS_BITS[st]
+        if st not in (PdsState.NOT_READY_TO_SWITCH_ON, PdsState.SWITCH_ON_DISABLED, PdsState.FAULT):
+            sw |= SW_VOLTAGE
+        if self.al_state == AlState.OP:
+            sw |= SW_REMOTE
+        pos = s.counts
+        rpm = s.rpm
+        mode = self.mode
+        if st == PdsState.OPERATION_ENABLED:
+            if mode == PP:
+                prof = self.profile
+                window = self._v(0x6067)
+                if window == 0xFFFFFFFF:
+                    reached = prof.pos == prof.target and prof.vel == 0.0
+                elif window == 0:
+                    reached = prof.pos == prof.target
+                else:
+                    reached = prof.pos == prof.target and abs(prof.target - pos) <= window
+                if reached:
+                    sw |= SW_TARGET_REACHED
+                if self.set_point_ack:
+                    sw |= SW_OMS12
+            elif mode == PV:
+                if abs(rpm - self._v(0x60FF)) <= max(1.0, 0.01 * abs(self._v(0x60FF))):
+                    sw |= SW_TARGET_REACHED
+                if abs(rpm) < 1.0:
+                    sw |= SW_OMS12
+            elif mode == HM:
+                if self.homing_done:
+                    sw |= SW_TARGET_REACHED | SW_OMS12
+            elif mode in (CSP, CSV, CST):
+                sw |= SW_OMS12  # drive follows the command value
+        if abs(s.iq_ref_ma) >= s.i_limit_ma - 1e-6 and st in cia402.POWERED:
+            sw |= SW_INTERNAL_LIMIT
+        if "following_error" in self.active_faults:
+            sw |= SW_OMS13
+        if abs(rpm) >= 1.0:
+            sw |= SW_MOTOR_ACTIVE
+        if rpm < -1.0:
+            sw |= SW_DIRECTION
+        self._set(0x6041, sw)
+        self._set(0x6061, mode)
+        self._set(0x6063, pos)
+        self._set(0x6064, pos)
+        self._set(0x606C, round(rpm))
+        self._set(0x6062, round(self.p_demand))
+        self._set(0x606B, round(self.v_demand_rpm))
+        self._set(0x6077, round(s.iq_ma))
+        self._set(0x6074, round(s.iq_ref_ma))
+        self._set(0x60F4, round(self.p_demand - pos))
+        self._set(0x2041, round(s.iq_ma), 2)
+        self._set(0x2042, round(rpm), 2)
+        self._set(0x2043, pos, 3)
+        self._set(0x2081, pos % self.params.ppr, 3)
+        self._set(0x603F, self.fault_code)
+
+    @property
+    def velocity_rad_s(self) -> float:
+        return self.servo.omega
+
+    @staticmethod
+    def rpm_to_rad(rpm: float) -> float:
+        return rpm * RPM

@@ -1,0 +1,48 @@
+"""The device behind a CoE slave's firmware, by device type, with its motor parameters
+from the description's ``motor:`` section."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+from ecatsim.description import DescriptionError, DeviceDescription
+from ecatsim.device.drive import Drive
+from ecatsim.device.echo import OdEchoDevice
+from ecatsim.device.servo import MotorParams
+from ecatsim.slave.emcy import Emergency
+from ecatsim.slave.od import ObjectDictionary
+from ecatsim.slave.pdo import CoeDevice
+
+
+def motor_params(raw: Any, src: str) -> MotorParams:
+    """``motor:`` keys are MotorParams fields; one-line errors name the key."""
+    if raw is None:
+        return MotorParams()
+    if not isinstance(raw, dict):
+        raise DescriptionError(f"{src}: motor: expected a mapping")
+    names = {f.name: f for f in dataclasses.fields(MotorParams)}
+    kw: dict[str, Any] = {}
+    for k, v in raw.items():
+        if k not in names:
+            raise DescriptionError(f"{src}: motor.{k}: unknown key (allowed: {', '.join(names)})")
+        default = names[k].default
+        if isinstance(default, str):
+            if v not in ("pmsm", "stepper"):
+                raise DescriptionError(f"{src}: motor.{k}: use pmsm or stepper")
+        elif isinstance(default, int) and not isinstance(default, bool):
+            if not isinstance(v, int) or v <= 0:
+                raise DescriptionError(f"{src}: motor.{k}: expected a positive integer, got {v!r}")
+        elif not isinstance(v, int | float) or v < 0:
+            raise DescriptionError(f"{src}: motor.{k}: expected a number >= 0, got {v!r}")
+        kw[k] = v
+    return MotorParams(**kw)
+
+
+def make_coe_device(
+    kind: str, desc: DeviceDescription, od: ObjectDictionary, emcy: Emergency
+) -> CoeDevice:
+    """tmc8670: the CiA 402 drive; echo: the loopback device."""
+    if kind == "echo":
+        return OdEchoDevice(od)
+    return Drive(od, motor_params(desc.motor_raw, desc.source), emcy.raise_error, emcy.clear)
