@@ -202,6 +202,8 @@ class Drive:
             return
         tr = cia402.step(self.state, cmd)
         if tr is None:
+            if self.state == PdsState.OPERATION_ENABLED and self.mode == PP:
+                self._pp_setpoint()
             return
         number, nxt = tr
         if number == 16 and self._v(0x605A) < 5:
@@ -290,7 +292,6 @@ class Drive:
         halt = bool(self.prev_cw & 0x0100)
         cps = self.params.ppr / 60.0  # counts/s per rpm
         if mode == PP:
-            self._pp_setpoint()
             prof = self.profile
             if halt:
                 prof.target = (

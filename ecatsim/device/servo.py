@@ -148,29 +148,39 @@ class Profile:
         self.dec = 1.0
 
     def step(self, dt: float) -> None:
-        """Advance the demand by dt: accelerate, cruise, decelerate, stop at the target."""
+        """Advance the demand by dt: accelerate, cruise, and brake so as to stop exactly
+        at the target (the braking rate is v^2 / 2d, which is the profile deceleration
+        within one substep)."""
         rem = self.target - self.pos
         if rem == 0.0 and self.vel == 0.0:
             return
         direction = 1.0 if rem > 0 or (rem == 0 and self.vel < 0) else -1.0
         v = self.vel * direction  # speed towards the target
         dist = abs(rem)
-        if v < 0:
-            v = min(0.0, v + self.dec * dt)  # moving away: brake first
-        elif v * v / (2.0 * self.dec) >= dist - v * dt:
-            v = max(0.0, v - self.dec * dt)
-        elif v < self.vmax:
-            v = min(self.vmax, v + self.acc * dt)
-        elif v > self.vmax:
-            v = max(self.vmax, v - self.dec * dt)
-        if v >= 0 and (v * dt >= dist or (v <= self.dec * dt and dist <= self.dec * dt * dt)):
-            self.pos = self.target  # arrived
+        if v < 0:  # moving away from the target: brake first
+            v_new = min(0.0, v + self.dec * dt)
+            self.pos += direction * (v + v_new) / 2 * dt
+            self.vel = direction * v_new
+            return
+        v_try = (
+            min(self.vmax, v + self.acc * dt)
+            if v < self.vmax
+            else max(self.vmax, v - self.dec * dt)
+        )
+        if v_try * v_try / (2.0 * self.dec) <= dist - (v + v_try) / 2 * dt:
+            v_new = v_try
+        else:
+            d_req = v * v / (2.0 * dist) if dist > 0 else self.dec
+            v_new = max(0.0, v - max(d_req, 1e-12) * dt)
+            if v == 0.0:
+                v_new = min(self.acc * dt, self.vmax)  # start of a very short move
+        travel = (v + v_new) / 2 * dt
+        if travel >= dist or (v_new == 0.0 and v > 0.0):
+            self.pos = self.target
             self.vel = 0.0
             return
-        if v == 0.0 and dist > 0:
-            v = min(self.acc * dt, self.vmax)  # creep the last bit
-        self.pos += direction * v * dt
-        self.vel = direction * v
+        self.pos += direction * travel
+        self.vel = direction * v_new
 
 
 def ramp(value: float, target: float, up: float, down: float, dt: float) -> float:
