@@ -89,6 +89,8 @@ class Daemon:
                 mark_processed(buf)
             link.send(memoryview(buf)[:n])
             self.replies += 1
+            # let a master woken on this CPU take the reply before the slaves react
+            os.sched_yield()
             if self.trace_frames:
                 log.debug("frame_out", data=bytes(buf[:n]).hex())
         self._service()
