@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -87,6 +88,10 @@ def run_daemon(opts: RunOptions) -> None:
         except OSError as exc:
             raise UserError(f"--cpu {opts.cpu}: cannot pin ({exc.strerror})") from exc
     daemon = Daemon(link, segment, busy_poll=opts.busy_poll, trace_frames=opts.trace_frames)
+    # Everything built so far lives for the whole run: keep it out of the cyclic garbage
+    # collector so a full collection cannot stall a reply by milliseconds.
+    gc.collect()
+    gc.freeze()
     daemon.install_signal_handlers()
     where = opts.iface or opts.tap or opts.udp
     log.info(

@@ -9,7 +9,6 @@ import struct
 import time
 from typing import Any
 
-import pysoem
 import pytest
 
 from tests.integration.test_esc_master import to_op
@@ -89,7 +88,7 @@ def test_pv_example_2000_rpm(master_factory: Any, daemon_factory: Any) -> None:
     enable(c)
     t0 = time.perf_counter()
     reached = None
-    for i in range(3000):
+    for _i in range(3000):
         sw, _m, _p, _t, vel, _d = c.run(0x0F, vel=2000)
         if sw & 0x0400 and vel > 1900 and reached is None:
             reached = time.perf_counter() - t0
@@ -108,7 +107,7 @@ def test_cst_example_torque_step(master_factory: Any, daemon_factory: Any) -> No
     enable(c)
     samples = []
     for _ in range(200):
-        sw, _m, _p, torque, vel, _d = c.run(0x0F, torque=1000)
+        _sw, _m, _p, torque, vel, _d = c.run(0x0F, torque=1000)
         samples.append((time.perf_counter(), vel, torque))
     assert torque == 1000
     # acceleration from the velocity slope over the middle of the run (rpm/s -> rad/s^2)

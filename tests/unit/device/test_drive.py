@@ -46,10 +46,17 @@ def test_every_state_command_pair(state: PdsState, cmd: Command) -> None:
 
 @pytest.mark.parametrize(
     ("cw", "prev", "cmd"),
-    [(0x06, 0, Command.SHUTDOWN), (0x07, 0, Command.SWITCH_ON), (0x0F, 0, Command.SWITCH_ON_ENABLE),
-     (0x00, 0, Command.DISABLE_VOLTAGE), (0x02, 0, Command.QUICK_STOP), (0x80, 0, Command.FAULT_RESET),
-     (0x80, 0x80, Command.NONE), (0x0B, 0, Command.QUICK_STOP)],
-)  # fmt: skip
+    [
+        (0x06, 0, Command.SHUTDOWN),
+        (0x07, 0, Command.SWITCH_ON),
+        (0x0F, 0, Command.SWITCH_ON_ENABLE),
+        (0x00, 0, Command.DISABLE_VOLTAGE),
+        (0x02, 0, Command.QUICK_STOP),
+        (0x80, 0, Command.FAULT_RESET),
+        (0x80, 0x80, Command.NONE),
+        (0x0B, 0, Command.QUICK_STOP),
+    ],
+)
 def test_controlword_decoding(cw: int, prev: int, cmd: Command) -> None:
     assert cia402.decode(cw, prev) == cmd
 
