@@ -1,5 +1,5 @@
-"""Demo master (pysoem): find the drives, bring them to OP, exchange process data, and
-print a short table of what came back."""
+"""Demo master (pysoem): find the drives, bring them to OP, enable the CiA 402 drive, make a
+profile-position move and a velocity run, and print a short table of what came back."""
 
 from __future__ import annotations
 
@@ -12,13 +12,61 @@ import pysoem
 
 RX = struct.Struct("<HihI")  # 6040 controlword, 607A target position, 6071 torque, 60FF velocity
 TX = struct.Struct("<HbihiI")  # 6041, 6061, 6064 position, 6077 torque, 606C velocity, 60FD
+PP, PV = 1, 3
+
+
+class Bus:
+    def __init__(self, master: pysoem.Master, period_us: int) -> None:
+        self.m = master
+        self.period = period_us / 1e6
+        self.t_next = time.perf_counter()
+        self.rtts: list[float] = []
+        self.wkc_errors = 0
+        self.cycles = 0
+
+    def cycle(self, cw: int, pos: int = 0, vel: int = 0) -> tuple[int, ...]:
+        for s in self.m.slaves:
+            s.output = RX.pack(cw, pos, 0, vel & 0xFFFFFFFF)
+        t0 = time.perf_counter()
+        self.m.send_processdata()
+        wkc = self.m.receive_processdata(5000)
+        self.rtts.append(time.perf_counter() - t0)
+        self.wkc_errors += wkc != self.m.expected_wkc
+        self.cycles += 1
+        self.t_next += self.period
+        delay = self.t_next - time.perf_counter()
+        if delay > 0:
+            time.sleep(delay)
+        return TX.unpack(bytes(self.m.slaves[0].input))
+
+
+def to_op(master: pysoem.Master, bus: Bus) -> None:
+    master.config_map()
+    if master.state_check(pysoem.SAFEOP_STATE, 2_000_000) != pysoem.SAFEOP_STATE:
+        raise SystemExit(f"SAFEOP not reached: {[hex(s.al_status) for s in master.slaves]}")
+    master.state = pysoem.OP_STATE
+    bus.cycle(0)
+    master.write_state()
+    for _ in range(200):
+        bus.cycle(0)
+        if master.state_check(pysoem.OP_STATE, 5000) == pysoem.OP_STATE:
+            return
+    raise SystemExit(f"OP not reached: {[hex(s.al_status) for s in master.slaves]}")
+
+
+def enable(bus: Bus, pos: int = 0) -> None:
+    for cw in (0x00, 0x06, 0x07, 0x0F):
+        for _ in range(5):
+            sw = bus.cycle(cw, pos)[0]
+    if sw & 0x6F != 0x27:
+        raise SystemExit(f"drive not enabled: statusword 0x{sw:04X}")
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--iface", default="ecat0")
-    ap.add_argument("--cycles", type=int, default=2000)
     ap.add_argument("--period-us", type=int, default=1000)
+    ap.add_argument("--target", type=int, default=50_000, help="pp target (encoder counts)")
     args = ap.parse_args()
 
     master = pysoem.Master()
@@ -30,51 +78,41 @@ def main() -> int:
             return 1
         for i, s in enumerate(master.slaves):
             print(f"slave {i}: {s.name} vendor 0x{s.man:X} product {s.id} rev 0x{s.rev:08X}")
-        size = master.config_map()
-        if master.state_check(pysoem.SAFEOP_STATE, 2_000_000) != pysoem.SAFEOP_STATE:
-            print("SAFEOP not reached", [hex(s.al_status) for s in master.slaves], file=sys.stderr)
-            return 1
-        master.state = pysoem.OP_STATE
-        master.send_processdata()
-        master.receive_processdata(2000)
-        master.write_state()
-        for _ in range(100):
-            master.send_processdata()
-            master.receive_processdata(2000)
-            if master.state_check(pysoem.OP_STATE, 5000) == pysoem.OP_STATE:
+        for s in master.slaves:
+            s.sdo_write(0x6060, 0, struct.pack("<b", PP))
+            s.sdo_write(0x6081, 0, struct.pack("<I", 1000))  # profile velocity, rpm
+            s.sdo_write(0x6083, 0, struct.pack("<I", 4000))  # acceleration, rpm/s
+            s.sdo_write(0x6084, 0, struct.pack("<I", 4000))
+        bus = Bus(master, args.period_us)
+        to_op(master, bus)
+        print(f"OP: expected WKC {master.expected_wkc}; pp move to {args.target} counts")
+        enable(bus, args.target)
+        print(f"{'t [ms]':>7} {'statusword':>10} {'position':>9} {'velocity':>9}")
+        bus.cycle(0x1F, args.target)  # new set point
+        t0 = bus.cycles
+        for i in range(5000):
+            sw, _mode, pos, _tq, vel, _di = bus.cycle(0x1F, args.target)
+            if i % 100 == 0:
+                print(f"{bus.cycles - t0:7d} {sw:#10x} {pos:9d} {vel:9d}")
+            if sw & 0x0400 and i > 10:
+                print(f"{bus.cycles - t0:7d} {sw:#10x} {pos:9d} {vel:9d}  target reached")
                 break
-        else:
-            print("OP not reached", [hex(s.al_status) for s in master.slaves], file=sys.stderr)
-            return 1
-        print(f"OP: process image {size} bytes, expected WKC {master.expected_wkc}")
-        print(f"{'cycle':>6} {'target':>8} {'actual':>8} {'velocity':>8} {'wkc':>4}")
-        bad = 0
-        rtts = []
-        t_next = time.perf_counter()
-        for cycle in range(args.cycles):
-            target = cycle * 10
-            for s in master.slaves:
-                s.output = RX.pack(0x000F, target, 0, 10 * 1000)
-            t0 = time.perf_counter()
-            master.send_processdata()
-            wkc = master.receive_processdata(2000)
-            rtts.append(time.perf_counter() - t0)
-            bad += wkc != master.expected_wkc
-            if cycle % (args.cycles // 10 or 1) == 0:
-                _sw, _mode, pos, _tq, vel, _cnt = TX.unpack(bytes(master.slaves[0].input))
-                print(f"{cycle:6d} {target:8d} {pos:8d} {vel:8d} {wkc:4d}")
-            t_next += args.period_us / 1e6
-            delay = t_next - time.perf_counter()
-            if delay > 0:
-                time.sleep(delay)
-        rtts.sort()
+        for s in master.slaves:  # mode switch over SDO while enabled, then run at 600 rpm
+            s.sdo_write(0x6060, 0, struct.pack("<b", PV))
+        for _ in range(600):
+            sw, _m, pos, _t, vel, _d = bus.cycle(0x0F, vel=600)
+        print(f"pv: velocity {vel} rpm at position {pos}")
+        for _ in range(400):
+            bus.cycle(0x0F, vel=0)
+        bus.cycle(0x06)
+        rtts = sorted(bus.rtts)
         print(
-            f"{args.cycles} cycles, {bad} WKC errors, round trip median "
+            f"{bus.cycles} cycles, {bus.wkc_errors} WKC errors, round trip median "
             f"{rtts[len(rtts) // 2] * 1e6:.0f} us, p99 {rtts[int(len(rtts) * 0.99)] * 1e6:.0f} us"
         )
         master.state = pysoem.INIT_STATE
         master.write_state()
-        return 0 if bad == 0 else 1
+        return 0 if bus.wkc_errors == 0 else 1
     finally:
         master.close()
 
