@@ -68,6 +68,7 @@ def cli(ctx: click.Context, debug: bool) -> None:
 @click.option("--allow-ip-iface", is_flag=True, help="Allow an interface with an IPv4 address.")
 @click.option("--busy-poll", is_flag=True, help="Spin instead of blocking (lowest latency).")
 @click.option("--cpu", type=int, help="Pin the daemon to this CPU.")
+@click.option("--trace", "trace", type=click.Path(path_type=Path), help="Per-cycle drive CSV.")
 @click.pass_obj
 def run(
     obj: _Ctx,
@@ -81,6 +82,7 @@ def run(
     allow_ip_iface: bool,
     busy_poll: bool,
     cpu: int | None,
+    trace: Path | None,
 ) -> None:
     """Emulate the segment on an interface until SIGINT/SIGTERM."""
     from ecatsim.runner import RunOptions, run_daemon
@@ -99,8 +101,21 @@ def run(
         allow_ip_iface=allow_ip_iface,
         busy_poll=busy_poll,
         cpu=cpu,
+        trace=trace,
     )
     run_daemon(opts)
+
+
+@cli.command("plot")
+@click.argument("csv_path", metavar="TRACE.csv", type=click.Path(path_type=Path))
+@click.option("-o", "--output", required=True, type=click.Path(path_type=Path))
+@click.option("--slave", type=int, default=0, show_default=True)
+def plot_cmd(csv_path: Path, output: Path, slave: int) -> None:
+    """Plot a --trace CSV: position, velocity, torque; set point over actual."""
+    from ecatsim.trace import plot
+
+    plot(csv_path, output, slave)
+    click.echo(f"{output}: written")
 
 
 @cli.group()

@@ -13,9 +13,12 @@ from ecatsim.build import build_segment
 from ecatsim.clock import MonotonicClock
 from ecatsim.config import SegmentConfig, default_segment, load_segment, repeat_default
 from ecatsim.daemon import Daemon
+from ecatsim.device.drive import Drive
 from ecatsim.errors import UserError
 from ecatsim.link.base import Link
 from ecatsim.link.errors import LinkError
+from ecatsim.segment import Segment
+from ecatsim.trace import TraceWriter
 
 log = structlog.get_logger("ecatsim")
 
@@ -33,6 +36,7 @@ class RunOptions:
     allow_ip_iface: bool = False
     busy_poll: bool = False
     cpu: int | None = None
+    trace: Path | None = None
 
 
 def segment_config(opts: RunOptions) -> SegmentConfig:
@@ -76,11 +80,22 @@ def open_link(opts: RunOptions) -> Link:
         raise UserError(str(exc)) from exc
 
 
+def attach_trace(segment: Segment, path: Path) -> TraceWriter:
+    """Give every drive of the segment a tracer writing into one CSV."""
+    writer = TraceWriter(path)
+    for pos, fw in enumerate(segment.firmware):
+        device = getattr(fw, "device", None)
+        if isinstance(device, Drive):
+            device.tracer = lambda now, row, pos=pos: writer.row(now, pos, row)
+    return writer
+
+
 def run_daemon(opts: RunOptions) -> None:
     """Build everything, log ``ready``, serve until SIGINT/SIGTERM."""
     cfg = segment_config(opts)
     clock = MonotonicClock()
     segment = build_segment(cfg, clock)
+    tracer = attach_trace(segment, opts.trace) if opts.trace is not None else None
     link = open_link(opts)
     if opts.cpu is not None:
         try:
@@ -105,6 +120,8 @@ def run_daemon(opts: RunOptions) -> None:
         daemon.run()
     finally:
         daemon.close()
+        if tracer is not None:
+            tracer.close()
         log.info(
             "stopped",
             frames=segment.frames,

@@ -24,8 +24,10 @@ fi
 ip link set "$MASTER_IF" up
 ip link set "$SLAVE_IF" up
 
-LOG=$(mktemp -t ecatsim-demo.XXXXXX.log)
-.venv/bin/ecatsim run --iface "$SLAVE_IF" "$@" >"$LOG" 2>&1 &
+OUT=${ECATSIM_DEMO_OUT:-demo-out}
+mkdir -p "$OUT"
+LOG="$OUT/daemon.log"
+.venv/bin/ecatsim run --iface "$SLAVE_IF" --trace "$OUT/trace.csv" "$@" >"$LOG" 2>&1 &
 DAEMON=$!
 trap 'kill $DAEMON 2>/dev/null || true; wait $DAEMON 2>/dev/null || true' EXIT
 for _ in $(seq 100); do
@@ -35,3 +37,6 @@ for _ in $(seq 100); do
 done
 echo "daemon on $SLAVE_IF (log: $LOG); demo master on $MASTER_IF"
 .venv/bin/python tools/demo_master.py --iface "$MASTER_IF"
+kill "$DAEMON"; wait "$DAEMON" 2>/dev/null || true
+trap - EXIT
+.venv/bin/ecatsim plot "$OUT/trace.csv" -o "$OUT/plot.png"

@@ -81,6 +81,8 @@ class Drive:
         self.injected: set[str] = set()
         self.overcurrent_ma = 0.95 * self.params.max_current_ma
         self.peak_rpm = 0.0
+        #: called with (time, trace_row()) after every input update when tracing
+        self.tracer: Callable[[int, tuple[int | str, ...]], None] | None = None
         self._init_od()
 
     # ----------------------------------------------------------------- OD helpers
@@ -147,6 +149,28 @@ class Drive:
     def update_inputs(self, now_ns: int) -> None:
         self.advance(now_ns)
         self._publish()
+        if self.tracer is not None:
+            self.tracer(now_ns, self.trace_row())
+
+    def trace_row(self) -> tuple[int | str, ...]:
+        """Set points and actual values for the trace. Ref: issue "trace and plot"."""
+        mode = self.mode
+        if mode in (PV, CSV):
+            target_vel = self._v(0x60FF)
+        else:
+            target_vel = round(self.profile.vel * 60.0 / self.params.ppr) if mode == PP else 0
+        return (
+            self._v(0x6040),
+            self._v(0x6041),
+            mode,
+            self.state.name,
+            round(self.p_demand),
+            self._v(0x6064),
+            target_vel,
+            self._v(0x606C),
+            self._v(0x6071) if mode == CST else round(self.servo.iq_ref_ma),
+            self._v(0x6077),
+        )
 
     def al_state_changed(self, state: AlState, now_ns: int) -> None:
         """Leaving OP stops the motor (seed 004 §3.2): quick-stop ramp, voltage off."""
@@ -303,6 +327,8 @@ class Drive:
             self.p_demand = prof.pos
             self._check_following()
             return s.current_from_velocity(s.velocity_from_position(prof.pos, prof.vel / cps))
+        if mode not in (PP, CSP):
+            self.p_demand = s.angle / (2 * math.pi) * self.params.ppr  # follows the actual
         if mode == PV:
             target = 0.0 if halt else float(self._v(0x60FF))
             acc = float(self._v(0x6083) or 1)

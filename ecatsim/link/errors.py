@@ -1,4 +1,7 @@
-"""Link errors: one line naming the problem and the fix."""
+"""Link errors: one line naming the problem and the fix.
+
+Ref: docs/architecture.md (the CLI prints a LinkError as ``ecatsim: error: ...``).
+"""
 
 from __future__ import annotations
 

@@ -68,7 +68,9 @@ class TapLink:
             )
         except (OSError, subprocess.SubprocessError) as exc:
             os.close(fd)
-            raise LinkError(f"cannot bring TAP device {name} up: {exc} (is iproute2 installed?)")
+            raise LinkError(
+                f"cannot bring TAP device {name} up: {exc} (is iproute2 installed?)"
+            ) from exc
         if r.returncode != 0:
             os.close(fd)
             msg = r.stderr.decode(errors="replace").strip()

@@ -1,5 +1,10 @@
-"""EtherCAT over UDP: the UDP payload starts with the EtherCAT header; replies go to the
-sender of the last datagram. Ref: ETG.1000.4 §5.3.2 (UDP port 0x88A4 = 34980)."""
+"""EtherCAT over UDP: the UDP payload starts with the EtherCAT header (no Ethernet header).
+
+The link answers whoever sent the last datagram, so a master may use any source port.
+IPv4 and IPv6 hosts both work (the address family follows ``host``).
+
+Ref: ETG.1000.4 (EtherCAT frame in a UDP/IP datagram, UDP port 0x88A4 = 34980).
+"""
 
 from __future__ import annotations
 
@@ -9,27 +14,39 @@ import socket
 from ecatsim.link.errors import LinkError
 
 UDP_PORT = 0x88A4
+_RCVBUF = 1 << 20
 
 
 class UdpLink:
-    """A UDP socket serving EtherCAT frames."""
+    """A UDP socket serving EtherCAT frames to the sender of the last datagram."""
 
     ethernet = False
 
     def __init__(self, host: str, port: int = UDP_PORT) -> None:
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        if not 0 <= port <= 0xFFFF:
+            raise LinkError(f"UDP port {port} out of range: use 0..65535 (EtherCAT: 34980)")
         try:
-            self.sock.bind((host, port))
+            infos = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)
+        except socket.gaierror as exc:
+            raise LinkError(f"cannot resolve UDP host {host!r}: {exc.strerror}") from exc
+        family, _t, _p, _c, addr = infos[0]
+        sock = socket.socket(family, socket.SOCK_DGRAM)
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, _RCVBUF)
+            sock.bind(addr)
         except OSError as exc:
-            self.sock.close()
+            sock.close()
             raise LinkError(
-                f"cannot bind UDP {host}:{port} ({exc.strerror}): pick a free port"
+                f"cannot bind UDP {host}:{port} ({exc.strerror}): pick a free port or address"
             ) from exc
-        self.sock.setblocking(False)
-        self.peer: tuple[str, int] | None = None
+        sock.setblocking(False)
+        self.sock = sock
+        #: Address of the sender of the last received datagram; replies go there.
+        self.peer: tuple[str, int] | tuple[str, int, int, int] | None = None
 
     @property
     def address(self) -> tuple[str, int]:
+        """The bound (host, port); useful with port 0."""
         a = self.sock.getsockname()
         return str(a[0]), int(a[1])
 
@@ -42,6 +59,7 @@ class UdpLink:
         except BlockingIOError:
             return 0
         except OSError as exc:
+            # ECONNREFUSED: an ICMP port-unreachable for an earlier reply (master gone).
             if exc.errno in (errno.EAGAIN, errno.EINTR, errno.ECONNREFUSED):
                 return 0
             raise
@@ -49,12 +67,13 @@ class UdpLink:
         return n
 
     def send(self, frame: memoryview) -> None:
-        if self.peer is not None:
-            try:
-                self.sock.sendto(frame, self.peer)
-            except OSError as exc:
-                if exc.errno not in (errno.EAGAIN, errno.ENOBUFS, errno.ECONNREFUSED):
-                    raise
+        if self.peer is None:
+            return
+        try:
+            self.sock.sendto(frame, self.peer)
+        except OSError as exc:
+            if exc.errno not in (errno.EAGAIN, errno.ENOBUFS, errno.ECONNREFUSED):
+                raise
 
     def close(self) -> None:
         self.sock.close()

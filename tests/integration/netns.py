@@ -1,8 +1,15 @@
 """Private network namespaces joined by a veth pair, for real-master tests.
 
-Each pair gets unique names and is removed on exit, even after a failure (and at
-interpreter exit as a safety net). ``in_netns`` switches the calling thread into a
-namespace so a pysoem master can open its raw socket there.
+- :class:`NetnsPair` makes two namespaces (master, slave) with unique names and a veth
+  pair between them, IPv6 off (no router-solicitation noise on the wire), everything up.
+  Both namespaces are removed on exit, even after a failure, and at interpreter exit as a
+  safety net.
+- :func:`in_netns` switches the *calling thread* into a namespace (``setns(2)``), so a
+  pysoem master can open its raw socket there: the socket stays in that namespace.
+- :class:`Daemon` runs ``python -m ecatsim run --iface <slave end>`` inside the slave
+  namespace and waits for its ``ready`` log event.
+
+Ref: ip-netns(8), setns(2), veth(4).
 """
 
 from __future__ import annotations
@@ -11,95 +18,160 @@ import atexit
 import contextlib
 import ctypes
 import itertools
+import json
 import os
+import re
 import signal
 import subprocess
 import sys
+import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
+from types import TracebackType
+
+import pytest
 
 CLONE_NEWNET = 0x40000000
+NETNS_DIR = Path("/run/netns")
+READY_TIMEOUT = 10.0
+STOP_TIMEOUT = 5.0
+
 _counter = itertools.count()
+_lock = threading.Lock()
+#: namespaces this process created and has not removed yet (for the atexit safety net)
 _live: set[str] = set()
 
 
+def is_root() -> bool:
+    return os.geteuid() == 0
+
+
+def require_root(what: str = "this test") -> None:
+    """Skip without root locally; fail loudly in CI (``CI`` set), never skip there."""
+    if is_root():
+        return
+    reason = f"{what} needs root (network namespaces, veth, raw sockets)"
+    if os.environ.get("CI"):
+        pytest.fail(f"{reason}; CI must run the suite as root", pytrace=False)
+    pytest.skip(f"{reason}: run 'sudo .venv/bin/python -m pytest'")
+
+
 def _run(*args: str) -> None:
-    subprocess.run(args, check=True, capture_output=True, timeout=10)
+    r = subprocess.run(args, capture_output=True, text=True, timeout=10, check=False)
+    if r.returncode != 0:
+        raise RuntimeError(f"{' '.join(args)} failed ({r.returncode}): {r.stderr.strip()}")
+
+
+def _del_ns(ns: str) -> None:
+    subprocess.run(["ip", "netns", "del", ns], capture_output=True, check=False, timeout=10)
+    with _lock:
+        _live.discard(ns)
 
 
 def _cleanup_all() -> None:
-    for ns in list(_live):
-        subprocess.run(["ip", "netns", "del", ns], capture_output=True, check=False)
-        _live.discard(ns)
+    with _lock:
+        left = list(_live)
+    for ns in left:
+        _del_ns(ns)
 
 
 atexit.register(_cleanup_all)
 
 
+def netns_exists(ns: str) -> bool:
+    return (NETNS_DIR / ns).exists()
+
+
 class NetnsPair:
-    """Two namespaces (master, slave) with a veth pair between them."""
+    """Two namespaces (``master_ns``, ``slave_ns``) with a veth pair between them.
+
+    ``master_if`` lives in ``master_ns`` and ``slave_if`` in ``slave_ns``. Namespace names
+    are ``ecs-<pid>-<n>-m`` / ``-s``; interface names are ``vm<6 hex>`` / ``vs<6 hex>``
+    (IFNAMSIZ allows 15 characters; a TAP ``tap<6 hex>`` also fits). The interfaces are
+    created directly inside the fresh namespaces, so their names cannot clash with anything.
+    """
 
     def __init__(self) -> None:
-        if os.geteuid() != 0:
-            raise PermissionError("network namespaces need root")
-        tag = f"{os.getpid() % 100000:05d}{next(_counter) % 1000:03d}"
-        self.master_ns = f"ecs-{tag}-m"
-        self.slave_ns = f"ecs-{tag}-s"
+        if not is_root():
+            raise PermissionError(
+                "NetnsPair needs root (ip netns add, veth): run the tests with sudo"
+            )
+        self.master_ns = ""
+        self.slave_ns = ""
+        self.master_if = ""
+        self.slave_if = ""
+
+    def _names(self) -> None:
+        pid = os.getpid()
+        n = next(_counter)
+        tag = f"{(pid * 4099 + n * 40503) & 0xFFFFFF:06x}"
+        self.master_ns = f"ecs-{pid}-{n}-m"
+        self.slave_ns = f"ecs-{pid}-{n}-s"
         self.master_if = f"vm{tag}"
         self.slave_if = f"vs{tag}"
 
     def __enter__(self) -> NetnsPair:
         try:
-            for ns in (self.master_ns, self.slave_ns):
-                _run("ip", "netns", "add", ns)
-                _live.add(ns)
-            _run(
-                "ip",
-                "link",
-                "add",
-                self.master_if,
-                "netns",
-                self.master_ns,
-                "type",
-                "veth",
-                "peer",
-                "name",
-                self.slave_if,
-                "netns",
-                self.slave_ns,
-            )
-            for ns, dev in ((self.master_ns, self.master_if), (self.slave_ns, self.slave_if)):
-                for name in (dev, "lo"):
-                    subprocess.run(
-                        [
-                            "ip",
-                            "netns",
-                            "exec",
-                            ns,
-                            "sysctl",
-                            "-q",
-                            "-w",
-                            f"net.ipv6.conf.{name}.disable_ipv6=1",
-                        ],
-                        capture_output=True,
-                        check=False,
-                    )
-                _run("ip", "-n", ns, "link", "set", dev, "up")
-                _run("ip", "-n", ns, "link", "set", "lo", "up")
+            self._create()
         except BaseException:
-            self.__exit__(None, None, None)
+            self._remove()
             raise
         return self
 
-    def __exit__(self, *exc: object) -> None:
+    def _create(self) -> None:
+        for _attempt in range(100):
+            self._names()
+            # a stale namespace of a killed earlier run with the same pid: take the next n
+            if not netns_exists(self.master_ns) and not netns_exists(self.slave_ns):
+                break
+        else:
+            raise RuntimeError("no free namespace name: remove stale ones ('ip netns list')")
         for ns in (self.master_ns, self.slave_ns):
-            subprocess.run(["ip", "netns", "del", ns], capture_output=True, check=False)
-            _live.discard(ns)
+            with _lock:
+                _live.add(ns)
+            _run("ip", "netns", "add", ns)
+            # IPv6 off before the veth exists: it inherits 'default'
+            _sysctl_in(ns, "net.ipv6.conf.default.disable_ipv6", "1")
+            _sysctl_in(ns, "net.ipv6.conf.all.disable_ipv6", "1")
+        _run(
+            "ip", "link", "add", self.master_if, "netns", self.master_ns, "type", "veth",
+            "peer", "name", self.slave_if, "netns", self.slave_ns,
+        )  # fmt: skip
+        for ns, dev in ((self.master_ns, self.master_if), (self.slave_ns, self.slave_if)):
+            _sysctl_in(ns, f"net.ipv6.conf.{dev}.disable_ipv6", "1")
+            _run("ip", "-n", ns, "link", "set", "lo", "up")
+            _run("ip", "-n", ns, "link", "set", dev, "up")
+
+    def _remove(self) -> None:
+        for ns in (self.master_ns, self.slave_ns):
+            if ns:
+                _del_ns(ns)
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self._remove()
 
     def exists(self) -> bool:
-        out = subprocess.run(["ip", "netns", "list"], capture_output=True, text=True).stdout
-        return self.master_ns in out or self.slave_ns in out
+        """True if either namespace still exists."""
+        return netns_exists(self.master_ns) or netns_exists(self.slave_ns)
+
+    def __repr__(self) -> str:
+        return f"NetnsPair({self.master_ns}:{self.master_if} <-> {self.slave_ns}:{self.slave_if})"
+
+
+def _sysctl_in(ns: str, key: str, value: str) -> None:
+    """Write a net sysctl inside ``ns`` (ignored if absent, e.g. IPv6 compiled out).
+
+    /proc/sys/net is resolved against the network namespace of the thread that opens it.
+    """
+    path = "/proc/sys/" + key.replace(".", "/")
+    with in_netns(ns), contextlib.suppress(OSError), open(path, "w") as f:
+        f.write(value)
 
 
 _libc = ctypes.CDLL(None, use_errno=True)
@@ -108,90 +180,130 @@ _libc = ctypes.CDLL(None, use_errno=True)
 def _setns(fd: int) -> None:
     if _libc.setns(fd, CLONE_NEWNET) != 0:
         err = ctypes.get_errno()
-        raise OSError(err, os.strerror(err))
+        raise OSError(err, f"setns(CLONE_NEWNET): {os.strerror(err)}")
 
 
 @contextlib.contextmanager
 def in_netns(ns: str) -> Iterator[None]:
     """Run the block with the calling thread in network namespace ``ns``.
 
-    Sockets created inside stay in that namespace after the block ends.
+    Sockets created inside stay in that namespace after the block ends. Only this thread
+    moves; other threads (and subprocesses started elsewhere) are unaffected.
     """
-    own = os.open("/proc/thread-self/ns/net", os.O_RDONLY)
-    target = os.open(f"/run/netns/{ns}", os.O_RDONLY)
     try:
-        _setns(target)
+        target = os.open(NETNS_DIR / ns, os.O_RDONLY | os.O_CLOEXEC)
+    except FileNotFoundError:
+        raise RuntimeError(f"network namespace {ns!r} does not exist") from None
+    try:
+        own = os.open("/proc/thread-self/ns/net", os.O_RDONLY | os.O_CLOEXEC)
         try:
-            yield
+            _setns(target)
+            try:
+                yield
+            finally:
+                _setns(own)
         finally:
-            _setns(own)
+            os.close(own)
     finally:
         os.close(target)
-        os.close(own)
+
+
+def _is_ready_line(line: str) -> bool:
+    """A log line announcing that the daemon serves frames (JSON or console format)."""
+    line = line.strip()
+    if line.startswith("{"):
+        try:
+            event = json.loads(line).get("event")
+        except (ValueError, AttributeError):
+            event = None
+        if event is not None:
+            return str(event) == "ready"
+    return re.search(r"\bready\b", line) is not None
 
 
 class Daemon:
-    """``ecatsim run`` inside the slave namespace of a pair."""
+    """``python -m ecatsim run --iface <slave_if> [args]`` inside the slave namespace.
 
-    def __init__(self, pair: NetnsPair, args: tuple[str, ...], log: Path) -> None:
+    Output (stdout and stderr) goes to ``log``. ``start`` waits for the ``ready`` event and
+    fails the test with the log if the process dies or is not ready in time. ``--log-format
+    json`` is added unless ``args`` choose a format.
+    """
+
+    def __init__(self, pair: NetnsPair, args: Sequence[str], log: Path) -> None:
         self.pair = pair
-        self.args = args
+        self.args = tuple(args)
         self.log = log
         self.proc: subprocess.Popen[bytes] | None = None
         self.starts = 0
 
-    def start(self, timeout: float = 10.0) -> None:
+    @property
+    def command(self) -> list[str]:
+        fmt = [] if "--log-format" in self.args else ["--log-format", "json"]
+        return [
+            "ip", "netns", "exec", self.pair.slave_ns,
+            sys.executable, "-m", "ecatsim", "run", "--iface", self.pair.slave_if,
+            *fmt, *self.args,
+        ]  # fmt: skip
+
+    def _this_run(self) -> list[str]:
+        """Log lines of the current start (after its marker line)."""
+        text = self.log.read_text(errors="replace")
+        marker = f"--- start {self.starts}:"
+        return text[text.rfind(marker) :].splitlines()[1:]
+
+    def start(self, timeout: float = READY_TIMEOUT) -> None:
+        if self.alive():
+            raise RuntimeError("daemon already running: stop() it first")
         self.starts += 1
-        cmd = [
-            "ip",
-            "netns",
-            "exec",
-            self.pair.slave_ns,
-            sys.executable,
-            "-m",
-            "ecatsim",
-            "run",
-            "--iface",
-            self.pair.slave_if,
-            "--log-format",
-            "json",
-            *self.args,
-        ]
+        cmd = self.command
         with open(self.log, "ab") as f:
             f.write(f"--- start {self.starts}: {' '.join(cmd)}\n".encode())
-        f = open(self.log, "ab")  # noqa: SIM115 - owned by the process lifetime
-        self.proc = subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT)
-        f.close()
+            f.flush()
+            self.proc = subprocess.Popen(
+                cmd, stdin=subprocess.DEVNULL, stdout=f, stderr=subprocess.STDOUT
+            )
         deadline = time.monotonic() + timeout
-        marker = f"--- start {self.starts}:"
-        while time.monotonic() < deadline:
-            text = self.log.read_text(errors="replace")
-            tail = text[text.rfind(marker) :]
-            if '"ready"' in tail:
+        while True:
+            if any(_is_ready_line(line) for line in self._this_run()):
                 return
             if self.proc.poll() is not None:
-                raise RuntimeError(f"daemon exited with {self.proc.returncode}:\n{tail}")
-            time.sleep(0.05)
-        self.stop()
-        raise RuntimeError(f"daemon not ready after {timeout} s:\n{self.log.read_text()}")
+                rc = self.proc.returncode
+                self.proc = None
+                pytest.fail(
+                    f"daemon exited with {rc} before it was ready:\n{self.log.read_text()}",
+                    pytrace=False,
+                )
+            if time.monotonic() > deadline:
+                self.stop()
+                pytest.fail(
+                    f"daemon not ready after {timeout} s:\n{self.log.read_text()}", pytrace=False
+                )
+            time.sleep(0.02)
 
     def alive(self) -> bool:
         return self.proc is not None and self.proc.poll() is None
 
-    def stop(self) -> int | None:
+    @property
+    def pid(self) -> int | None:
+        return None if self.proc is None else self.proc.pid
+
+    def stop(self, timeout: float = STOP_TIMEOUT) -> int | None:
+        """SIGTERM, wait up to ``timeout`` s, then SIGKILL. The exit status, or None if it
+        was not started. A status < 0 is the signal that ended it (-9: it had to be killed).
+        """
         if self.proc is None:
             return None
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGTERM)
+        proc = self.proc
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGTERM)
             try:
-                self.proc.wait(5)
+                proc.wait(timeout)
             except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(5)
-        rc = self.proc.returncode
+                proc.kill()
+                proc.wait(timeout)
         self.proc = None
-        return rc
+        return proc.returncode
 
-    def restart(self) -> None:
+    def restart(self, timeout: float = READY_TIMEOUT) -> None:
         self.stop()
-        self.start()
+        self.start(timeout)

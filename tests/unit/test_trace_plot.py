@@ -1,0 +1,34 @@
+"""--trace CSV rows and `ecatsim plot` output."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+from click.testing import CliRunner
+
+from ecatsim.cli import cli
+from ecatsim.trace import COLUMNS, TraceWriter
+from tests.unit.device.test_drive import MS, command, enable, make
+
+
+def test_trace_rows_and_plot(tmp_path: Path) -> None:
+    d, _ = make()
+    path = tmp_path / "t.csv"
+    w = TraceWriter(path)
+    d.tracer = lambda now, row: w.row(now, 0, row)
+    t = enable(d, 3)
+    for i in range(1, 200):
+        command(d, t + i * MS, 0x0F, x60FF=800)
+    w.close()
+    rows = list(csv.DictReader(path.open()))
+    assert tuple(rows[0]) == COLUMNS
+    assert rows[-1]["state"] == "OPERATION_ENABLED" and rows[-1]["mode"] == "3"
+    assert int(rows[-1]["target_velocity"]) == 800
+    assert 0 < int(rows[-1]["velocity"]) <= 800
+    out = tmp_path / "p.png"
+    r = CliRunner().invoke(cli, ["plot", str(path), "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    r = CliRunner().invoke(cli, ["plot", str(path), "-o", str(out), "--slave", "3"])
+    assert r.exit_code != 0 and "no rows for slave 3" in str(r.exception)
