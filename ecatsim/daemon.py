@@ -131,9 +131,9 @@ class Daemon:
                     self._service_timers()
                 continue
             deadline = self.segment.next_deadline()
-            timeout = IDLE_TIMEOUT_MS
+            timeout: float = IDLE_TIMEOUT_MS
             if deadline is not None:
-                timeout = max(0, min(timeout, (deadline - clock.now_ns()) // 1_000_000 + 1))
+                timeout = max(0.0, min(timeout, (deadline - clock.now_ns()) / 1e6))
             events = poller.poll(timeout)
             for efd, _ev in events:
                 if efd == self._wake_r:

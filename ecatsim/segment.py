@@ -45,6 +45,7 @@ class Segment:
         self.clock = clock
         self.firmware = list(firmware)
         self.persist = persist
+        self._sync_escs: list[Esc] = []
         self.reach = len(self.escs)
         self.addr_map: dict[int, tuple[int, ...]] = {}
         self.logical: list[Esc] = []
@@ -53,6 +54,8 @@ class Segment:
         self.port0_closed = False
         self.frames = 0
         self.bad_frames = 0
+        self.sync0_ticks = 0
+        self.sync0_late_ns = 0
         n = len(self.escs)
         for i, esc in enumerate(self.escs):
             esc.set_topology(n - 1 - i)
@@ -257,6 +260,13 @@ class Segment:
         for esc in self.escs:
             if esc.wd.deadline_ns:
                 esc.check_timers(t)
+        if self.sync_escs:
+            for esc in self.sync_escs:
+                d = esc.dc.sync0_deadline()
+                if d is not None and d <= t:
+                    esc.sync0_tick(t)
+                    self.sync0_ticks += 1
+                    self.sync0_late_ns = max(self.sync0_late_ns, t - d)
         ctx = self.ctx
         if ctx.pending and self.firmware:
             for pos in sorted(ctx.pending):
@@ -266,9 +276,21 @@ class Segment:
                 self.persist(pos)
             ctx.flush.clear()
 
+    @property
+    def sync_escs(self) -> list[Esc]:
+        """ESCs whose SYNC unit runs (recomputed when an activation changes)."""
+        if self.ctx.timers_dirty:
+            self.ctx.timers_dirty = False
+            self._sync_escs = [e for e in self.escs if e.dc.next_sync0 is not None]
+        return self._sync_escs
+
     def next_deadline(self) -> int | None:
         """The earliest timer deadline (ns), for the daemon's poll timeout."""
         ds = [e.wd.deadline_ns for e in self.escs if e.wd.deadline_ns]
+        for e in self.sync_escs:
+            d = e.dc.sync0_deadline()
+            if d is not None:
+                ds.append(d)
         return min(ds) if ds else None
 
 

@@ -71,6 +71,7 @@ class FrameContext:
         "logical_dirty",
         "pending",
         "t_ns",
+        "timers_dirty",
         "topology_dirty",
     )
 
@@ -81,6 +82,7 @@ class FrameContext:
         self.addr_dirty = True
         self.logical_dirty = True
         self.topology_dirty = True
+        self.timers_dirty = True
         #: positions of ESCs whose PDI interrupt line (AL event & mask) is raised
         self.pending: set[int] = set()
         #: positions of ESCs with an EEPROM image to persist
@@ -814,6 +816,19 @@ class Esc:
     def _ew_dc_activation(self, ra: int, rs: int, old: bytes) -> None:
         """Ref: TMC8460 §5.50.4 Table 105 (bit 7 self-clearing)."""
         self.mem[ra] &= 0x7F
+        if self.mem[ra] != old[0]:
+            self.dc.activation_written()
+            self.ctx.timers_dirty = True
+
+    def _pw_dc_activation(self, ra: int, rs: int, old: bytes) -> None:
+        """The PDI may run the SYNC unit too. Ref: TMC8460 §5.50.4 Table 105."""
+        self._ew_dc_activation(ra, rs, old)
+
+    def sync0_tick(self, now_ns: int) -> None:
+        """A due SYNC0 pulse: status, and AL event 0x0220.2 if mapped. Ref: §5.32 bit 2."""
+        if self.dc.sync0_pulse(now_ns):
+            self.set_al_event(regs.EV_SYNC0)
+        self.ctx.timers_dirty = True
 
     def _pr_dc_sync_status(self, ra: int, rs: int) -> None:
         """PDI read of 0x098E/0x098F clears AL event 0x0220.2/.3. Ref: Tables 108, 109."""

@@ -21,13 +21,14 @@ class DcUnit:
     """Time base and time-loop control of one ESC."""
 
     __slots__ = (
-        "adjust_ns",
         "drift_ppm",
         "hop_ns",
+        "local_ref",
         "mem",
+        "next_sync0",
         "position",
         "rate_ppb",
-        "start_ns",
+        "t_ref",
         "turnaround_ns",
     )
 
@@ -43,12 +44,16 @@ class DcUnit:
     ) -> None:
         self.mem = mem
         self.position = position
-        self.start_ns = start_ns
         self.drift_ppm = drift_ppm
         self.hop_ns = hop_ns
         self.turnaround_ns = turnaround_ns
-        self.adjust_ns = 0.0
         self.rate_ppb = 0.0
+        # The local clock is piecewise linear: local_ref at host time t_ref, running at
+        # speed() since. Corrections rebase it, so a rate change never jumps the time.
+        self.t_ref = 0
+        self.local_ref = start_ns
+        #: system time of the next SYNC0 pulse, or None while the SYNC unit is off
+        self.next_sync0: int | None = None
 
     def arrival_ns(self, frame_t_ns: int) -> int:
         """When a frame sent at ``frame_t_ns`` reaches this slave's port 0."""
@@ -56,8 +61,15 @@ class DcUnit:
 
     def local_time(self, t_ns: int) -> int:
         """Local clock at host time ``t_ns`` (drift and control-loop correction applied)."""
-        drift = t_ns * (self.drift_ppm * 1e-6 + self.rate_ppb * 1e-9)
-        return (self.start_ns + t_ns + int(drift + self.adjust_ns)) & MASK64
+        return (self.local_ref + int((t_ns - self.t_ref) * self.speed())) & MASK64
+
+    def speed(self) -> float:
+        """Local clock ticks per host ns: drift plus the control loop's correction."""
+        return 1.0 + self.drift_ppm * 1e-6 + self.rate_ppb * 1e-9
+
+    def _rebase(self, t_ns: int) -> None:
+        self.local_ref = self.local_time(t_ns)
+        self.t_ref = t_ns
 
     def offset(self) -> int:
         return int(_U64.unpack_from(self.mem, regs.DC_SYSTEM_TIME_OFFSET)[0])
@@ -104,13 +116,66 @@ class DcUnit:
         # speed counter implements, with a bandwidth from 0x0930 (larger = smoother).
         start = int(struct.unpack_from("<H", self.mem, regs.DC_SPEED_COUNTER_START)[0]) & 0x7FFF
         gain = 1.0 / max(2.0, start / 0x400)
+        t = self.arrival_ns(frame_t_ns)
+        self._rebase(t)
         if abs(diff) > 1_000_000:
-            self.adjust_ns -= diff  # far off: jump, as after a new offset
+            self.local_ref -= diff  # far off: jump, as after a new offset
         else:
-            self.adjust_ns -= diff * gain
-            self.rate_ppb -= diff * gain * 0.05
+            self.local_ref -= int(diff * gain)
+            self.rate_ppb = max(-1e6, min(1e6, self.rate_ppb - diff * gain * 5.0))
         mag = min(abs(diff), 0x7FFFFFFF)
         _U32.pack_into(self.mem, regs.DC_SYSTEM_TIME_DIFF, mag | (0x80000000 if diff < 0 else 0))
+
+    def host_time_of(self, system_ns: int) -> int:
+        """Inverse of system_time(): when the host clock reaches ``system_ns`` here."""
+        local = (system_ns - self.offset() - self.local_ref) & MASK64
+        if local >= 1 << 63:
+            local -= 1 << 64
+        return self.t_ref + int(local / self.speed())
+
+    # -- SYNC out unit ---------------------------------------------------------------
+
+    def activation_written(self) -> None:
+        """0x0981 bit 0 starts the SYNC unit at the start time 0x0990; bit 1 enables SYNC0.
+
+        Ref: TMC8460 §5.50.4 Tables 105, 107, 110.
+        """
+        m = self.mem
+        act = m[regs.DC_ACTIVATION]
+        if act & 0x01 and act & 0x02:
+            start = int(_U64.unpack_from(m, regs.DC_START_TIME)[0])
+            self.next_sync0 = start
+            m[regs.DC_ACTIVATION_STATUS] |= 0x01  # first SYNC0 pulse pending
+        else:
+            self.next_sync0 = None
+            m[regs.DC_ACTIVATION_STATUS] &= 0xFE
+
+    def sync0_deadline(self) -> int | None:
+        """Host time of the next SYNC0 pulse."""
+        return None if self.next_sync0 is None else self.host_time_of(self.next_sync0)
+
+    def sync0_pulse(self, now_ns: int) -> bool:
+        """Generate the due SYNC0 pulse; returns True if SYNC0 is mapped to 0x0220.2.
+
+        Pulses that are more than one cycle overdue (the system time was corrected forward,
+        or the host stalled) are skipped rather than fired in a burst.
+        Ref: TMC8460 §5.50.4 Tables 106-112; §5.28.2 Table 42 (0x0151 bit 3).
+        """
+        m = self.mem
+        if self.next_sync0 is None:
+            return False
+        cycle = int(_U32.unpack_from(m, regs.DC_SYNC0_CYCLE)[0])
+        m[regs.DC_ACTIVATION_STATUS] &= 0xFE
+        m[regs.DC_SYNC0_STATUS] |= 0x01
+        if cycle == 0:
+            self.next_sync0 = None  # single shot
+        else:
+            self.next_sync0 += cycle
+            behind = self.system_time(now_ns) - self.next_sync0
+            if behind >= cycle:
+                self.next_sync0 += (behind // cycle) * cycle
+            _U64.pack_into(m, regs.DC_START_TIME, self.next_sync0 & MASK64)
+        return bool(m[regs.SYNC_LATCH_CONFIG] & 0x08)
 
     def reset_filters(self) -> None:
         """Writing 0x0930/0x0934 resets the difference and speed counter diff. Ref: Table 99."""

@@ -16,9 +16,12 @@ from ecatsim.esc.pdi import (
     AL_EVENT_MASK,
     AL_STATUS,
     AL_STATUS_CODE,
+    DC_ACTIVATION,
+    DC_SYNC0_STATUS,
     EV_AL_CONTROL,
     EV_SM0,
     EV_SM_ACTIVATION,
+    EV_SYNC0,
     EV_WATCHDOG_PD,
     WD_STATUS_PD,
     Pdi,
@@ -48,7 +51,7 @@ CTRL_PD_IN = 0x00  # buffered, ECAT reads
 #: Events the firmware serves (AL event mask). SM1 (mailbox read by the master) is only
 #: unmasked while replies are queued. Ref: TMC8460 §5.30, §5.32 Table 46.
 EV_SM1 = EV_SM0 << 1
-EVENT_MASK = EV_AL_CONTROL | EV_SM_ACTIVATION | EV_WATCHDOG_PD | (0x0D * EV_SM0)
+EVENT_MASK = EV_AL_CONTROL | EV_SM_ACTIVATION | EV_WATCHDOG_PD | EV_SYNC0 | (0x0D * EV_SM0)
 
 
 @dataclass(frozen=True, slots=True)
@@ -94,6 +97,10 @@ class Firmware:
         self.od: ObjectDictionary | None = None
         self.emergency: Emergency | None = None
         self.device: object | None = None
+        #: outputs received in DC mode, applied at the next SYNC0
+        self.pending_outputs: bytes | None = None
+        #: the last input image (captured at SYNC0 in DC mode)
+        self.sync_inputs: bytes | None = None
         self.bootstrap_supported = bootstrap_supported
         self.state = AlState.INIT
         self.error = False
@@ -145,13 +152,28 @@ class Firmware:
             p.u16(WD_STATUS_PD)  # acknowledges the event
             if self.state == AlState.OP:
                 self.fail(AlState.SAFEOP, al.CODE_SM_WATCHDOG, now_ns)
+        pd_events = ev & ((EV_SM0 << SM_PD_OUT) | (EV_SM0 << SM_PD_IN))
+        dc = bool(pd_events or ev & EV_SYNC0) and (p.u8(DC_ACTIVATION) & 0x03) == 0x03
         if ev & (EV_SM0 << SM_PD_OUT):
             out = p.sm_read(SM_PD_OUT)
             if out is not None and self.state == AlState.OP:
-                self.app.set_outputs(out, now_ns)
-        if ev & ((EV_SM0 << SM_PD_OUT) | (EV_SM0 << SM_PD_IN)):
-            # new outputs or inputs consumed: one fresh input image (clears the SM3 event)
-            self._write_inputs(now_ns)
+                if dc:
+                    self.pending_outputs = out  # applied at SYNC0
+                else:
+                    self.app.set_outputs(out, now_ns)  # free run: applied when SM2 is written
+        if ev & EV_SYNC0:
+            p.u8(DC_SYNC0_STATUS)  # acknowledges the event
+            if self.pending_outputs is not None and self.state == AlState.OP:
+                self.app.set_outputs(self.pending_outputs, now_ns)
+                self.pending_outputs = None
+            self.sync_inputs = None
+            self._write_inputs(now_ns)  # inputs captured at SYNC0
+        elif pd_events:
+            if dc and self.sync_inputs is not None:
+                # the master took the inputs: offer the SYNC0 capture again (clears SM3 event)
+                self.pdi.sm_write(SM_PD_IN, self.sync_inputs)
+            else:
+                self._write_inputs(now_ns)
         self.service_mailbox(ev, now_ns)
 
     def service_mailbox(self, ev: int, now_ns: int) -> None:
@@ -182,7 +204,9 @@ class Firmware:
 
     def _write_inputs(self, now_ns: int) -> None:
         if self.state in (AlState.SAFEOP, AlState.OP):
-            self.pdi.sm_write(SM_PD_IN, self.app.get_inputs(now_ns))
+            image = self.app.get_inputs(now_ns)
+            self.sync_inputs = image
+            self.pdi.sm_write(SM_PD_IN, image)
 
     # ----------------------------------------------------------------- AL control
 

@@ -188,7 +188,8 @@ def in_netns(ns: str) -> Iterator[None]:
     """Run the block with the calling thread in network namespace ``ns``.
 
     Sockets created inside stay in that namespace after the block ends. Only this thread
-    moves; other threads (and subprocesses started elsewhere) are unaffected.
+    moves; threads that already exist are unaffected, while threads and subprocesses
+    *started inside the block* inherit the namespace (clone(2)).
     """
     try:
         target = os.open(NETNS_DIR / ns, os.O_RDONLY | os.O_CLOEXEC)
