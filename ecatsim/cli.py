@@ -69,6 +69,7 @@ def cli(ctx: click.Context, debug: bool) -> None:
 @click.option("--busy-poll", is_flag=True, help="Spin instead of blocking (lowest latency).")
 @click.option("--cpu", type=int, help="Pin the daemon to this CPU.")
 @click.option("--trace", "trace", type=click.Path(path_type=Path), help="Per-cycle drive CSV.")
+@click.option("--ctl", "ctl", type=click.Path(path_type=Path), help="Control socket path (0600).")
 @click.pass_obj
 def run(
     obj: _Ctx,
@@ -83,6 +84,7 @@ def run(
     busy_poll: bool,
     cpu: int | None,
     trace: Path | None,
+    ctl: Path | None,
 ) -> None:
     """Emulate the segment on an interface until SIGINT/SIGTERM."""
     from ecatsim.runner import RunOptions, run_daemon
@@ -102,8 +104,45 @@ def run(
         busy_poll=busy_poll,
         cpu=cpu,
         trace=trace,
+        ctl=ctl,
     )
     run_daemon(opts)
+
+
+@cli.command("ctl")
+@click.option("--socket", "sock", required=True, type=click.Path(path_type=Path))
+@click.argument("command", type=click.Choice(["status", "fault", "clear", "peek", "poke", "od"]))
+@click.argument("args", nargs=-1)
+def ctl_cmd(sock: Path, command: str, args: tuple[str, ...]) -> None:
+    """Talk to a running daemon: status | fault SLAVE KIND | clear SLAVE KIND |
+    peek SLAVE ADDR LEN | poke SLAVE ADDR HEX | od SLAVE INDEX SUB [VALUE]."""
+    import json
+
+    from ecatsim.ctl import request
+
+    def num(v: str) -> int:
+        return int(v, 0)
+
+    try:
+        if command == "status":
+            req: dict[str, object] = {"cmd": "status"}
+        elif command in ("fault", "clear"):
+            req = {"cmd": "fault", "slave": num(args[0]), "kind": args[1],
+                   "active": command == "fault"}  # fmt: skip
+        elif command == "peek":
+            req = {"cmd": "peek", "slave": num(args[0]), "addr": num(args[1]), "len": num(args[2])}
+        elif command == "poke":
+            req = {"cmd": "poke", "slave": num(args[0]), "addr": num(args[1]), "data": args[2]}
+        else:
+            req = {"cmd": "od", "slave": num(args[0]), "index": num(args[1]), "sub": num(args[2])}
+            if len(args) > 3:
+                req["value"] = num(args[3])
+    except (IndexError, ValueError) as exc:
+        raise UserError(f"ctl {command}: bad arguments {' '.join(args)!r} (see --help)") from exc
+    reply = request(sock, req)
+    click.echo(json.dumps(reply, indent=2))
+    if not reply.get("ok"):
+        raise SystemExit(1)
 
 
 @cli.command("plot")

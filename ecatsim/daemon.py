@@ -12,6 +12,7 @@ import os
 import select
 import signal
 from types import FrameType
+from typing import Protocol
 
 import structlog
 
@@ -26,6 +27,14 @@ MAX_FRAME = 2048
 IDLE_TIMEOUT_MS = 200
 
 
+class ControlServer(Protocol):
+    """The control socket as the loop sees it."""
+
+    def fileno(self) -> int: ...
+
+    def serve(self) -> None: ...
+
+
 class Daemon:
     """Serve one link with one segment until stopped."""
 
@@ -36,7 +45,9 @@ class Daemon:
         *,
         busy_poll: bool = False,
         trace_frames: bool = False,
+        ctl: ControlServer | None = None,
     ) -> None:
+        self.ctl = ctl
         self.link = link
         self.segment = segment
         self.busy_poll = busy_poll
@@ -124,6 +135,10 @@ class Daemon:
         poller = select.poll()
         poller.register(fd, select.POLLIN)
         poller.register(self._wake_r, select.POLLIN)
+        ctl_fd = -1
+        if self.ctl is not None:
+            ctl_fd = self.ctl.fileno()
+            poller.register(ctl_fd, select.POLLIN)
         clock = self.segment.clock
         while not self._stop:
             if self.busy_poll:
@@ -144,6 +159,11 @@ class Daemon:
                 elif efd == fd:
                     while self.handle_one(buf):
                         pass
+                elif efd == ctl_fd and self.ctl is not None:
+                    try:
+                        self.ctl.serve()
+                    except Exception as exc:
+                        self._failure("ctl", exc)
             self._service_timers()
 
     def _service_timers(self) -> None:

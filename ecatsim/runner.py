@@ -12,6 +12,7 @@ import structlog
 from ecatsim.build import build_segment
 from ecatsim.clock import MonotonicClock
 from ecatsim.config import SegmentConfig, default_segment, load_segment, repeat_default
+from ecatsim.ctl import ControlSocket
 from ecatsim.daemon import Daemon
 from ecatsim.device.drive import Drive
 from ecatsim.errors import UserError
@@ -37,6 +38,7 @@ class RunOptions:
     busy_poll: bool = False
     cpu: int | None = None
     trace: Path | None = None
+    ctl: Path | None = None
 
 
 def segment_config(opts: RunOptions) -> SegmentConfig:
@@ -102,7 +104,10 @@ def run_daemon(opts: RunOptions) -> None:
             os.sched_setaffinity(0, {opts.cpu})
         except OSError as exc:
             raise UserError(f"--cpu {opts.cpu}: cannot pin ({exc.strerror})") from exc
-    daemon = Daemon(link, segment, busy_poll=opts.busy_poll, trace_frames=opts.trace_frames)
+    ctl = ControlSocket(opts.ctl, segment) if opts.ctl is not None else None
+    daemon = Daemon(
+        link, segment, busy_poll=opts.busy_poll, trace_frames=opts.trace_frames, ctl=ctl
+    )
     # Everything built so far lives for the whole run: keep it out of the cyclic garbage
     # collector so a full collection cannot stall a reply by milliseconds.
     gc.collect()
@@ -120,6 +125,8 @@ def run_daemon(opts: RunOptions) -> None:
         daemon.run()
     finally:
         daemon.close()
+        if ctl is not None:
+            ctl.close()
         if tracer is not None:
             tracer.close()
         log.info(

@@ -184,3 +184,57 @@ def test_csp_sine_with_dc_sync0(master_factory: Any, daemon_factory: Any, tmp_pa
     assert p75 <= bound, (p75, bound, ranked[-10:])
     diff = struct.unpack("<I", m.slaves[1]._fprd(0x092C, 4))[0] & 0x7FFFFFFF
     assert diff < 1000  # ns
+
+
+def test_overcurrent_emcy_quick_stop_and_fault_reset(
+    master_factory: Any, daemon_factory: Any, tmp_path: Any
+) -> None:
+    """An injected overcurrent (control socket) faults the drive with an EMCY that pysoem
+    receives; a fault reset recovers once the cause is gone; quick stop uses 6085h."""
+    from ecatsim.ctl import request
+
+    sock = tmp_path / "ctl.sock"
+    daemon_factory("--ctl", str(sock))
+    m = master_factory()
+    assert m.config_init() == 1
+    s = m.slaves[0]
+    emcys: list[Any] = []
+    s.add_emergency_callback(emcys.append)
+    s.sdo_write(0x6060, 0, struct.pack("<b", 3))
+    s.sdo_write(0x6085, 0, struct.pack("<I", 5000))
+    s.sdo_write(0x6083, 0, struct.pack("<I", 10000))
+    assert oct(sock.stat().st_mode & 0o777) == "0o600"
+    to_op(m)
+    c = Cycle(m)
+    enable(c)
+    for _ in range(300):
+        c.run(0x0F, vel=1000)
+    # quick stop: 1000 rpm at 5000 rpm/s takes 200 ms, then switch on disabled (605Ah = 2)
+    n = 0
+    while True:
+        sw, _m, _p, _t, vel, _d = c.run(0x0B, vel=1000)
+        n += 1
+        if sw & 0x6F == 0x40 or n > 400:
+            break
+    assert 170 <= n <= 260, n
+    assert abs(vel) < 5
+    enable(c)
+    assert request(sock, {"cmd": "fault", "slave": 0, "kind": "overcurrent"})["ok"]
+    for _ in range(50):
+        sw = c.run(0x0F)[0]
+        m.slaves[0].mbx_receive()
+        if sw & 0x4F == 0x08 and emcys:
+            break
+    assert sw & 0x4F == 0x08  # fault
+    assert emcys and emcys[0].error_code == 0x2310
+    assert struct.unpack("<H", s.sdo_read(0x603F, 0))[0] == 0x2310
+    assert s.sdo_read(0x1001, 0)[0] & 0x03 == 0x03  # generic + current
+    for _ in range(3):
+        sw = c.run(0x80)[0]
+    assert sw & 0x4F == 0x08  # cause still present: no reset
+    assert request(sock, {"cmd": "fault", "slave": 0, "kind": "overcurrent", "active": False})["ok"]
+    for cw in (0x00, 0x80):
+        for _ in range(3):
+            sw = c.run(cw)[0]
+    assert sw & 0x4F == 0x40  # fault reset -> switch on disabled
+    assert struct.unpack("<H", s.sdo_read(0x603F, 0))[0] == 0
