@@ -11,7 +11,7 @@ from typing import Any
 import pysoem
 import pytest
 
-from tests.integration.test_esc_master import to_op
+from tests.integration.test_esc_master import RX_TIMEOUT_US, to_op
 
 pytestmark = pytest.mark.integration
 
@@ -169,7 +169,7 @@ def test_pdo_remap_changes_the_process_image(
     for cycle in range(50):
         s.output = struct.pack("<Hih", cycle, cycle * 3, -cycle)
         m.send_processdata()
-        assert m.receive_processdata(2000) == 3
+        assert m.receive_processdata(RX_TIMEOUT_US) == 3
     sw, _mode, pos, torque, _vel, _di, _demand = struct.unpack("<HbihiIi", bytes(s.input))
     assert (sw, pos, torque) == (48, 48 * 3, -48)
 

@@ -14,6 +14,7 @@ import pytest
 from tests.integration.test_esc_master import to_op
 
 pytestmark = pytest.mark.integration
+from tests.integration.test_esc_master import RX_TIMEOUT_US  # noqa: E402
 
 RX = struct.Struct("<HihI")  # 6040, 607A, 6071, 60FF
 TX = struct.Struct("<HbihiI")  # 6041, 6061, 6064, 6077, 606C, 60FD
@@ -29,7 +30,7 @@ class Cycle:
     def run(self, cw: int, pos: int = 0, torque: int = 0, vel: int = 0) -> tuple[int, ...]:
         self.s.output = RX.pack(cw, pos, torque, vel)
         self.m.send_processdata()
-        assert self.m.receive_processdata(5000) == 3
+        assert self.m.receive_processdata(RX_TIMEOUT_US) == 3
         self.t_next += 0.001
         d = self.t_next - time.perf_counter()
         if d > 0:
@@ -146,7 +147,7 @@ def test_csp_sine_with_dc_sync0(master_factory: Any, daemon_factory: Any, tmp_pa
         for s in m.slaves:
             s.output = RX.pack(cw, pos, 0, 0)
         m.send_processdata()
-        assert m.receive_processdata(20_000) == 6
+        assert m.receive_processdata(RX_TIMEOUT_US) == 6
         c.t_next += 0.001
         d = c.t_next - time.perf_counter()
         if d > 0:
