@@ -46,6 +46,13 @@ SM_TYPES = {"unused": 0, "mbx_out": 1, "mbx_in": 2, "pd_out": 3, "pd_in": 4}
 FMMU_TYPES = {"unused": 0, "outputs": 1, "inputs": 2, "mbx_state": 3}
 
 
+def _bits(names: tuple[str, ...], table: dict[str, int]) -> int:
+    v = 0
+    for n in names:
+        v |= table[n]
+    return v
+
+
 class DescriptionError(ValueError):
     """A device description is malformed; the message is one line with file and key."""
 
@@ -86,17 +93,13 @@ class MailboxConfig:
 
     @property
     def protocol_bits(self) -> int:
-        v = 0
-        for p in self.protocols:
-            v |= MAILBOX_PROTOCOLS[p]
-        return v
+        """SII word 0x1C. Ref: ETG.2010 Table 2."""
+        return _bits(self.protocols, MAILBOX_PROTOCOLS)
 
     @property
     def coe_detail_bits(self) -> int:
-        v = 0
-        for p in self.coe_details:
-            v |= COE_DETAILS[p]
-        return v
+        """General category CoE details byte. Ref: ETG.2010 Table 5."""
+        return _bits(self.coe_details, COE_DETAILS)
 
 
 @dataclass(frozen=True, slots=True)
