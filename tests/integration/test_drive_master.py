@@ -38,7 +38,7 @@ class Cycle:
         return TX.unpack(bytes(self.s.input))
 
 
-def start(master_factory: Any, daemon_factory: Any, mode: int, **sdo: int) -> Cycle:
+def start(master_factory: Any, daemon_factory: Any, mode: int, **sdo: int | bytes) -> Cycle:
     daemon_factory()
     m = master_factory()
     assert m.config_init() == 1
@@ -46,7 +46,10 @@ def start(master_factory: Any, daemon_factory: Any, mode: int, **sdo: int) -> Cy
     s.sdo_write(0x6060, 0, struct.pack("<b", mode))
     for name, value in sdo.items():
         index = int(name[1:], 16)
-        s.sdo_write(index, 0, struct.pack("<I" if value >= 0 else "<i", value))
+        if isinstance(value, bytes):
+            s.sdo_write(index, 0, value)
+        else:
+            s.sdo_write(index, 0, struct.pack("<I" if value >= 0 else "<i", value))
     to_op(m)
     return Cycle(m)
 
@@ -239,3 +242,23 @@ def test_overcurrent_emcy_quick_stop_and_fault_reset(
             sw = c.run(cw)[0]
     assert sw & 0x4F == 0x40  # fault reset -> switch on disabled
     assert struct.unpack("<H", s.sdo_read(0x603F, 0))[0] == 0
+
+
+def test_homing_on_index_pulse_then_current_position(
+    master_factory: Any, daemon_factory: Any
+) -> None:
+    """hm: method 34 runs to the index pulse and sets 607Ch there, then holds."""
+    c = start(master_factory, daemon_factory, 6, x6098=b"\x22", x607C=1000)
+    enable(c)
+    for _ in range(3):
+        c.run(0x0F)
+    attained = False
+    for _ in range(3000):
+        sw, mode, pos, _t, _v, _d = c.run(0x1F)  # bit 4: homing operation start
+        if sw & 0x1400 == 0x1400:
+            attained = True
+            break
+    assert mode == 6 and attained
+    for _ in range(200):
+        sw, _m, pos, _t, vel, _d = c.run(0x1F)
+    assert abs(pos - 1000) <= 40 and abs(vel) < 5  # home offset at the index, stopped there
