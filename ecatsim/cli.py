@@ -70,6 +70,7 @@ def cli(ctx: click.Context, debug: bool) -> None:
 @click.option("--cpu", type=int, help="Pin the daemon to this CPU.")
 @click.option("--trace", "trace", type=click.Path(path_type=Path), help="Per-cycle drive CSV.")
 @click.option("--ctl", "ctl", type=click.Path(path_type=Path), help="Control socket path (0600).")
+@click.option("--user", "user", help="Started as root: switch to this user after opening.")
 @click.pass_obj
 def run(
     obj: _Ctx,
@@ -85,6 +86,7 @@ def run(
     cpu: int | None,
     trace: Path | None,
     ctl: Path | None,
+    user: str | None,
 ) -> None:
     """Emulate the segment on an interface until SIGINT/SIGTERM."""
     from ecatsim.runner import RunOptions, run_daemon
@@ -105,6 +107,7 @@ def run(
         cpu=cpu,
         trace=trace,
         ctl=ctl,
+        user=user,
     )
     run_daemon(opts)
 

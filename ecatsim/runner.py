@@ -18,6 +18,7 @@ from ecatsim.device.drive import Drive
 from ecatsim.errors import UserError
 from ecatsim.link.base import Link
 from ecatsim.link.errors import LinkError
+from ecatsim.privileges import drop_privileges
 from ecatsim.segment import Segment
 from ecatsim.trace import TraceWriter
 
@@ -39,6 +40,7 @@ class RunOptions:
     cpu: int | None = None
     trace: Path | None = None
     ctl: Path | None = None
+    user: str | None = None
 
 
 def segment_config(opts: RunOptions) -> SegmentConfig:
@@ -112,6 +114,7 @@ def run_daemon(opts: RunOptions) -> None:
     # collector so a full collection cannot stall a reply by milliseconds.
     gc.collect()
     gc.freeze()
+    drop_privileges(opts.user)  # sockets and files are open: keep CAP_NET_RAW only
     daemon.install_signal_handlers()
     where = opts.iface or opts.tap or opts.udp
     log.info(
