@@ -30,8 +30,13 @@ def check_image(path: Path, rounds_done: int) -> None:
     words = [struct.unpack_from("<H", img, w * 2)[0] for w in WORDS]
     # the file is the state after some prefix of the writes of the current round
     new = [value(rounds_done, w) for w in WORDS]
-    old = [value(rounds_done - 1, w) if rounds_done else 0 for w in WORDS]
-    assert any(words == new[:k] + old[k:] for k in range(len(new) + 1)), words
+    old = [value(rounds_done - 1, w) if rounds_done > 1 else 0 for w in WORDS]
+    assert any(words == new[:k] + old[k:] for k in range(len(new) + 1)), (
+        rounds_done,
+        words,
+        new,
+        old,
+    )
 
 
 def test_kill_minus_nine_during_eeprom_writes(
