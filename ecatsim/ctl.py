@@ -17,6 +17,7 @@ from typing import Any
 from ecatsim.device.drive import Drive
 from ecatsim.errors import UserError
 from ecatsim.segment import Segment
+from ecatsim.slave.al import AlState
 
 MAX_REQUEST = 4096
 
@@ -96,6 +97,19 @@ class ControlSocket:
             raise IndexError(f"no slave {slave}")
         if cmd == "fault":
             self._drive(slave).inject(str(req["kind"]), bool(req.get("active", True)))
+            return {"ok": True}
+        fw = seg.firmware[slave]
+        if cmd == "al_refuse":  # refuse the next state change with an AL status code
+            fw.refuse_next = int(req["code"])  # type: ignore[attr-defined]
+            return {"ok": True}
+        if cmd == "al_fall":  # fall from OP to SAFEOP + error with a code
+            fw.fail(AlState.SAFEOP, int(req["code"]), seg.clock.now_ns())  # type: ignore[attr-defined]
+            return {"ok": True}
+        if cmd == "mbx_drop":  # no reply to the next N mailbox requests
+            mbx = getattr(fw, "mbx", None)
+            if mbx is None:
+                raise ValueError(f"slave {slave} has no mailbox")
+            mbx.drop_next = int(req.get("count", 1))
             return {"ok": True}
         if cmd == "peek":
             addr, n = int(req["addr"]), int(req["len"])

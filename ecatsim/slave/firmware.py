@@ -101,6 +101,8 @@ class Firmware:
         self.pending_outputs: bytes | None = None
         #: the last input image (captured at SYNC0 in DC mode)
         self.sync_inputs: bytes | None = None
+        #: injected fault: refuse the next state change with this AL status code
+        self.refuse_next: int | None = None
         self.bootstrap_supported = bootstrap_supported
         self.state = AlState.INIT
         self.error = False
@@ -233,6 +235,10 @@ class Firmware:
         tr = al.lookup(self.state, req)
         if tr is None:
             self._refuse(al.CODE_INVALID_STATE_CHANGE)
+            return
+        if self.refuse_next is not None:
+            code, self.refuse_next = self.refuse_next, None
+            self._refuse(code)  # injected fault
             return
         code = self._check(tr)
         if code:

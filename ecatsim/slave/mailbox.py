@@ -61,6 +61,8 @@ class MailboxEngine:
         self.last_in_counter = 0
         self.repeat_ack = False
         self.errors = 0
+        #: injected fault: the next N requests get no reply
+        self.drop_next = 0
         self.log = log.bind(slave=pdi.position)
 
     def reset(self) -> None:
@@ -85,6 +87,9 @@ class MailboxEngine:
         try:
             req = self._parse(raw)
             if req is None:
+                return
+            if self.drop_next:
+                self.drop_next -= 1
                 return
             handler = self.handlers.get(req.mtype)
             if handler is None or not self.accept(req.mtype):

@@ -1,0 +1,58 @@
+"""Injected faults over the control socket, observed by pysoem the standard way.
+Ref: issue "reliability" (AL and mailbox faults)."""
+
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+from typing import Any
+
+import pysoem
+import pytest
+
+from ecatsim.ctl import request
+from tests.integration.test_esc_master import to_op
+
+pytestmark = pytest.mark.integration
+
+
+def test_al_refuse_and_fall(daemon_factory: Any, master_factory: Any, tmp_path: Path) -> None:
+    sock = tmp_path / "ctl.sock"
+    daemon_factory("--ctl", str(sock))
+    m = master_factory()
+    assert m.config_init() == 1
+    s = m.slaves[0]
+    assert request(sock, {"cmd": "al_refuse", "slave": 0, "code": 0x0017})["ok"]
+    m.config_map()
+    assert m.state_check(pysoem.SAFEOP_STATE, 300_000) != pysoem.SAFEOP_STATE
+    m.read_state()
+    assert s.state == pysoem.PREOP_STATE | pysoem.STATE_ERROR
+    assert s.al_status == 0x0017
+    # the fault is used up: acknowledge and go on to OP
+    s.state = pysoem.SAFEOP_STATE | pysoem.STATE_ACK
+    s.write_state()
+    assert s.state_check(pysoem.SAFEOP_STATE, 1_000_000) == pysoem.SAFEOP_STATE
+    to_op(m)
+    assert request(sock, {"cmd": "al_fall", "slave": 0, "code": 0x001A})["ok"]
+    m.read_state()
+    assert s.state == pysoem.SAFEOP_STATE | pysoem.STATE_ERROR
+    assert s.al_status == 0x001A
+    status = request(sock, {"cmd": "status"})
+    assert (
+        status["slaves"][0]["al_status"] == 0x14 and status["slaves"][0]["al_status_code"] == 0x1A
+    )
+
+
+def test_mailbox_no_reply_then_recovers(
+    daemon_factory: Any, master_factory: Any, tmp_path: Path
+) -> None:
+    sock = tmp_path / "ctl.sock"
+    daemon_factory("--ctl", str(sock))
+    m = master_factory()
+    m.sdo_read_timeout = 200_000
+    assert m.config_init() == 1
+    s = m.slaves[0]
+    assert request(sock, {"cmd": "mbx_drop", "slave": 0, "count": 1})["ok"]
+    with pytest.raises((pysoem.WkcError, pysoem.SdoError, pysoem.MailboxError)):
+        s.sdo_read(0x1000, 0)  # no reply: the master times out
+    assert struct.unpack("<I", s.sdo_read(0x1000, 0))[0] == 0xFFFC0192
