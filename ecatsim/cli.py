@@ -114,11 +114,17 @@ def run(
 
 @cli.command("ctl")
 @click.option("--socket", "sock", required=True, type=click.Path(path_type=Path))
-@click.argument("command", type=click.Choice(["status", "fault", "clear", "peek", "poke", "od"]))
+@click.argument(
+    "command",
+    type=click.Choice(
+        ["status", "fault", "clear", "peek", "poke", "od", "al_refuse", "al_fall", "mbx_drop"]
+    ),
+)
 @click.argument("args", nargs=-1)
 def ctl_cmd(sock: Path, command: str, args: tuple[str, ...]) -> None:
     """Talk to a running daemon: status | fault SLAVE KIND | clear SLAVE KIND |
-    peek SLAVE ADDR LEN | poke SLAVE ADDR HEX | od SLAVE INDEX SUB [VALUE]."""
+    peek SLAVE ADDR LEN | poke SLAVE ADDR HEX | od SLAVE INDEX SUB [VALUE] |
+    al_refuse SLAVE CODE | al_fall SLAVE CODE | mbx_drop SLAVE COUNT."""
     import json
 
     from ecatsim.ctl import request
@@ -134,6 +140,10 @@ def ctl_cmd(sock: Path, command: str, args: tuple[str, ...]) -> None:
                    "active": command == "fault"}  # fmt: skip
         elif command == "peek":
             req = {"cmd": "peek", "slave": num(args[0]), "addr": num(args[1]), "len": num(args[2])}
+        elif command in ("al_refuse", "al_fall"):
+            req = {"cmd": command, "slave": num(args[0]), "code": num(args[1])}
+        elif command == "mbx_drop":
+            req = {"cmd": command, "slave": num(args[0]), "count": num(args[1])}
         elif command == "poke":
             req = {"cmd": "poke", "slave": num(args[0]), "addr": num(args[1]), "data": args[2]}
         else:
