@@ -117,14 +117,26 @@ def run(
 @click.argument(
     "command",
     type=click.Choice(
-        ["status", "fault", "clear", "peek", "poke", "od", "al_refuse", "al_fall", "mbx_drop"]
+        [
+            "status",
+            "fault",
+            "clear",
+            "peek",
+            "poke",
+            "od",
+            "al_refuse",
+            "al_fall",
+            "mbx_drop",
+            "wire",
+        ]
     ),
 )
 @click.argument("args", nargs=-1)
 def ctl_cmd(sock: Path, command: str, args: tuple[str, ...]) -> None:
     """Talk to a running daemon: status | fault SLAVE KIND | clear SLAVE KIND |
     peek SLAVE ADDR LEN | poke SLAVE ADDR HEX | od SLAVE INDEX SUB [VALUE] |
-    al_refuse SLAVE CODE | al_fall SLAVE CODE | mbx_drop SLAVE COUNT."""
+    al_refuse SLAVE CODE | al_fall SLAVE CODE | mbx_drop SLAVE COUNT |
+    wire KIND COUNT [VALUE] (drop, duplicate, corrupt, wkc, circulating)."""
     import json
 
     from ecatsim.ctl import request
@@ -142,6 +154,10 @@ def ctl_cmd(sock: Path, command: str, args: tuple[str, ...]) -> None:
             req = {"cmd": "peek", "slave": num(args[0]), "addr": num(args[1]), "len": num(args[2])}
         elif command in ("al_refuse", "al_fall"):
             req = {"cmd": command, "slave": num(args[0]), "code": num(args[1])}
+        elif command == "wire":
+            req = {"cmd": "wire", "kind": args[0], "count": num(args[1])}
+            if len(args) > 2:
+                req["value"] = num(args[2])
         elif command == "mbx_drop":
             req = {"cmd": command, "slave": num(args[0]), "count": num(args[1])}
         elif command == "poke":

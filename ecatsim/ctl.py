@@ -11,6 +11,7 @@ import os
 import socket
 import struct
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +19,7 @@ from ecatsim.device.drive import Drive
 from ecatsim.errors import UserError
 from ecatsim.segment import Segment
 from ecatsim.slave.al import AlState
+from ecatsim.wirefault import KINDS, WireFault
 
 MAX_REQUEST = 4096
 
@@ -28,6 +30,8 @@ class ControlSocket:
     def __init__(self, path: Path, segment: Segment) -> None:
         self.path = path
         self.segment = segment
+        #: set by the daemon: arms a wire fault on its replies
+        self.arm_wire: Callable[[WireFault], None] | None = None
         path.parent.mkdir(parents=True, exist_ok=True)
         if path.exists():
             path.unlink()
@@ -92,6 +96,12 @@ class ControlSocket:
                     }
                 )
             return {"ok": True, "slaves": out, "frames": seg.frames, "bad_frames": seg.bad_frames}
+        if cmd == "wire":
+            kind = str(req["kind"])
+            if kind not in KINDS or self.arm_wire is None:
+                raise ValueError(f"wire fault {kind!r}: use one of {', '.join(KINDS)}")
+            self.arm_wire(WireFault(kind, int(req.get("count", 1)), int(req.get("value", 1))))
+            return {"ok": True}
         slave = int(req["slave"])
         if not 0 <= slave < len(seg.escs):
             raise IndexError(f"no slave {slave}")

@@ -16,6 +16,7 @@ from typing import Protocol
 
 import structlog
 
+from ecatsim import wirefault
 from ecatsim.link.base import Link
 from ecatsim.recorder import FrameRecorder
 from ecatsim.segment import Segment
@@ -48,6 +49,8 @@ class Daemon:
         ctl: ControlServer | None = None,
     ) -> None:
         self.ctl = ctl
+        #: an armed wire fault (control socket), None on the normal path
+        self.wire_fault: wirefault.WireFault | None = None
         self.link = link
         self.segment = segment
         self.busy_poll = busy_poll
@@ -98,7 +101,13 @@ class Daemon:
         if reply:
             if link.ethernet:
                 mark_processed(buf)
-            link.send(memoryview(buf)[:n])
+            copies = 1
+            if self.wire_fault is not None:
+                copies = wirefault.apply(self.wire_fault, buf, off, n)
+                if self.wire_fault.count <= 0:
+                    self.wire_fault = None
+            for _ in range(copies):
+                link.send(memoryview(buf)[:n])
             self.replies += 1
             # let a master woken on this CPU take the reply before the slaves react
             os.sched_yield()

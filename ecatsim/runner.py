@@ -114,6 +114,8 @@ def run_daemon(opts: RunOptions) -> None:
     # collector so a full collection cannot stall a reply by milliseconds.
     gc.collect()
     gc.freeze()
+    if ctl is not None:
+        ctl.arm_wire = lambda f: setattr(daemon, "wire_fault", f)
     drop_privileges(opts.user)  # sockets and files are open: keep CAP_NET_RAW only
     daemon.install_signal_handlers()
     where = opts.iface or opts.tap or opts.udp

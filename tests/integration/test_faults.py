@@ -56,3 +56,28 @@ def test_mailbox_no_reply_then_recovers(
     with pytest.raises((pysoem.WkcError, pysoem.SdoError, pysoem.MailboxError)):
         s.sdo_read(0x1000, 0)  # no reply: the master times out
     assert struct.unpack("<I", s.sdo_read(0x1000, 0))[0] == 0xFFFC0192
+
+
+def test_wire_faults_seen_as_wkc_mismatch_and_lost_frames(
+    daemon_factory: Any, master_factory: Any, tmp_path: Path
+) -> None:
+    sock = tmp_path / "ctl.sock"
+    daemon_factory("--ctl", str(sock), "--slaves", "2")
+    m = master_factory()
+    assert m.config_init() == 2
+    to_op(m)
+    expected = m.expected_wkc
+
+    def cycle() -> int:
+        m.send_processdata()
+        return int(m.receive_processdata(20_000))
+
+    assert cycle() == expected
+    assert request(sock, {"cmd": "wire", "kind": "wkc", "count": 2, "value": -1})["ok"]
+    assert [cycle() for _ in range(3)] == [expected - 1, expected - 1, expected]
+    assert request(sock, {"cmd": "wire", "kind": "drop", "count": 1})["ok"]
+    assert cycle() < 0  # the reply never came
+    assert cycle() == expected  # recovered
+    assert request(sock, {"cmd": "wire", "kind": "duplicate", "count": 1})["ok"]
+    assert cycle() == expected  # the master takes one copy ...
+    assert cycle() == expected  # ... and is not confused by the other
