@@ -121,6 +121,13 @@ class ControlSocket:
                 raise ValueError(f"slave {slave} has no mailbox")
             mbx.drop_next = int(req.get("count", 1))
             return {"ok": True}
+        if cmd == "link":  # a cable fault: port 1 of this slave and port 0 of the next
+            port, up = int(req.get("port", 1)), bool(req.get("up", False))
+            seg.escs[slave].set_link(port, up)
+            peer = slave + 1 if port == 1 else slave - 1
+            if 0 <= peer < len(seg.escs):
+                seg.escs[peer].set_link(1 - port, up)
+            return {"ok": True}
         if cmd == "peek":
             addr, n = int(req["addr"]), int(req["len"])
             esc = seg.escs[slave]

@@ -69,6 +69,9 @@ class Segment:
             ctx.topology_dirty = False
             reach = len(self.escs)
             for i, esc in enumerate(self.escs):
+                if not esc.port0_open:
+                    reach = i  # the frame cannot enter this slave: it and those behind are lost
+                    break
                 if esc.port1_closed:
                     reach = i + 1
                     break
@@ -150,6 +153,8 @@ class Segment:
             p = q
         if ctx.topology_dirty:
             self._refresh()
+        if self.reach == 0:
+            return False  # no link at the first slave: the frame is lost
         if self.port0_closed and not self._circulate(buf, off + 2):
             return False
         self._walk(buf, off + 2)

@@ -185,6 +185,9 @@ class Esc:
         self.pdram_ok = False
         self.slaves_behind = 0
         self.port1_closed = True
+        self.port0_open = True
+        #: injected link faults per port (0, 1)
+        self.link_down = [False, False]
         self.al_control_locked = False
         self.reset_progress_frame = -1
         self.ecat_irq = 0
@@ -237,19 +240,21 @@ class Esc:
     def update_dl_status(self) -> None:
         """Compute 0x0110:0x0111 from links and the loop settings in 0x0100.
 
-        Port 0 faces the master and always has a link; port 1 has a link if a slave is
-        behind it; ports 2 and 3 are not implemented (closed, no link).
-        Ref: TMC8460 §5.19 Tables 30, 31; §5.17 Table 28 bits 8-15.
+        Port 0 faces the master and has a link unless a fault took it down; port 1 has a
+        link if a slave is behind it and the cable is up; ports 2 and 3 are not implemented
+        (closed, no link). Ref: TMC8460 §5.19 Tables 30, 31; §5.17 Table 28 bits 8-15.
         """
         m = self.mem
         loop = m[regs.DL_CONTROL + 1]
-        link1 = self.slaves_behind > 0
+        link0 = not self.link_down[0]
+        link1 = self.slaves_behind > 0 and not self.link_down[1]
         lo = m[regs.DL_STATUS] & 0x07
-        lo |= 0x10 | (0x20 if link1 else 0)
+        lo |= (0x10 if link0 else 0) | (0x20 if link1 else 0)
         hi = 0x50  # ports 2 and 3: closed, no communication
         # port 0
         p0 = loop & 0x03
-        closed0 = p0 == 0x03
+        closed0 = p0 == 0x03 or not link0
+        self.port0_open = link0  # a forced-closed port 0 is the circulating-frame case
         hi |= 0x01 if closed0 else 0x02
         p1 = (loop >> 2) & 0x03
         closed1 = p1 == 0x03 or (p1 in (0, 1) and not link1)
@@ -263,6 +268,19 @@ class Esc:
         if old != (lo | (hi << 8)):
             self._set_ecat_event(regs.ECAT_EV_DL_STATUS)
             self.ctx.topology_dirty = True
+
+    def set_link(self, port: int, up: bool) -> None:
+        """A link fault on port 0 or 1: DL status changes; a lost link at an open port in
+        Auto loop mode counts in 0x0310+port. Ref: TMC8460 §5.19, §5.38 Table 52."""
+        if self.link_down[port] == (not up):
+            return
+        self.link_down[port] = not up
+        m = self.mem
+        loop = (m[regs.DL_CONTROL + 1] >> (2 * port)) & 0x03
+        if not up and loop == 0 and m[regs.LOST_LINK_COUNTER + port] < 0xFF:
+            m[regs.LOST_LINK_COUNTER + port] += 1
+        self.update_dl_status()
+        self.ctx.topology_dirty = True
 
     # ================================================================ events
 

@@ -217,3 +217,20 @@ def test_circulating_bit_with_port0_closed() -> None:
     r = m.brd(0x0000, 1)
     assert not r.flags & dg.CIRCULATING
     assert m.frame([dg.build(dg.Cmd.BRD, 0, 0, b"\x00", circulating=True)]) is not None
+
+
+def test_link_fault_hides_slaves_and_counts_lost_link() -> None:
+    seg, _ = segment_of(3)
+    m = TinyMaster(seg)
+    esc1, esc2 = seg.escs[1], seg.escs[2]
+    esc1.set_link(1, False)
+    esc2.set_link(0, False)
+    assert m.brd(0x0000, 1).wkc == 2
+    assert m.aprd(1, 0x0110, 2).data == bytes([0x13, 0x56])  # port 1: no link, closed
+    assert m.aprd(1, 0x0311, 1).data == b"\x01"  # lost link counter, port 1
+    esc1.set_link(1, True)
+    esc2.set_link(0, True)
+    assert m.brd(0x0000, 1).wkc == 3
+    assert m.aprd(1, 0x0110, 2).data == bytes([0x33, 0x5A])
+    seg.escs[0].set_link(0, False)
+    assert m.frame([dg.build(dg.Cmd.BRD, 0, 0, b"\x00")]) is None  # nothing answers

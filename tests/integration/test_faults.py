@@ -81,3 +81,28 @@ def test_wire_faults_seen_as_wkc_mismatch_and_lost_frames(
     assert request(sock, {"cmd": "wire", "kind": "duplicate", "count": 1})["ok"]
     assert cycle() == expected  # the master takes one copy ...
     assert cycle() == expected  # ... and is not confused by the other
+
+
+def test_link_down_seen_in_dl_status_lost_link_and_wkc(
+    daemon_factory: Any, master_factory: Any, tmp_path: Path
+) -> None:
+    sock = tmp_path / "ctl.sock"
+    daemon_factory("--ctl", str(sock), "--slaves", "3")
+    m = master_factory()
+    assert m.config_init() == 3
+    to_op(m)
+    expected = m.expected_wkc
+
+    def cycle() -> int:
+        m.send_processdata()
+        return int(m.receive_processdata(20_000))
+
+    assert cycle() == expected
+    assert request(sock, {"cmd": "link", "slave": 1, "port": 1, "up": False})["ok"]
+    assert cycle() == expected - 3  # the third drive is cut off
+    s1 = m.slaves[1]
+    assert s1._fprd(0x0110, 2) == bytes([0x13, 0x56])  # port 1: no link, loop closed
+    assert s1._fprd(0x0311, 1) == b"\x01"  # lost link counter, port 1
+    assert request(sock, {"cmd": "link", "slave": 1, "port": 1, "up": True})["ok"]
+    assert cycle() == expected  # the segment recovers when the fault is cleared
+    assert s1._fprd(0x0110, 2) == bytes([0x33, 0x5A])
