@@ -128,6 +128,7 @@ def run(
             "al_fall",
             "mbx_drop",
             "wire",
+            "link",
         ]
     ),
 )
@@ -136,7 +137,8 @@ def ctl_cmd(sock: Path, command: str, args: tuple[str, ...]) -> None:
     """Talk to a running daemon: status | fault SLAVE KIND | clear SLAVE KIND |
     peek SLAVE ADDR LEN | poke SLAVE ADDR HEX | od SLAVE INDEX SUB [VALUE] |
     al_refuse SLAVE CODE | al_fall SLAVE CODE | mbx_drop SLAVE COUNT |
-    wire KIND COUNT [VALUE] (drop, duplicate, corrupt, wkc, circulating)."""
+    wire KIND COUNT [VALUE] (drop, duplicate, corrupt, wkc, circulating) |
+    link SLAVE PORT up|down."""
     import json
 
     from ecatsim.ctl import request
@@ -158,6 +160,9 @@ def ctl_cmd(sock: Path, command: str, args: tuple[str, ...]) -> None:
             req = {"cmd": "wire", "kind": args[0], "count": num(args[1])}
             if len(args) > 2:
                 req["value"] = num(args[2])
+        elif command == "link":
+            req = {"cmd": "link", "slave": num(args[0]), "port": num(args[1])}
+            req["up"] = args[2] == "up"
         elif command == "mbx_drop":
             req = {"cmd": command, "slave": num(args[0]), "count": num(args[1])}
         elif command == "poke":
