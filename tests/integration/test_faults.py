@@ -4,6 +4,7 @@ Ref: issue "reliability" (AL and mailbox faults)."""
 from __future__ import annotations
 
 import struct
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -14,6 +15,23 @@ from ecatsim.ctl import request
 from tests.integration.test_esc_master import to_op
 
 pytestmark = pytest.mark.integration
+
+
+def op_with_ctl(
+    daemon_factory: Any, master_factory: Any, tmp_path: Path, n: int
+) -> tuple[Path, Any, Callable[[], int]]:
+    """n drives in OP behind a control socket; cycle() returns the WKC (-1: no reply)."""
+    sock = tmp_path / "ctl.sock"
+    daemon_factory("--ctl", str(sock), "--slaves", str(n))
+    m = master_factory()
+    assert m.config_init() == n
+    to_op(m)
+
+    def cycle() -> int:
+        m.send_processdata()
+        return int(m.receive_processdata(20_000))
+
+    return sock, m, cycle
 
 
 def test_al_refuse_and_fall(daemon_factory: Any, master_factory: Any, tmp_path: Path) -> None:
@@ -61,16 +79,8 @@ def test_mailbox_no_reply_then_recovers(
 def test_wire_faults_seen_as_wkc_mismatch_and_lost_frames(
     daemon_factory: Any, master_factory: Any, tmp_path: Path
 ) -> None:
-    sock = tmp_path / "ctl.sock"
-    daemon_factory("--ctl", str(sock), "--slaves", "2")
-    m = master_factory()
-    assert m.config_init() == 2
-    to_op(m)
+    sock, m, cycle = op_with_ctl(daemon_factory, master_factory, tmp_path, 2)
     expected = m.expected_wkc
-
-    def cycle() -> int:
-        m.send_processdata()
-        return int(m.receive_processdata(20_000))
 
     assert cycle() == expected
     assert request(sock, {"cmd": "wire", "kind": "wkc", "count": 2, "value": -1})["ok"]
@@ -86,16 +96,8 @@ def test_wire_faults_seen_as_wkc_mismatch_and_lost_frames(
 def test_link_down_seen_in_dl_status_lost_link_and_wkc(
     daemon_factory: Any, master_factory: Any, tmp_path: Path
 ) -> None:
-    sock = tmp_path / "ctl.sock"
-    daemon_factory("--ctl", str(sock), "--slaves", "3")
-    m = master_factory()
-    assert m.config_init() == 3
-    to_op(m)
+    sock, m, cycle = op_with_ctl(daemon_factory, master_factory, tmp_path, 3)
     expected = m.expected_wkc
-
-    def cycle() -> int:
-        m.send_processdata()
-        return int(m.receive_processdata(20_000))
 
     assert cycle() == expected
     assert request(sock, {"cmd": "link", "slave": 1, "port": 1, "up": False})["ok"]
