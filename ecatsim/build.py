@@ -153,7 +153,7 @@ def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
             app: Application = PdoImage(od, device)
             foe = desc.mailbox.foe or "foe" in desc.mailbox.protocols
             fw = Firmware(pdi, app, layout, mbx=mbx, bootstrap_supported=foe)
-            CoeProtocol(mbx, od, fw.al_state_code)
+            fw.coe = CoeProtocol(mbx, od, fw.al_state_code)
             fw.od = od
             fw.emergency = emcy
             fw.device = device

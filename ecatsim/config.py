@@ -11,6 +11,9 @@ slaves:
     alias: 0                 # optional configured station alias (SII word 4)
     serial: 1                # optional serial number (SII words 0x0E/0x0F)
     dc_drift_ppm: 0.0        # optional local clock drift
+faults:                      # optional: faults injected while running (ecatsim/faults/spec.py)
+  - {kind: wkc, value: -1, count: 3, on_state: op}
+  - {kind: drop, probability: 0.001, seed: 7}
 ```
 """
 
@@ -19,11 +22,11 @@ from __future__ import annotations
 import importlib.resources
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import yaml
 
 from ecatsim.errors import UserError
+from ecatsim.faults.spec import FaultSpec, FaultSpecError, parse_fault
 
 DEVICE_TYPES = ("tmc8670", "echo")
 MAX_SLAVES = 4096
@@ -65,7 +68,7 @@ class SegmentConfig:
 
     slaves: tuple[SlaveConfig, ...]
     source: str = "<default>"
-    faults: tuple[dict[str, Any], ...] = field(default_factory=tuple)
+    faults: tuple[FaultSpec, ...] = field(default_factory=tuple)
 
 
 def _err(src: str, key: str, msg: str) -> UserError:
@@ -155,8 +158,14 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
         raise _err(src, "slaves", f"at most {MAX_SLAVES} slaves")
     faults = data.get("faults") or []
     if not isinstance(faults, list):
-        raise _err(src, "faults", "expected a list")
-    return SegmentConfig(tuple(out), src, tuple(faults))
+        raise _err(src, "faults", "expected a list of faults like {kind: drop, after_frames: 100}")
+    specs: list[FaultSpec] = []
+    for i, f in enumerate(faults):
+        try:
+            specs.append(parse_fault(f))
+        except FaultSpecError as exc:
+            raise _err(src, f"faults[{i}]", str(exc)) from None
+    return SegmentConfig(tuple(out), src, tuple(specs))
 
 
 def load_segment(path: Path) -> SegmentConfig:

@@ -1,4 +1,4 @@
-"""Local control socket: status, drive faults, ESC memory peek/poke, OD read/write.
+"""Local control socket: status, fault injection, ESC memory peek/poke, OD read/write.
 
 A unix datagram socket (mode 0600) carrying one JSON request and one JSON reply per
 datagram. It is served by the daemon loop between frames, never inside frame processing.
@@ -11,15 +11,15 @@ import os
 import socket
 import struct
 import tempfile
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from ecatsim.device.drive import Drive
 from ecatsim.errors import UserError
+from ecatsim.esc import regs
+from ecatsim.faults.engine import FaultEngine
+from ecatsim.faults.spec import parse_fault
 from ecatsim.segment import Segment
-from ecatsim.slave.al import AlState
-from ecatsim.wirefault import KINDS, WireFault
 
 MAX_REQUEST = 4096
 
@@ -27,11 +27,10 @@ MAX_REQUEST = 4096
 class ControlSocket:
     """The daemon side."""
 
-    def __init__(self, path: Path, segment: Segment) -> None:
+    def __init__(self, path: Path, segment: Segment, faults: FaultEngine) -> None:
         self.path = path
         self.segment = segment
-        #: set by the daemon: arms a wire fault on its replies
-        self.arm_wire: Callable[[WireFault], None] | None = None
+        self.faults = faults
         path.parent.mkdir(parents=True, exist_ok=True)
         if path.exists():
             path.unlink()
@@ -68,65 +67,81 @@ class ControlSocket:
                 except OSError:
                     pass
 
-    def _drive(self, slave: int) -> Drive:
-        fw = self.segment.firmware[slave]
-        device = getattr(fw, "device", None)
-        if not isinstance(device, Drive):
-            raise ValueError(f"slave {slave} has no drive")
-        return device
+    def _inject(self, fault: dict[str, Any]) -> dict[str, Any]:
+        fid = self.faults.add(parse_fault(fault), self.segment.clock.now_ns())
+        return {"ok": True, "id": fid}
+
+    def status(self) -> dict[str, Any]:
+        """Every slave's AL state and code, DL status, error counters; the active faults.
+
+        Ref: TMC8460 §5.19 (DL status), §5.20 (AL status), §5.34-5.38 (error counters).
+        """
+        out = []
+        for esc in self.segment.escs:
+            m = esc.mem
+            al = struct.unpack_from("<HxxH", m, regs.AL_STATUS)
+            out.append(
+                {
+                    "position": esc.position,
+                    "station": struct.unpack_from("<H", m, regs.STATION_ADDRESS)[0],
+                    "al_status": al[0],
+                    "al_status_code": al[1],
+                    "dl_status": struct.unpack_from("<H", m, regs.DL_STATUS)[0],
+                    "rx_errors": [struct.unpack_from("<BB", m, 0x0300 + 2 * p) for p in (0, 1)],
+                    "fwd_rx_errors": list(m[0x0308:0x030A]),
+                    "pu_errors": m[0x030C],
+                    "pdi_errors": m[0x030D],
+                    "lost_link": list(m[0x0310:0x0312]),
+                    "wd_expired": m[0x0442],
+                }
+            )
+        seg = self.segment
+        return {
+            "ok": True,
+            "slaves": out,
+            "frames": seg.frames,
+            "bad_frames": seg.bad_frames,
+            "faults": self.faults.status(),
+            "faults_fired": self.faults.fired_total,
+        }
 
     def handle(self, req: dict[str, Any]) -> dict[str, Any]:
         """One request -> one reply."""
         cmd = req["cmd"]
         seg = self.segment
+        now = seg.clock.now_ns()
         if cmd == "status":
-            out = []
-            for esc in seg.escs:
-                m = esc.mem
-                al = struct.unpack_from("<HxxH", m, 0x0130)
-                out.append(
-                    {
-                        "position": esc.position,
-                        "station": struct.unpack_from("<H", m, 0x0010)[0],
-                        "al_status": al[0],
-                        "al_status_code": al[1],
-                        "dl_status": struct.unpack_from("<H", m, 0x0110)[0],
-                        "pu_errors": m[0x030C],
-                        "wd_expired": m[0x0442],
-                    }
-                )
-            return {"ok": True, "slaves": out, "frames": seg.frames, "bad_frames": seg.bad_frames}
-        if cmd == "wire":
-            kind = str(req["kind"])
-            if kind not in KINDS or self.arm_wire is None:
-                raise ValueError(f"wire fault {kind!r}: use one of {', '.join(KINDS)}")
-            self.arm_wire(WireFault(kind, int(req.get("count", 1)), int(req.get("value", 1))))
-            return {"ok": True}
+            return self.status()
+        if cmd == "inject":  # any fault, as in the segment YAML's faults: list
+            return self._inject(dict(req["fault"]))
+        if cmd == "clear":  # one fault by id, or all
+            fid = req.get("id")
+            return {
+                "ok": True,
+                "cleared": self.faults.clear(None if fid is None else int(fid), now),
+            }
+        if cmd == "wire":  # shorthand: a wire fault on the next N replies
+            return self._inject(
+                {"kind": req["kind"], "count": req.get("count", 1), "value": req.get("value")}
+            )
         slave = int(req["slave"])
         if not 0 <= slave < len(seg.escs):
             raise IndexError(f"no slave {slave}")
-        if cmd == "fault":
-            self._drive(slave).inject(str(req["kind"]), bool(req.get("active", True)))
+        if cmd == "fault":  # shorthand: a drive fault held until cleared
+            kind = str(req["kind"])
+            if req.get("active", True):
+                return self._inject({"kind": kind, "slave": slave})
+            self.faults.clear(None, now, kind)
+            drive = getattr(seg.firmware[slave], "device", None)
+            if isinstance(drive, Drive):
+                drive.inject(kind, False)
             return {"ok": True}
-        fw = seg.firmware[slave]
-        if cmd == "al_refuse":  # refuse the next state change with an AL status code
-            fw.refuse_next = int(req["code"])  # type: ignore[attr-defined]
-            return {"ok": True}
-        if cmd == "al_fall":  # fall from OP to SAFEOP + error with a code
-            fw.fail(AlState.SAFEOP, int(req["code"]), seg.clock.now_ns())  # type: ignore[attr-defined]
-            return {"ok": True}
-        if cmd == "mbx_drop":  # no reply to the next N mailbox requests
-            mbx = getattr(fw, "mbx", None)
-            if mbx is None:
-                raise ValueError(f"slave {slave} has no mailbox")
-            mbx.drop_next = int(req.get("count", 1))
-            return {"ok": True}
+        if cmd in ("al_refuse", "al_fall"):  # shorthands for one-shot AL faults
+            return self._inject({"kind": cmd, "slave": slave, "code": req["code"]})
+        if cmd == "mbx_drop":  # shorthand: no reply to the next N mailbox requests
+            return self._inject({"kind": cmd, "slave": slave, "count": req.get("count", 1)})
         if cmd == "link":  # a cable fault: port 1 of this slave and port 0 of the next
-            port, up = int(req.get("port", 1)), bool(req.get("up", False))
-            seg.escs[slave].set_link(port, up)
-            peer = slave + 1 if port == 1 else slave - 1
-            if 0 <= peer < len(seg.escs):
-                seg.escs[peer].set_link(1 - port, up)
+            self.faults.set_cable(slave, int(req.get("port", 1)), bool(req.get("up", False)))
             return {"ok": True}
         if cmd == "peek":
             addr, n = int(req["addr"]), int(req["len"])

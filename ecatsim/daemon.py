@@ -16,7 +16,7 @@ from typing import Protocol
 
 import structlog
 
-from ecatsim import wirefault
+from ecatsim.faults.engine import FaultEngine
 from ecatsim.link.base import Link
 from ecatsim.recorder import FrameRecorder
 from ecatsim.segment import Segment
@@ -47,12 +47,15 @@ class Daemon:
         busy_poll: bool = False,
         trace_frames: bool = False,
         ctl: ControlServer | None = None,
+        faults: FaultEngine | None = None,
     ) -> None:
         self.ctl = ctl
-        #: an armed wire fault (control socket), None on the normal path
-        self.wire_fault: wirefault.WireFault | None = None
         self.link = link
         self.segment = segment
+        #: injected faults (segment YAML, control socket); idle unless something is armed
+        self.faults = faults if faults is not None else FaultEngine(segment)
+        #: replies held back by a delay fault: (due time ns, frame), in due order
+        self.delayed: list[tuple[int, bytes]] = []
         self.busy_poll = busy_poll
         self.trace_frames = trace_frames
         self.recorder = FrameRecorder()
@@ -98,14 +101,16 @@ class Daemon:
         except Exception as exc:  # the loop never dies on a frame
             self._failure("process", exc)
             return True
+        faults = self.faults
         if reply:
             if link.ethernet:
                 mark_processed(buf)
             copies = 1
-            if self.wire_fault is not None:
-                copies = wirefault.apply(self.wire_fault, buf, off, n)
-                if self.wire_fault.count <= 0:
-                    self.wire_fault = None
+            if faults.wire_live:
+                copies, delay_ns = faults.on_reply(buf, off, n)
+                if delay_ns and copies:
+                    self._hold(bytes(buf[:n]), copies, delay_ns)
+                    copies = 0
             for _ in range(copies):
                 link.send(memoryview(buf)[:n])
             self.replies += 1
@@ -114,7 +119,24 @@ class Daemon:
             if self.trace_frames:
                 log.debug("frame_out", data=bytes(buf[:n]).hex())
         self._service()
+        if faults.active:
+            try:
+                faults.after_frame(self.segment.clock.now_ns())
+            except Exception as exc:
+                self._failure("faults", exc)
         return True
+
+    def _hold(self, frame: bytes, copies: int, delay_ns: int) -> None:
+        """A delay fault: send ``frame`` later (``copies`` times)."""
+        due = self.segment.clock.now_ns() + delay_ns
+        for _ in range(copies):
+            self.delayed.append((due, frame))
+        self.delayed.sort(key=lambda d: d[0])
+
+    def _send_delayed(self, now_ns: int) -> None:
+        while self.delayed and self.delayed[0][0] <= now_ns:
+            _, frame = self.delayed.pop(0)
+            self.link.send(memoryview(frame))
 
     def _service(self) -> None:
         try:
@@ -154,7 +176,7 @@ class Daemon:
                 if not self.handle_one(buf):
                     self._service_timers()
                 continue
-            deadline = self.segment.next_deadline()
+            deadline = self._deadline()
             timeout: float = IDLE_TIMEOUT_MS
             if deadline is not None:
                 timeout = max(0.0, min(timeout, (deadline - clock.now_ns()) / 1e6))
@@ -175,9 +197,25 @@ class Daemon:
                         self._failure("ctl", exc)
             self._service_timers()
 
+    def _deadline(self) -> int | None:
+        ds = [
+            d for d in (self.segment.next_deadline(), self.faults.next_deadline()) if d is not None
+        ]
+        if self.delayed:
+            ds.append(self.delayed[0][0])
+        return min(ds) if ds else None
+
     def _service_timers(self) -> None:
         if self.segment.next_deadline() is not None or self.segment.ctx.pending:
             self._service()
+        if self.delayed or self.faults.active:
+            now = self.segment.clock.now_ns()
+            self._send_delayed(now)
+            if self.faults.active:
+                try:
+                    self.faults.poll(now)
+                except Exception as exc:
+                    self._failure("faults", exc)
 
     def close(self) -> None:
         self.link.close()

@@ -16,6 +16,8 @@ from ecatsim.ctl import ControlSocket
 from ecatsim.daemon import Daemon
 from ecatsim.device.drive import Drive
 from ecatsim.errors import UserError
+from ecatsim.faults.engine import FaultEngine
+from ecatsim.faults.spec import FaultSpecError
 from ecatsim.link.base import Link
 from ecatsim.link.errors import LinkError
 from ecatsim.privileges import drop_privileges
@@ -94,6 +96,18 @@ def attach_trace(segment: Segment, path: Path) -> TraceWriter:
     return writer
 
 
+def arm_faults(cfg: SegmentConfig, segment: Segment) -> FaultEngine:
+    """The fault engine with the segment file's ``faults:`` armed (from now)."""
+    engine = FaultEngine(segment)
+    now = segment.clock.now_ns()
+    for i, spec in enumerate(cfg.faults):
+        try:
+            engine.add(spec, now)
+        except FaultSpecError as exc:
+            raise UserError(f"{cfg.source}: faults[{i}]: {exc}") from None
+    return engine
+
+
 def run_daemon(opts: RunOptions) -> None:
     """Build everything, log ``ready``, serve until SIGINT/SIGTERM."""
     cfg = segment_config(opts)
@@ -106,16 +120,20 @@ def run_daemon(opts: RunOptions) -> None:
             os.sched_setaffinity(0, {opts.cpu})
         except OSError as exc:
             raise UserError(f"--cpu {opts.cpu}: cannot pin ({exc.strerror})") from exc
-    ctl = ControlSocket(opts.ctl, segment) if opts.ctl is not None else None
+    faults = arm_faults(cfg, segment)
+    ctl = ControlSocket(opts.ctl, segment, faults) if opts.ctl is not None else None
     daemon = Daemon(
-        link, segment, busy_poll=opts.busy_poll, trace_frames=opts.trace_frames, ctl=ctl
+        link,
+        segment,
+        busy_poll=opts.busy_poll,
+        trace_frames=opts.trace_frames,
+        ctl=ctl,
+        faults=faults,
     )
     # Everything built so far lives for the whole run: keep it out of the cyclic garbage
     # collector so a full collection cannot stall a reply by milliseconds.
     gc.collect()
     gc.freeze()
-    if ctl is not None:
-        ctl.arm_wire = lambda f: setattr(daemon, "wire_fault", f)
     drop_privileges(opts.user)  # sockets and files are open: keep CAP_NET_RAW only
     daemon.install_signal_handlers()
     where = opts.iface or opts.tap or opts.udp

@@ -30,6 +30,7 @@ from ecatsim.esc.pdi import (
 from ecatsim.slave import al
 from ecatsim.slave.al import AlState, Transition
 from ecatsim.slave.app import Application
+from ecatsim.slave.coe import CoeProtocol
 from ecatsim.slave.emcy import Emergency
 from ecatsim.slave.mailbox import MailboxEngine
 from ecatsim.slave.od import ObjectDictionary
@@ -97,6 +98,7 @@ class Firmware:
         self.od: ObjectDictionary | None = None
         self.emergency: Emergency | None = None
         self.device: object | None = None
+        self.coe: CoeProtocol | None = None
         #: outputs received in DC mode, applied at the next SYNC0
         self.pending_outputs: bytes | None = None
         #: the last input image (captured at SYNC0 in DC mode)

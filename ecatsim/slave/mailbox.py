@@ -61,8 +61,11 @@ class MailboxEngine:
         self.last_in_counter = 0
         self.repeat_ack = False
         self.errors = 0
-        #: injected fault: the next N requests get no reply
+        #: injected faults: the next N requests get no reply; the next request gets this
+        #: error reply; the next N replies repeat the previous counter
         self.drop_next = 0
+        self.error_next: MbxError | None = None
+        self.stale_counter_next = 0
         self.log = log.bind(slave=pdi.position)
 
     def reset(self) -> None:
@@ -91,6 +94,9 @@ class MailboxEngine:
             if self.drop_next:
                 self.drop_next -= 1
                 return
+            if self.error_next is not None:
+                code, self.error_next = self.error_next, None
+                raise MailboxError(code)
             handler = self.handlers.get(req.mtype)
             if handler is None or not self.accept(req.mtype):
                 raise MailboxError(MbxError.UNSUPPORTED_PROTOCOL)
@@ -141,7 +147,10 @@ class MailboxEngine:
             body = (0x0001).to_bytes(2, "little") + int(MbxError.NO_MORE_MEMORY).to_bytes(
                 2, "little"
             )
-        self.counter = self.counter % 7 + 1
+        if self.stale_counter_next and self.counter:
+            self.stale_counter_next -= 1  # injected: the previous counter again
+        else:
+            self.counter = self.counter % 7 + 1
         self.out.append(mbx_header(len(body), mtype, self.counter) + body)
         self.flush()
 

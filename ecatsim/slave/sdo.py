@@ -64,12 +64,21 @@ class SdoServer:
         self.down_size = 0
         self.down_toggle = 0
         self.down_key: tuple[int, int, bool] | None = None
+        #: injected faults: index -> (subindex or None for any, abort code) on the next
+        #: access; a toggle error in the next segment
+        self.forced_aborts: dict[int, tuple[int | None, int]] = {}
+        self.toggle_error_next = False
 
     def handle(self, data: bytes) -> bytes | None:
         """One SDO request (CoE header included) -> the reply, or None (abort request)."""
         if len(data) < 10:
             return abort_frame(0, 0, ABORT_COMMAND)
         _coe, cmd, index, sub = SDO_HDR.unpack_from(data)
+        ccs = cmd >> 5
+        if ccs == CCS_UPLOAD_SEGMENT:
+            index, sub = self.up_key  # a segment carries data, not the object
+        elif ccs == CCS_DOWNLOAD_SEGMENT and self.down_key is not None:
+            index, sub = self.down_key[:2]
         try:
             return self._dispatch(cmd, index, sub, data)
         except SdoAbort as exc:
@@ -93,6 +102,14 @@ class SdoServer:
         if cmd == CMD_ABORT:
             self._clear()
             return None
+        if self.forced_aborts and ccs in (CCS_UPLOAD, CCS_DOWNLOAD):
+            forced = self.forced_aborts.get(index)
+            if forced is not None and forced[0] in (None, sub):
+                del self.forced_aborts[index]
+                raise SdoAbort(forced[1], "injected")
+        if self.toggle_error_next and ccs in (CCS_UPLOAD_SEGMENT, CCS_DOWNLOAD_SEGMENT):
+            self.toggle_error_next = False
+            raise SdoAbort(ABORT_TOGGLE, "injected")
         if ccs == CCS_UPLOAD:
             return self._upload(cmd, index, sub)
         if ccs == CCS_UPLOAD_SEGMENT:

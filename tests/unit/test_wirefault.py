@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
+from ecatsim.faults.wire import patch
 from ecatsim.wire import datagram as dg
-from ecatsim.wirefault import WireFault, apply
 
 
 def frame() -> bytearray:
@@ -13,14 +13,18 @@ def frame() -> bytearray:
 def test_each_kind() -> None:
     f = frame()
     n = len(f)
-    fault = WireFault("wkc", 1, 2)
-    assert apply(fault, f, 14, n) == 1 and fault.count == 0
+    assert patch("wkc", 2, f, 14, n) == 1
     assert f[-2:] == b"\x05\x00"
     f = frame()
-    assert apply(WireFault("corrupt", 1), f, 14, n) == 1
+    assert patch("wkc", -3, f, 14, n) == 1
+    assert f[-2:] == b"\x00\x00"
+    f = frame()
+    assert patch("corrupt", 0, f, 14, n) == 1
     assert f[14 + 2 + 10 : 14 + 2 + 12] == b"\x10\xdf"  # the middle data byte inverted
     f = frame()
-    assert apply(WireFault("circulating", 1), f, 14, n) == 1
+    assert patch("circulating", 0, f, 14, n) == 1
     assert f[14 + 2 + 7] & 0x40
-    assert apply(WireFault("drop", 1), frame(), 14, n) == 0
-    assert apply(WireFault("duplicate", 1), frame(), 14, n) == 2
+    assert patch("drop", 0, frame(), 14, n) == 0
+    assert patch("duplicate", 0, frame(), 14, n) == 2
+    short = frame()[:18]
+    assert patch("wkc", 1, short, 14, 18) == 1 and short == frame()[:18]  # no datagram: untouched
