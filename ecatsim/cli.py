@@ -69,7 +69,12 @@ def cli(ctx: click.Context, debug: bool) -> None:
 @click.option("--busy-poll", is_flag=True, help="Spin instead of blocking (lowest latency).")
 @click.option("--cpu", type=int, help="Pin the daemon to this CPU.")
 @click.option("--trace", "trace", type=click.Path(path_type=Path), help="Per-cycle drive CSV.")
-@click.option("--ctl", "ctl", type=click.Path(path_type=Path), help="Control socket path (0600).")
+@click.option(
+    "--ctl",
+    "ctl",
+    type=click.Path(path_type=Path),
+    help="Control socket path (0600; default: /run/ecatsim/LINK.sock).",
+)
 @click.option("--user", "user", help="Started as root: switch to this user after opening.")
 @click.pass_obj
 def run(
@@ -113,14 +118,16 @@ def run(
 
 
 @cli.command("ctl")
-@click.option("--socket", "sock", required=True, type=click.Path(path_type=Path))
+@click.option("--socket", "sock", type=click.Path(path_type=Path), help="The daemon's --ctl path.")
+@click.option("--link", "link", help="Or: the daemon's --iface/--tap/--udp (default socket).")
 @click.argument(
     "command",
     type=click.Choice(
         [
             "status",
-            "fault",
+            "inject",
             "clear",
+            "fault",
             "peek",
             "poke",
             "od",
@@ -133,15 +140,23 @@ def run(
     ),
 )
 @click.argument("args", nargs=-1)
-def ctl_cmd(sock: Path, command: str, args: tuple[str, ...]) -> None:
-    """Talk to a running daemon: status | fault SLAVE KIND | clear SLAVE KIND |
-    peek SLAVE ADDR LEN | poke SLAVE ADDR HEX | od SLAVE INDEX SUB [VALUE] |
-    al_refuse SLAVE CODE | al_fall SLAVE CODE | mbx_drop SLAVE COUNT |
-    wire KIND COUNT [VALUE] (drop, duplicate, corrupt, wkc, circulating) |
-    link SLAVE PORT up|down."""
+def ctl_cmd(sock: Path | None, link: str | None, command: str, args: tuple[str, ...]) -> None:
+    """Talk to a running daemon.
+
+    \b
+    status                          AL state/code, DL status, error counters, active faults
+    inject KIND [key=value ...]     any fault, keys as in the segment YAML's faults: list,
+                                    e.g. inject wkc value=-1 count=3 after_frames=100
+                                         inject link_down slave=1 port=1 after_s=2 for_s=1
+                                         inject sdo_abort index=0x6060 code=0x06010000
+    clear [ID]                      remove one fault (ID from inject/status), or all
+    fault SLAVE KIND | clear SLAVE KIND   a drive fault, held until cleared
+    al_refuse SLAVE CODE | al_fall SLAVE CODE | mbx_drop SLAVE N | wire KIND N [VALUE]
+    link SLAVE PORT up|down | peek SLAVE ADDR LEN | poke SLAVE ADDR HEX | od SLAVE INDEX SUB [V]
+    """
     import json
 
-    from ecatsim.ctl import request
+    from ecatsim.ctl import default_path, parse_value, request
 
     def num(v: str) -> int:
         return int(v, 0)
@@ -149,9 +164,20 @@ def ctl_cmd(sock: Path, command: str, args: tuple[str, ...]) -> None:
     try:
         if command == "status":
             req: dict[str, object] = {"cmd": "status"}
-        elif command in ("fault", "clear"):
-            req = {"cmd": "fault", "slave": num(args[0]), "kind": args[1],
-                   "active": command == "fault"}  # fmt: skip
+        elif command == "inject":
+            fault: dict[str, object] = {"kind": args[0]}
+            for kv in args[1:]:
+                key, sep, value = kv.partition("=")
+                if not sep:
+                    raise ValueError(kv)
+                fault[key] = parse_value(value)
+            req = {"cmd": "inject", "fault": fault}
+        elif command == "clear" and len(args) == 2:  # clear SLAVE KIND: a drive fault
+            req = {"cmd": "fault", "slave": num(args[0]), "kind": args[1], "active": False}
+        elif command == "clear":
+            req = {"cmd": "clear", "id": num(args[0]) if args else None}
+        elif command == "fault":
+            req = {"cmd": "fault", "slave": num(args[0]), "kind": args[1], "active": True}
         elif command == "peek":
             req = {"cmd": "peek", "slave": num(args[0]), "addr": num(args[1]), "len": num(args[2])}
         elif command in ("al_refuse", "al_fall"):
@@ -173,6 +199,10 @@ def ctl_cmd(sock: Path, command: str, args: tuple[str, ...]) -> None:
                 req["value"] = num(args[3])
     except (IndexError, ValueError) as exc:
         raise UserError(f"ctl {command}: bad arguments {' '.join(args)!r} (see --help)") from exc
+    if sock is None:
+        if link is None:
+            raise UserError("ctl: give --socket PATH (the daemon's --ctl) or --link IFACE")
+        sock = default_path(link)
     reply = request(sock, req)
     click.echo(json.dumps(reply, indent=2))
     if not reply.get("ok"):

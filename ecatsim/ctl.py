@@ -24,6 +24,32 @@ from ecatsim.segment import Segment
 MAX_REQUEST = 4096
 
 
+def run_dir() -> Path:
+    """Where control sockets live: /run/ecatsim for root, else the user's runtime dir."""
+    if os.geteuid() == 0:
+        return Path("/run/ecatsim")
+    base = os.environ.get("XDG_RUNTIME_DIR") or f"/tmp/ecatsim-{os.getuid()}"
+    return Path(base) / "ecatsim"
+
+
+def default_path(link: str) -> Path:
+    """The control socket of the daemon serving ``link`` (interface, TAP or HOST:PORT)."""
+    safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in link)
+    return run_dir() / f"{safe}.sock"
+
+
+def parse_value(text: str) -> int | float | str:
+    """A ``key=value`` argument: an integer (any base), a number, or a word."""
+    try:
+        return int(text, 0)
+    except ValueError:
+        pass
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
 class ControlSocket:
     """The daemon side."""
 
@@ -31,9 +57,9 @@ class ControlSocket:
         self.path = path
         self.segment = segment
         self.faults = faults
-        path.parent.mkdir(parents=True, exist_ok=True)
+        path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
         if path.exists():
-            path.unlink()
+            _remove_stale(path)
         self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
         old = os.umask(0o177)
         try:
@@ -170,6 +196,19 @@ class ControlSocket:
             self.path.unlink()
         except OSError:
             pass
+
+
+def _remove_stale(path: Path) -> None:
+    """Remove a socket left by a daemon that is gone; refuse one a live daemon serves."""
+    probe = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    try:
+        probe.connect(str(path))
+    except OSError:
+        path.unlink(missing_ok=True)
+        return
+    finally:
+        probe.close()
+    raise UserError(f"--ctl {path}: another daemon serves this control socket; pass --ctl PATH")
 
 
 def request(path: Path, req: dict[str, Any], timeout: float = 2.0) -> dict[str, Any]:

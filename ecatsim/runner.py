@@ -12,7 +12,7 @@ import structlog
 from ecatsim.build import build_segment
 from ecatsim.clock import MonotonicClock
 from ecatsim.config import SegmentConfig, default_segment, load_segment, repeat_default
-from ecatsim.ctl import ControlSocket
+from ecatsim.ctl import ControlSocket, default_path
 from ecatsim.daemon import Daemon
 from ecatsim.device.drive import Drive
 from ecatsim.errors import UserError
@@ -121,7 +121,8 @@ def run_daemon(opts: RunOptions) -> None:
         except OSError as exc:
             raise UserError(f"--cpu {opts.cpu}: cannot pin ({exc.strerror})") from exc
     faults = arm_faults(cfg, segment)
-    ctl = ControlSocket(opts.ctl, segment, faults) if opts.ctl is not None else None
+    where = opts.iface or opts.tap or opts.udp or "ecatsim"
+    ctl = ControlSocket(opts.ctl or default_path(where), segment, faults)
     daemon = Daemon(
         link,
         segment,
@@ -136,20 +137,19 @@ def run_daemon(opts: RunOptions) -> None:
     gc.freeze()
     drop_privileges(opts.user)  # sockets and files are open: keep CAP_NET_RAW only
     daemon.install_signal_handlers()
-    where = opts.iface or opts.tap or opts.udp
     log.info(
         "ready",
         link=where,
         slaves=len(segment.escs),
         config=cfg.source,
         mode="busy-poll" if opts.busy_poll else "blocking",
+        ctl=str(ctl.path),
     )
     try:
         daemon.run()
     finally:
         daemon.close()
-        if ctl is not None:
-            ctl.close()
+        ctl.close()
         if tracer is not None:
             tracer.close()
         log.info(

@@ -4,6 +4,7 @@ Ref: issue "reliability" (AL and mailbox faults)."""
 from __future__ import annotations
 
 import struct
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -108,3 +109,177 @@ def test_link_down_seen_in_dl_status_lost_link_and_wkc(
     assert request(sock, {"cmd": "link", "slave": 1, "port": 1, "up": True})["ok"]
     assert cycle() == expected  # the segment recovers when the fault is cleared
     assert s1._fprd(0x0110, 2) == bytes([0x33, 0x5A])
+
+
+def inject(sock: Path, **fault: object) -> int:
+    reply = request(sock, {"cmd": "inject", "fault": fault})
+    assert reply["ok"], reply
+    return int(reply["id"])
+
+
+def test_delay_and_corrupt_seen_as_late_frame_and_bad_inputs(
+    daemon_factory: Any, master_factory: Any, tmp_path: Path
+) -> None:
+    sock, m, cycle = op_with_ctl(daemon_factory, master_factory, tmp_path, 1)
+    expected = m.expected_wkc
+    s = m.slaves[0]
+    assert cycle() == expected
+    good = bytes(s.input)
+    inject(sock, kind="delay", value=30_000)  # 30 ms: past the master's 20 ms timeout
+    assert cycle() < 0  # the reply is late: lost for this cycle
+    time.sleep(0.015)  # (well inside the 100 ms process-data watchdog)
+    assert [cycle() for _ in range(3)] == [expected] * 3  # on time again
+    # the corrupted byte is the middle of the LRW: outputs (12) then inputs, byte 14 = input 2
+    inject(sock, kind="corrupt")
+    assert cycle() == expected
+    assert bytes(s.input) == good[:2] + bytes([good[2] ^ 0xFF]) + good[3:]
+    assert cycle() == expected and bytes(s.input) == good
+
+
+def test_mailbox_faults_seen_by_pysoem(
+    daemon_factory: Any, master_factory: Any, tmp_path: Path
+) -> None:
+    sock = tmp_path / "ctl.sock"
+    daemon_factory("--ctl", str(sock))
+    m = master_factory()
+    m.sdo_read_timeout = 200_000
+    assert m.config_init() == 1
+    s = m.slaves[0]
+    inject(sock, kind="sdo_abort", index=0x6060, code=0x08000022)
+    with pytest.raises(pysoem.SdoError) as sdo_err:
+        s.sdo_read(0x6060, 0)
+    assert sdo_err.value.abort_code == 0x08000022
+    assert s.sdo_read(0x6060, 0) == b"\x00"  # used up
+    inject(sock, kind="mbx_error", code=0x0003)  # MBXERR_INVALIDCHANNEL
+    with pytest.raises(pysoem.MailboxError) as mbx_err:
+        s.sdo_read(0x1000, 0)
+    assert mbx_err.value.error_code == 0x0003
+    # SOEM asks for a repeat of the error reply until its timeout (ETG.1000.4 §6.7.4): a
+    # real slave repeats it too, so more copies wait on pysoem's error stack
+    rest = m._collect_mailbox_errors()
+    assert rest and all(isinstance(e, pysoem.MailboxError) and e.error_code == 3 for e in rest)
+    # the last repeat may still sit in SM1: SOEM's next request empties it first
+    try:
+        value = s.sdo_read(0x1000, 0)
+    except pysoem.MailboxError as again:
+        assert again.error_code == 3
+        value = s.sdo_read(0x1000, 0)
+    assert struct.unpack("<I", value)[0] == 0xFFFC0192
+
+
+def test_toggle_error_and_wrong_counter_seen_by_pysoem(
+    daemon_factory: Any, master_factory: Any, tmp_path: Path
+) -> None:
+    sock = tmp_path / "ctl.sock"
+    daemon_factory("--ctl", str(sock))
+    m = master_factory()
+    m.sdo_read_timeout = 200_000
+    assert m.config_init() == 1
+    s = m.slaves[0]
+    # a 20-byte input mailbox: the 7-byte device name needs a segmented upload
+    s.state = pysoem.INIT_STATE
+    s.write_state()
+    assert s.state_check(pysoem.INIT_STATE, 1_000_000) == pysoem.INIT_STATE
+    s.amend_mbx("in", 0x1080, 20)
+    s.state = pysoem.PREOP_STATE
+    s.write_state()
+    assert s.state_check(pysoem.PREOP_STATE, 1_000_000) == pysoem.PREOP_STATE
+    assert s.sdo_read(0x1008, 0) == b"TMC8670"
+    inject(sock, kind="sdo_toggle")
+    with pytest.raises(pysoem.SdoError) as err:
+        s.sdo_read(0x1008, 0)
+    assert err.value.abort_code == 0x05030000
+    assert s.sdo_read(0x1008, 0) == b"TMC8670"
+    # wrong counter: raw mailbox traffic through pysoem's FPWR/FPRD
+    counters = []
+    for c, fault in ((1, False), (2, True), (3, False)):
+        if fault:
+            inject(sock, kind="mbx_counter")
+        req = struct.pack("<HHBBHBHBI", 10, 0, 0, 0x03 | (c << 4), 0x2000, 0x40, 0x1000, 0, 0)
+        s._fpwr(0x1000, req.ljust(128, b"\x00"))
+        deadline = time.monotonic() + 1.0
+        while not s._fprd(0x080D, 1)[0] & 0x08:  # SM1 status: mailbox full
+            assert time.monotonic() < deadline, "no mailbox reply"
+        reply = s._fprd(0x1080, 20)
+        assert reply[8:12] == bytes([0x43, 0x00, 0x10, 0x00])  # the 1000h upload answer
+        counters.append(reply[5] >> 4)
+    assert counters[1] == counters[0] and counters[2] == counters[0] % 7 + 1
+
+
+def test_power_cycle_seen_as_init_and_recovered(
+    daemon_factory: Any, master_factory: Any, tmp_path: Path
+) -> None:
+    sock, m, cycle = op_with_ctl(daemon_factory, master_factory, tmp_path, 2)
+    expected = m.expected_wkc
+    assert cycle() == expected
+    inject(sock, kind="power_cycle", slave=1, value=200)  # at once
+    assert cycle() == expected // 2  # slave 1 is dark
+    assert m.slaves[0]._fprd(0x0110, 2)[0] & 0x20 == 0  # slave 0: no link on port 1
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < 0.25:  # keep cycling: slave 0's watchdog stays fed
+        assert cycle() == expected // 2
+        time.sleep(0.002)
+    assert cycle() == expected // 2  # powered up again, but in INIT: no process data
+    with pytest.raises(pysoem.WkcError):
+        m.slaves[1]._fprd(0x0010, 2)  # its station address is back to the reset value 0
+    assert m.slaves[0]._fprd(0x0130, 2) == b"\x08\x00"  # slave 0 is still in OP
+    assert m.config_init() == 2  # a master re-scans and brings it back
+    to_op(m)
+    assert cycle() == m.expected_wkc == expected
+
+
+def test_time_window_and_seeded_probability(
+    daemon_factory: Any, master_factory: Any, tmp_path: Path
+) -> None:
+    sock, m, cycle = op_with_ctl(daemon_factory, master_factory, tmp_path, 1)
+    expected = m.expected_wkc
+    inject(sock, kind="wkc", value=-1, after_s=0.3, for_s=0.3)
+    t0 = time.monotonic()
+    seen: list[tuple[float, int]] = []
+    while (t := time.monotonic() - t0) < 0.9:
+        seen.append((t, cycle()))
+        time.sleep(0.002)
+    assert all(w == expected for t, w in seen if t < 0.25)
+    assert all(w == expected - 1 for t, w in seen if 0.35 < t < 0.55)
+    assert all(w == expected for t, w in seen if t > 0.65)
+
+    def pattern() -> list[int]:
+        fid = inject(sock, kind="drop", probability=0.25, seed=11)
+        out = [cycle() for _ in range(120)]
+        request(sock, {"cmd": "clear", "id": fid})
+        return out
+
+    a = pattern()
+    assert a == pattern()  # the same seed, the same lost frames
+    assert 10 <= a.count(-1) <= 55 and set(a) == {-1, expected}
+
+
+def test_faults_from_the_segment_yaml(
+    daemon_factory: Any, master_factory: Any, tmp_path: Path
+) -> None:
+    seg = tmp_path / "segment.yaml"
+    seg.write_text(
+        "slaves: [{device: tmc8670}]\n"
+        "faults:\n"
+        "  - {kind: sdo_abort, index: 0x6061, code: 0x06040047}\n"
+        "  - {kind: overtemperature, slave: 0, on_state: op}\n"
+    )
+    sock = tmp_path / "ctl.sock"
+    daemon_factory("--ctl", str(sock), "--config", str(seg))
+    m = master_factory()
+    assert m.config_init() == 1
+    s = m.slaves[0]
+    with pytest.raises(pysoem.SdoError) as err:
+        s.sdo_read(0x6061, 0)
+    assert err.value.abort_code == 0x06040047
+    to_op(m)
+    for _ in range(20):
+        m.send_processdata()
+        m.receive_processdata(20_000)
+    emcys: list[Any] = []
+    s.add_emergency_callback(emcys.append)
+    assert struct.unpack("<H", s.sdo_read(0x603F, 0))[0] == 0x4310  # overtemperature
+    assert [e.error_code for e in emcys] == [0x4310]
+    status = request(sock, {"cmd": "status"})
+    assert [f["kind"] for f in status["faults"]] == ["overtemperature"]
+    assert request(sock, {"cmd": "clear"})["cleared"] == 1

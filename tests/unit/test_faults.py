@@ -306,8 +306,7 @@ def test_power_cycle_resets_registers_and_cuts_the_slave_off_meanwhile() -> None
     m.apwr(0, 0x0010, b"\x01\x10")
     m.apwr(1, 0x0010, b"\x02\x10")
     preop(m)
-    m.inject(kind="power_cycle", slave=1, value=50)
-    m.brd()  # the frame that fires it
+    m.inject(kind="power_cycle", slave=1, value=50)  # at once
     assert wkcs(m, 1) == [1]  # slave 1 is dark
     r = m.aprd(0, 0x0110, 2)
     assert r is not None and r.data[0] & 0x20 == 0  # slave 0: port 1 no link
