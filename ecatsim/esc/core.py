@@ -494,10 +494,13 @@ class Esc:
         return 1 if ok else 0
 
     def _compile_sm_windows(self) -> None:
+        """Address windows of the enabled SMs. An SM that starts below the process RAM is
+        not mapped: the registers stay reachable, so a master can always reconfigure it.
+        Ref: TMC8460 §5.49 (SM start address in process memory), §5.53; decision E22."""
         wins = []
         for sm in self.sm:
             w = sm.window()
-            if w is not None:
+            if w is not None and w[0] >= regs.PDRAM_START:
                 wins.append((w[0], w[1], sm))
         wins.sort(key=lambda x: x[0])
         self.sm_windows = tuple(wins)

@@ -149,3 +149,16 @@ def test_two_slaves_lrw_wkc_adds_up() -> None:
     assert r.wkc == 6
     assert r.data == b"\x01\x02\x03\x04\x10\x20\x11\x21"
     assert m.aprd(1, 0x1000, 2).data == b"\x03\x04"
+
+
+def test_sm_starting_in_register_space_does_not_hide_registers() -> None:
+    """Found by the frame fuzzer: an SM placed over the registers must not lock a master
+    out of its own configuration registers (decision E22)."""
+    m, _ = setup()
+    assert m.apwr(0, 0x0800, sm_regs(0x05A0, 0x4000, 0x26)).wkc == 1
+    assert m.aprd(0, 0x0800, 7).data == sm_regs(0x05A0, 0x4000, 0x26)[:7]
+    assert m.apwr(0, 0x0800, bytes(8)).wkc == 1  # the master disables it ...
+    assert m.aprd(0, 0x0806, 1).data == b"\x00"
+    assert m.apwr(0, 0x0800, bytes(8)).wkc == 1  # ... and, disabled, clears it
+    assert m.aprd(0, 0x0800, 6).data == bytes(6)
+    assert m.aprd(0, 0x0130, 2).wkc == 1

@@ -29,8 +29,16 @@ def calibrate(n: int = 200_000) -> float:
 
 
 def configure_to_op(m: TinyMaster, n_slaves: int) -> None:
-    """Bring a segment to OP the way SOEM does: INIT, clear FMMUs/SMs, addresses, mailbox
-    SMs, PREOP, process-data SMs and FMMUs, SAFEOP, OP."""
+    """Bring a segment to OP the way SOEM does: slaves to defaults (loops auto, alias off,
+    error counters, EEPROM to EtherCAT), INIT, clear FMMUs/SMs, addresses, mailbox SMs,
+    PREOP, process-data SMs and FMMUs, SAFEOP, OP."""
+    m.bwr(0x0101, b"\x00")  # DL control: auto loop on every port
+    m.bwr(0x0103, b"\x00")  # alias off
+    m.bwr(0x0200, b"\x00\x00")  # ECAT event mask
+    m.bwr(0x0300, bytes(8))  # error counters
+    m.bwr(0x0981, b"\x00")  # SYNC activation off
+    m.bwr(0x0500, b"\x02")  # EEPROM: force EtherCAT ...
+    m.bwr(0x0500, b"\x00")  # ... and release
     m.bwr(0x0120, b"\x11\x00")
     m.bwr(0x0600, bytes(16 * 6))
     m.bwr(0x0800, bytes(8 * 6))

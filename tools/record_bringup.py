@@ -1,0 +1,106 @@
+"""Record the frames a real pysoem master sends while it brings ecatsim drives to OP (with
+DC) and exchanges process data, into a pcap file that the fuzz tests mutate (and replay
+unmutated afterwards: the recording ends with the slaves in OP).
+
+    sudo .venv/bin/python tools/record_bringup.py -o tests/data/pysoem_bringup.pcap
+
+Runs the daemon and the master in a private namespace pair (removed afterwards) and
+captures the master's outgoing EtherCAT frames with a raw socket in its namespace.
+"""
+
+from __future__ import annotations
+
+import argparse
+import socket
+import sys
+import tempfile
+import threading
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from ecatsim.link.pcap import PcapWriter  # noqa: E402
+from tests.integration.netns import Daemon, NetnsPair, in_netns  # noqa: E402
+
+ETH_P_ALL = 0x0003
+ETH_P_ECAT = 0x88A4
+PACKET_OUTGOING = 4
+
+
+def capture(sock: socket.socket, out: list[bytes], stop: threading.Event) -> None:
+    sock.settimeout(0.05)
+    while not stop.is_set():
+        try:
+            data, addr = sock.recvfrom(2048)
+        except TimeoutError:
+            continue
+        if addr[2] == PACKET_OUTGOING and data[12:14] == ETH_P_ECAT.to_bytes(2, "big"):
+            out.append(data)
+
+
+def bring_up(iface: str, slaves: int, cycles: int) -> None:
+    import pysoem
+
+    m = pysoem.Master()
+    m.open(iface)
+    try:
+        if m.config_init() != slaves:
+            raise SystemExit("record: the master did not find the slaves")
+        for s in m.slaves:
+            s.sdo_read(0x1018, 1)
+            s.sdo_write(0x6060, 0, b"\x08")
+        m.config_dc()
+        m.config_map()
+        m.state_check(pysoem.SAFEOP_STATE, 2_000_000)
+        m.state = pysoem.OP_STATE
+        m.send_processdata()
+        m.receive_processdata(50_000)
+        m.write_state()
+        for _ in range(cycles):
+            m.send_processdata()
+            m.receive_processdata(50_000)
+            if m.state_check(pysoem.OP_STATE, 2000) == pysoem.OP_STATE:
+                break
+        if m.read_state() != pysoem.OP_STATE:
+            raise SystemExit("record: the slaves did not reach OP")
+        for _ in range(cycles):
+            m.send_processdata()
+            m.receive_processdata(50_000)
+    finally:
+        m.close()
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("-o", "--output", type=Path, required=True)
+    ap.add_argument("--slaves", type=int, default=2)
+    ap.add_argument("--cycles", type=int, default=50)
+    args = ap.parse_args()
+    frames: list[bytes] = []
+    with NetnsPair() as pair, tempfile.TemporaryDirectory() as tmp:
+        daemon = Daemon(pair, ("--slaves", str(args.slaves)), Path(tmp) / "daemon.log")
+        daemon.start()
+        try:
+            with in_netns(pair.master_ns):
+                sock = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(ETH_P_ALL))
+                sock.bind((pair.master_if, 0))
+                stop = threading.Event()
+                t = threading.Thread(target=capture, args=(sock, frames, stop))
+                t.start()
+                try:
+                    bring_up(pair.master_if, args.slaves, args.cycles)
+                finally:
+                    stop.set()
+                    t.join()
+                    sock.close()
+        finally:
+            daemon.stop()
+    with PcapWriter(args.output) as w:
+        for f in frames:
+            w.write(f)
+    print(f"{args.output}: {len(frames)} frames")
+
+
+if __name__ == "__main__":
+    main()
