@@ -63,9 +63,8 @@ def main() -> int:
     configure_to_op(t, args.slaves)
     r = t.brd(0x0130, 2)
     ok = r.data == b"\x08\x00" and r.wkc == args.slaves and errors == 0
-    print(
-        f"after {args.frames} frames: AL status {r.data.hex()} wkc {r.wkc}: {'OK' if ok else 'FAIL'}"
-    )
+    verdict = "OK" if ok else "FAIL"
+    print(f"after {args.frames} frames: AL status {r.data.hex()} wkc {r.wkc}: {verdict}")
     return 0 if ok else 1
 
 
