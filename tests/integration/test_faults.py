@@ -3,6 +3,7 @@ Ref: issue "reliability" (AL and mailbox faults)."""
 
 from __future__ import annotations
 
+import socket
 import struct
 import time
 from collections.abc import Callable
@@ -13,6 +14,7 @@ import pysoem
 import pytest
 
 from ecatsim.ctl import request
+from tests.integration.netns import in_netns
 from tests.integration.test_esc_master import to_op
 
 pytestmark = pytest.mark.integration
@@ -283,3 +285,34 @@ def test_faults_from_the_segment_yaml(
     status = request(sock, {"cmd": "status"})
     assert [f["kind"] for f in status["faults"]] == ["overtemperature"]
     assert request(sock, {"cmd": "clear"})["cleared"] == 1
+
+
+def test_link_down_after_n_frames_and_circulating_bit(
+    daemon_factory: Any, master_factory: Any, tmp_path: Path, netns_pair: Any
+) -> None:
+    sock, m, cycle = op_with_ctl(daemon_factory, master_factory, tmp_path, 2)
+    expected = m.expected_wkc
+    fid = inject(sock, kind="link_down", slave=0, port=1, after_frames=5)
+    assert [cycle() for _ in range(7)] == [expected] * 5 + [expected // 2] * 2
+    assert m.slaves[0]._fprd(0x0311, 1) == b"\x01"  # lost link counter, port 1
+    request(sock, {"cmd": "clear", "id": fid})
+    assert cycle() == expected
+    # the circulating bit (ETG.1000.4 §5.4): SOEM does not look at it, so read the reply
+    # off the wire next to the master
+    with in_netns(netns_pair.master_ns):
+        raw = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(0x88A4))
+    raw.bind((netns_pair.master_if, 0))
+    raw.settimeout(0.5)
+    try:
+        inject(sock, kind="circulating")
+        flags = []
+        for _ in range(2):
+            assert cycle() == expected
+            while True:
+                data, addr = raw.recvfrom(2048)
+                if addr[2] != 4:  # not our own outgoing frame: the reply
+                    break
+            flags.append(struct.unpack_from("<H", data, 14 + 2 + 6)[0] & 0x4000)
+        assert flags == [0x4000, 0]
+    finally:
+        raw.close()
