@@ -1,0 +1,18 @@
+"""Every package of the source tree is in the wheel (a non-editable install, as in the
+container image, must not lose one)."""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_every_subpackage_is_listed() -> None:
+    conf = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    listed = set(conf["tool"]["setuptools"]["packages"])
+    found = {
+        ".".join(p.parent.relative_to(ROOT).parts) for p in (ROOT / "ecatsim").rglob("__init__.py")
+    }
+    assert found - listed == set()
