@@ -68,6 +68,11 @@ def cli(ctx: click.Context, debug: bool) -> None:
 @click.option("--allow-ip-iface", is_flag=True, help="Allow an interface with an IPv4 address.")
 @click.option("--busy-poll", is_flag=True, help="Spin instead of blocking (lowest latency).")
 @click.option("--cpu", type=int, help="Pin the daemon to this CPU.")
+@click.option(
+    "--rt-priority",
+    type=click.IntRange(1, 99),
+    help="Run under SCHED_FIFO at this priority (as real-time masters do; needs root).",
+)
 @click.option("--trace", "trace", type=click.Path(path_type=Path), help="Per-cycle drive CSV.")
 @click.option(
     "--ctl",
@@ -89,6 +94,7 @@ def run(
     allow_ip_iface: bool,
     busy_poll: bool,
     cpu: int | None,
+    rt_priority: int | None,
     trace: Path | None,
     ctl: Path | None,
     user: str | None,
@@ -110,6 +116,7 @@ def run(
         allow_ip_iface=allow_ip_iface,
         busy_poll=busy_poll,
         cpu=cpu,
+        rt_priority=rt_priority,
         trace=trace,
         ctl=ctl,
         user=user,

@@ -96,8 +96,12 @@ class Daemon:
         self.recorder.record(buf, n)
         if self.trace_frames:
             log.debug("frame_in", data=bytes(buf[:n]).hex())
+        seg = self.segment
+        t_rx = link.rx_ns or seg.clock.now_ns()
         try:
-            reply = self.segment.process(buf, off, n)
+            if seg.sync_escs:
+                seg.sync_until(t_rx)  # pulses due before this frame arrived come first
+            reply = seg.process(buf, off, n, t_rx)
         except Exception as exc:  # the loop never dies on a frame
             self._failure("process", exc)
             return True
@@ -118,7 +122,7 @@ class Daemon:
             os.sched_yield()
             if self.trace_frames:
                 log.debug("frame_out", data=bytes(buf[:n]).hex())
-        self._service()
+        self._service(t_rx)
         if faults.active:
             try:
                 faults.after_frame(self.segment.clock.now_ns())
@@ -138,9 +142,9 @@ class Daemon:
             _, frame = self.delayed.pop(0)
             self.link.send(memoryview(frame))
 
-    def _service(self) -> None:
+    def _service(self, t_ns: int | None = None) -> None:
         try:
-            self.segment.service()
+            self.segment.service(t_ns)
         except Exception as exc:
             self._failure("service", exc)
 
@@ -195,6 +199,9 @@ class Daemon:
                         self.ctl.serve()
                     except Exception as exc:
                         self._failure("ctl", exc)
+            # a frame that came in since poll returned is older than "now": serve it first
+            while self.handle_one(buf):
+                pass
             self._service_timers()
 
     def _deadline(self) -> int | None:

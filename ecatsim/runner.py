@@ -40,6 +40,7 @@ class RunOptions:
     allow_ip_iface: bool = False
     busy_poll: bool = False
     cpu: int | None = None
+    rt_priority: int | None = None
     trace: Path | None = None
     ctl: Path | None = None
     user: str | None = None
@@ -120,6 +121,19 @@ def run_daemon(opts: RunOptions) -> None:
             os.sched_setaffinity(0, {opts.cpu})
         except OSError as exc:
             raise UserError(f"--cpu {opts.cpu}: cannot pin ({exc.strerror})") from exc
+    if opts.rt_priority is not None:
+        if opts.busy_poll and opts.cpu is None:
+            raise UserError(
+                "--rt-priority with --busy-poll needs --cpu N: a spinning real-time "
+                "task would starve every other task on its CPU"
+            )
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(opts.rt_priority))
+        except OSError as exc:
+            raise UserError(
+                f"--rt-priority {opts.rt_priority}: cannot set SCHED_FIFO ({exc.strerror}); "
+                "run as root or with CAP_SYS_NICE"
+            ) from exc
     faults = arm_faults(cfg, segment)
     where = opts.iface or opts.tap or opts.udp or "ecatsim"
     ctl = ControlSocket(opts.ctl or default_path(where), segment, faults)

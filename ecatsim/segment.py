@@ -17,6 +17,10 @@ from ecatsim.esc import regs
 from ecatsim.esc.core import Esc, FrameContext
 from ecatsim.wire.datagram import CIRCULATING, LEN_MASK, MORE_FOLLOWS
 
+#: overdue SYNC0 pulses fired one by one before the rest are skipped (a stall this long,
+#: or a forward jump of the system time, is not caught up). Decision DC2.
+MAX_SYNC0_CATCHUP = 64
+
 # Command codes as plain ints for the hot path. Ref: ETG.1000.4 Table 11.
 NOP, APRD, APWR, APRW, FPRD, FPWR, FPRW, BRD, BWR, BRW, LRD, LWR, LRW, ARMW, FRMW = range(15)
 
@@ -116,8 +120,9 @@ class Segment:
 
     # ----------------------------------------------------------------- frame path
 
-    def process(self, buf: bytearray, off: int, n: int) -> bool:
-        """Process the EtherCAT frame at ``buf[off:n]`` in place.
+    def process(self, buf: bytearray, off: int, n: int, t_ns: int = 0) -> bool:
+        """Process the EtherCAT frame at ``buf[off:n]`` in place; it arrived at ``t_ns``
+        (host monotonic ns; 0: now).
 
         Returns True if the frame is to be sent back (it may be unmodified), False if it
         is destroyed (malformed: the master sees it as lost).
@@ -125,7 +130,7 @@ class Segment:
         """
         ctx = self.ctx
         ctx.frame_no += 1
-        ctx.t_ns = self.clock.now_ns()
+        ctx.t_ns = t_ns or self.clock.now_ns()
         self.frames += 1
         if off + 2 > n:
             self._count_error()
@@ -259,19 +264,15 @@ class Segment:
     # ----------------------------------------------------------------- after the reply
 
     def service(self, now_ns: int | None = None) -> None:
-        """Run timers and the firmware of every slave with a raised PDI interrupt, then
-        persist EEPROM images that changed. Never called between receive and reply."""
+        """Run timers and the firmware of every slave with a raised PDI interrupt, fire the
+        SYNC0 pulses due by ``now_ns``, then persist EEPROM images that changed. Never
+        called between receive and reply."""
         t = self.clock.now_ns() if now_ns is None else now_ns
+        if self.sync_escs:
+            self.sync_until(t)  # first: each pulse is handled at its own, earlier, time
         for esc in self.escs:
             if esc.wd.deadline_ns:
                 esc.check_timers(t)
-        if self.sync_escs:
-            for esc in self.sync_escs:
-                d = esc.dc.sync0_deadline()
-                if d is not None and d <= t:
-                    esc.sync0_tick(t)
-                    self.sync0_ticks += 1
-                    self.sync0_late_ns = max(self.sync0_late_ns, t - d)
         ctx = self.ctx
         if ctx.pending and self.firmware:
             for pos in sorted(ctx.pending):
@@ -280,6 +281,29 @@ class Segment:
             for pos in sorted(ctx.flush):
                 self.persist(pos)
             ctx.flush.clear()
+
+    def sync_until(self, t: int) -> None:
+        """Fire every SYNC0 pulse due by ``t`` in time order, each handled by the firmware
+        at the pulse's own time: outputs received before the pulse are applied and inputs
+        captured as of that instant, however late the host gets to it. Called before a
+        frame that arrived at ``t`` is processed, and from the timers.
+        Ref: TMC8460 §5.50.4 (SYNC0 generation); ETG.1000.6 §5.3 (DC synchronous mode).
+        """
+        ctx = self.ctx
+        for esc in self.sync_escs:
+            fw = self.firmware[esc.position] if self.firmware else None
+            for k in range(MAX_SYNC0_CATCHUP + 1):
+                d = esc.dc.sync0_deadline()
+                if d is None or d > t:
+                    break
+                if k == MAX_SYNC0_CATCHUP:
+                    d = t  # too far behind: fire once now, the missed pulses are skipped
+                esc.sync0_tick(d)
+                self.sync0_ticks += 1
+                if t - d > self.sync0_late_ns:
+                    self.sync0_late_ns = t - d
+                if fw is not None and esc.position in ctx.pending:
+                    fw.service(d)
 
     @property
     def sync_escs(self) -> list[Esc]:

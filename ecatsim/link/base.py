@@ -14,6 +14,9 @@ class Link(Protocol):
 
     #: True if frames carry an Ethernet header (raw/TAP/loopback); False for UDP.
     ethernet: bool
+    #: Host monotonic time (ns) the last received frame arrived, from the kernel's receive
+    #: time stamp; 0 if the link has none (then the daemon takes the time it reads it).
+    rx_ns: int
 
     def fileno(self) -> int:
         """A file descriptor that is readable when a frame is waiting (for select/poll)."""

@@ -122,6 +122,7 @@ class LoopbackLink:
     """Daemon side of an in-process wire; the test is the master on the other side."""
 
     ethernet = True
+    rx_ns = 0
 
     def __init__(
         self,

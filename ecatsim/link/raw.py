@@ -24,6 +24,7 @@ import json
 import socket
 import struct
 import subprocess
+import time
 
 from ecatsim.link.errors import LinkError
 
@@ -59,7 +60,10 @@ ECAT_FILTER: tuple[tuple[int, int, int, int], ...] = (
 AUXDATA = struct.Struct("=IIIHHHH")
 _VLAN_TAG = struct.Struct(">HH")
 _IFREQ_FLAGS = struct.Struct("16sH")
-_ANC_SIZE = socket.CMSG_SPACE(AUXDATA.size)
+#: SO_TIMESTAMPNS: the kernel's receive time (CLOCK_REALTIME) as struct timespec
+SO_TIMESTAMPNS = 35
+TIMESPEC = struct.Struct("=qq")
+_ANC_SIZE = socket.CMSG_SPACE(AUXDATA.size) + socket.CMSG_SPACE(TIMESPEC.size)
 
 
 def iface_exists(iface: str) -> bool:
@@ -138,6 +142,7 @@ class RawLink:
     """
 
     ethernet = True
+    rx_ns = 0
 
     def __init__(self, iface: str, *, qdisc_bypass: bool = True, bring_up: bool = True) -> None:
         if not iface or len(iface) > 15:
@@ -160,6 +165,7 @@ class RawLink:
         try:
             attach_filter(sock, ECAT_FILTER)
             sock.setsockopt(SOL_PACKET, PACKET_AUXDATA, 1)
+            sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, SOCK_BUF)
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SOCK_BUF)
             if qdisc_bypass:
@@ -179,6 +185,7 @@ class RawLink:
         sock.setblocking(False)
         self.sock = sock
         self._anc_size = _ANC_SIZE
+        self.rx_ns = 0
         if bring_up:
             try:
                 ensure_up(iface)
@@ -202,8 +209,14 @@ class RawLink:
                 raise
             if addr[2] == PACKET_OUTGOING:
                 continue
+            self.rx_ns = 0
             for level, typ, data in anc:
-                if level == SOL_PACKET and typ == PACKET_AUXDATA and len(data) >= AUXDATA.size:
+                if level == socket.SOL_SOCKET and typ == SO_TIMESTAMPNS:
+                    sec, nsec = TIMESPEC.unpack_from(data)
+                    # realtime stamp -> monotonic: subtract how long ago it was
+                    age = time.time_ns() - (sec * 1_000_000_000 + nsec)
+                    self.rx_ns = time.monotonic_ns() - max(0, age)
+                elif level == SOL_PACKET and typ == PACKET_AUXDATA and len(data) >= AUXDATA.size:
                     status, _l, _s, _m, _n, tci, tpid = AUXDATA.unpack_from(data)
                     if status & TP_STATUS_VLAN_VALID and n >= 12 and n + 4 <= len(buf):
                         if not status & TP_STATUS_VLAN_TPID_VALID:

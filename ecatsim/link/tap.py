@@ -41,6 +41,7 @@ class TapLink:
     """A TAP device created (or attached to, if it is persistent) under ``name``."""
 
     ethernet = True
+    rx_ns = 0
 
     def __init__(self, name: str) -> None:
         if not name or len(name) > 15:

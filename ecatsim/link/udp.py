@@ -21,6 +21,7 @@ class UdpLink:
     """A UDP socket serving EtherCAT frames to the sender of the last datagram."""
 
     ethernet = False
+    rx_ns = 0
 
     def __init__(self, host: str, port: int = UDP_PORT) -> None:
         if not 0 <= port <= 0xFFFF:

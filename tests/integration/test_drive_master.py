@@ -5,6 +5,7 @@ Ref: seed 004 §6-§9; CiA 402-2.
 
 from __future__ import annotations
 
+import os
 import struct
 import time
 from typing import Any
@@ -124,13 +125,16 @@ def test_cst_example_torque_step(master_factory: Any, daemon_factory: Any) -> No
 
 def test_csp_sine_with_dc_sync0(master_factory: Any, daemon_factory: Any, tmp_path: Any) -> None:
     """config_dc, SYNC0 at 1 ms, csp following a sine for 5 s on two drives (the second
-    with a drifting clock). The following error (60F4h, mapped instead of 60FDh) stays
-    within a bound from the loop gains; the DC time difference (0x092C) converges < 1 us."""
+    with a drifting clock), the master's frames kept mid-cycle from the DC time as SOEM's
+    examples do. The following error (60F4h, mapped instead of 60FDh) stays within a bound
+    from the loop gains in every cycle where the master delivered one target per SYNC0
+    (and the 50 cycles after any where it did not); the DC time difference (0x092C)
+    converges below 1 us. Master and daemon run SCHED_FIFO, as real-time masters do."""
     import math
 
     cfg = tmp_path / "seg.yaml"
     cfg.write_text("slaves:\n  - device: tmc8670\n  - device: tmc8670\n    dc_drift_ppm: 25\n")
-    daemon_factory("--config", str(cfg))
+    daemon_factory("--config", str(cfg), "--rt-priority", "40")
     m = master_factory()
     assert m.config_init() == 2
     for s in m.slaves:
@@ -146,12 +150,19 @@ def test_csp_sine_with_dc_sync0(master_factory: Any, daemon_factory: Any, tmp_pa
         assert s._fprd(0x0981, 1)[0] & 0x03 == 0x03  # SYNC unit and SYNC0 active
     c = Cycle(m)
 
+    sync0_start = struct.unpack("<Q", m.slaves[0]._fprd(0x0990, 8))[0]
+
+    def sync0_phase() -> int:
+        """Where in the SYNC0 cycle the last frame passed the reference clock (ns)."""
+        return int((m.dc_time - sync0_start) % 1_000_000)
+
     def all_cycle(cw: int, pos: int) -> list[tuple[int, ...]]:
         for s in m.slaves:
             s.output = RX.pack(cw, pos, 0, 0)
         m.send_processdata()
         assert m.receive_processdata(RX_TIMEOUT_US) == 6
-        c.t_next += 0.001
+        # keep the frames mid-cycle between SYNC0 pulses, as SOEM's examples do (ec_sync)
+        c.t_next += 0.001 + 0.1 * (500_000 - sync0_phase()) / 1e9
         d = c.t_next - time.perf_counter()
         if d > 0:
             time.sleep(d)
@@ -172,19 +183,45 @@ def test_csp_sine_with_dc_sync0(master_factory: Any, daemon_factory: Any, tmp_pa
     v_max = 2 * math.pi * freq * amplitude  # counts/s
     # the demand is a staircase (one target per SYNC0): +- v_max * T_cycle on top
     bound = 4 * a_max / (w_pos * w_vel) + v_max * 0.001 + 5
-    errors = []
-    for k in range(5000):
-        target = round(amplitude * math.sin(2 * math.pi * freq * k / 1000))
-        rows = all_cycle(0x0F, target)
-        if k > 50:
-            errors.append(max(abs(r[5] if r[5] < 2**31 else r[5] - 2**32) for r in rows))
+    # A real-time master, as on a real machine (the daemon runs with --rt-priority 40).
+    old_policy, old_param = os.sched_getscheduler(0), os.sched_getparam(0)
+    os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(50))
+    errors, clean = [], []
+    misses = [0, 0]  # cycles out of phase, cycles not 1 ms after the previous one
+    on_time, dc_prev = 0, m.dc_time
+    try:
+        k = 0
+        # 5 s of sine, longer (up to 20 s) until 2500 cycles met the master's schedule
+        while k < 5000 or (len(clean) < 2500 and k < 20_000):
+            k += 1
+            target = round(amplitude * math.sin(2 * math.pi * freq * k / 1000))
+            rows = all_cycle(0x0F, target)
+            err = max(abs(r[5] if r[5] < 2**31 else r[5] - 2**32) for r in rows)
+            # The bound assumes one new target per SYNC0. When the master itself stalls (its
+            # frames reach the slaves late, then in a burst: seen in the DC system time of
+            # its frames) the demand jumps, on real drives too. Such cycles, and the
+            # settling time after them (50 cycles, > 2 position-loop time constants), are
+            # not held to the bound.
+            interval = m.dc_time - dc_prev
+            dc_prev = m.dc_time
+            in_phase = 150_000 <= sync0_phase() <= 850_000
+            regular = 500_000 <= interval <= 1_500_000
+            misses[0] += not in_phase
+            misses[1] += not regular
+            on_time = on_time + 1 if in_phase and regular else 0
+            if k > 50:
+                errors.append(err)
+                if on_time >= 50:
+                    clean.append(err)
+    finally:
+        os.sched_setscheduler(0, old_policy, old_param)
     assert all(r[0] & 0x6F == 0x27 for r in rows)
     ranked = sorted(errors)
-    p50 = ranked[len(ranked) // 2]
-    # The typical cycle tracks within the bound. The tail does not yet: when the host delays
-    # SYNC0 handling by milliseconds the error bursts (open item in docs/performance.md
-    # and the drive issue); this test asserts what holds reliably today.
-    assert p50 <= bound, (p50, bound, ranked[-10:])
+    assert ranked[len(ranked) // 2] <= bound, (bound, ranked[-10:])
+    assert len(clean) >= 2500, (
+        f"the master kept its cycle in {len(clean)} cycles (out of phase, irregular: {misses})"
+    )
+    assert max(clean) <= bound, (bound, sorted(clean)[-10:])
     diff = struct.unpack("<I", m.slaves[1]._fprd(0x092C, 4))[0] & 0x7FFFFFFF
     assert diff < 1000  # ns
 
