@@ -5,6 +5,7 @@ Ref: seed 004 §6-§9; CiA 402-2.
 
 from __future__ import annotations
 
+import gc
 import os
 import struct
 import time
@@ -112,12 +113,19 @@ def test_cst_example_torque_step(master_factory: Any, daemon_factory: Any) -> No
     enable(c)
     samples = []
     for _ in range(200):
+        t_send = time.perf_counter()
         _sw, _m, _p, torque, vel, _d = c.run(0x0F, torque=1000)
-        samples.append((time.perf_counter(), vel, torque))
+        samples.append((t_send, vel))
     assert torque == 1000
-    # acceleration from the velocity slope over the middle of the run (rpm/s -> rad/s^2)
-    (t1, v1, _), (t2, v2, _) = samples[50], samples[150]
-    accel = (v2 - v1) * 2 * 3.141592653589793 / 60 / (t2 - t1)
+    # acceleration: least-squares slope of velocity over time after the current loop has
+    # settled (rpm/s -> rad/s^2); the fit averages out the master's own timing jitter
+    pts = samples[20:]
+    t_mean = sum(t for t, _ in pts) / len(pts)
+    v_mean = sum(v for _, v in pts) / len(pts)
+    slope = sum((t - t_mean) * (v - v_mean) for t, v in pts) / sum(
+        (t - t_mean) ** 2 for t, _ in pts
+    )
+    accel = slope * 2 * 3.141592653589793 / 60
     # friction free: Kt * I / J; the default motor's Coulomb friction (2 mNm) lowers it ~4 %
     ideal = KT * 1.0 / J
     assert 0.90 * ideal <= accel <= 1.02 * ideal
@@ -127,8 +135,8 @@ def test_csp_sine_with_dc_sync0(master_factory: Any, daemon_factory: Any, tmp_pa
     """config_dc, SYNC0 at 1 ms, csp following a sine for 5 s on two drives (the second
     with a drifting clock), the master's frames kept mid-cycle from the DC time as SOEM's
     examples do. The following error (60F4h, mapped instead of 60FDh) stays within a bound
-    from the loop gains in every cycle where the master delivered one target per SYNC0
-    (and the 50 cycles after any where it did not); the DC time difference (0x092C)
+    from the loop gains, plus one demand step for each SYNC0 interval of the last 150 in
+    which the master did not deliver exactly one target; the DC time difference (0x092C)
     converges below 1 us. Master and daemon run SCHED_FIFO, as real-time masters do."""
     import math
 
@@ -183,45 +191,51 @@ def test_csp_sine_with_dc_sync0(master_factory: Any, daemon_factory: Any, tmp_pa
     v_max = 2 * math.pi * freq * amplitude  # counts/s
     # the demand is a staircase (one target per SYNC0): +- v_max * T_cycle on top
     bound = 4 * a_max / (w_pos * w_vel) + v_max * 0.001 + 5
-    # A real-time master, as on a real machine (the daemon runs with --rt-priority 40).
+    step = v_max * 0.001  # one demand step
+    # A real-time master, as on a real machine, below the daemon (--rt-priority 40): SOEM
+    # spins while it waits for the reply and must not hold off the daemon sending it.
     old_policy, old_param = os.sched_getscheduler(0), os.sched_getparam(0)
-    os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(50))
-    errors, clean = [], []
-    misses = [0, 0]  # cycles out of phase, cycles not 1 ms after the previous one
-    on_time, dc_prev = 0, m.dc_time
+    os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(30))
+    gc.collect()
+    gc.disable()  # no collector pause in the master's cycle
+    errors: list[int] = []
+    # The bound assumes one new target per SYNC0. When the master itself stalls or bursts
+    # (seen in the DC time of its frames: a SYNC0 interval with no frame, or two), the
+    # demand jumps, on real drives too. Each such interval in the last 150 cycles (7
+    # position-loop time constants) adds one demand step to the bound; cycles with more
+    # than 5 of them are not judged.
+    judged: list[tuple[int, float]] = []
+    anomalies: list[int] = []
+    window, max_anomalies = 150, 5
+    interval_prev = (m.dc_time - sync0_start) // 1_000_000
     try:
         k = 0
-        # 5 s of sine, longer (up to 20 s) until 2500 cycles met the master's schedule
-        while k < 5000 or (len(clean) < 2500 and k < 20_000):
+        # 5 s of sine, longer (up to 30 s) until 1000 cycles could be judged
+        while k < 5000 or (len(judged) < 1000 and k < 30_000):
             k += 1
             target = round(amplitude * math.sin(2 * math.pi * freq * k / 1000))
             rows = all_cycle(0x0F, target)
             err = max(abs(r[5] if r[5] < 2**31 else r[5] - 2**32) for r in rows)
-            # The bound assumes one new target per SYNC0. When the master itself stalls (its
-            # frames reach the slaves late, then in a burst: seen in the DC system time of
-            # its frames) the demand jumps, on real drives too. Such cycles, and the
-            # settling time after them (50 cycles, > 2 position-loop time constants), are
-            # not held to the bound.
-            interval = m.dc_time - dc_prev
-            dc_prev = m.dc_time
-            in_phase = 150_000 <= sync0_phase() <= 850_000
-            regular = 500_000 <= interval <= 1_500_000
-            misses[0] += not in_phase
-            misses[1] += not regular
-            on_time = on_time + 1 if in_phase and regular else 0
+            interval = (m.dc_time - sync0_start) // 1_000_000
+            anomalies.append(abs(interval - interval_prev - 1))
+            interval_prev = interval
             if k > 50:
                 errors.append(err)
-                if on_time >= 50:
-                    clean.append(err)
+            recent = sum(anomalies[-window:])
+            if k > window and recent <= max_anomalies:
+                judged.append((err, bound + step * recent))
     finally:
+        gc.enable()
         os.sched_setscheduler(0, old_policy, old_param)
     assert all(r[0] & 0x6F == 0x27 for r in rows)
     ranked = sorted(errors)
     assert ranked[len(ranked) // 2] <= bound, (bound, ranked[-10:])
-    assert len(clean) >= 2500, (
-        f"the master kept its cycle in {len(clean)} cycles (out of phase, irregular: {misses})"
+    assert len(judged) >= 1000, (
+        f"the master met its schedule in only {len(judged)} of {k} cycles "
+        f"({sum(1 for a in anomalies if a)} SYNC0 intervals without exactly one frame)"
     )
-    assert max(clean) <= bound, (bound, sorted(clean)[-10:])
+    over = [(e, round(b)) for e, b in judged if e > b]
+    assert not over, (len(judged), over[:10])
     diff = struct.unpack("<I", m.slaves[1]._fprd(0x092C, 4))[0] & 0x7FFFFFFF
     assert diff < 1000  # ns
 
