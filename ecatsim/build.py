@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 import structlog
@@ -17,6 +18,7 @@ from ecatsim.description import (
     default_description,
     load_description,
 )
+from ecatsim.device.drive import Drive
 from ecatsim.device.echo import EchoDevice
 from ecatsim.device.factory import make_coe_device
 from ecatsim.errors import UserError
@@ -41,6 +43,9 @@ log = structlog.get_logger("ecatsim.build")
 
 #: Distinct local clock start per slave, so DC offsets are meaningful (ns).
 DC_START_STEP_NS = 1_000_003_000
+
+#: the latch unit the drive's encoder index pulse is wired to (SII 0x0151 bit 6 = 0)
+INDEX_LATCH_UNIT = 1
 
 
 def mailbox_layout(image: bytes | bytearray) -> MailboxLayout:
@@ -157,6 +162,9 @@ def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
             fw.od = od
             fw.emergency = emcy
             fw.device = device
+            if isinstance(device, Drive):
+                # the board wires the encoder index to LATCH1 (decision D14)
+                device.index_output = partial(pdi.latch_input, INDEX_LATCH_UNIT)
             if foe:
                 server = FoeServer(fw.al_state_code, mbx.max_body, sc.foe_dir, sc.foe_password)
                 mbx.register(MbxType.FOE, server.handle)

@@ -293,7 +293,11 @@ class Segment:
         for esc in self.sync_escs:
             fw = self.firmware[esc.position] if self.firmware else None
             for k in range(MAX_SYNC0_CATCHUP + 1):
+                d1 = esc.dc.sync1_deadline()
                 d = esc.dc.sync0_deadline()
+                if d1 is not None and d1 <= t and (d is None or d1 < d):
+                    esc.sync1_tick()  # registers only: the firmware acts on SYNC0
+                    continue
                 if d is None or d > t:
                     break
                 if k == MAX_SYNC0_CATCHUP:

@@ -36,6 +36,8 @@ SW_MOTOR_ACTIVE = 0x4000
 SW_DIRECTION = 0x8000
 
 # CiA 402 error codes (603Fh) and 1001h bits. Ref: CiA 402-2 Annex; CiA 301 Table 21.
+TWO_PI = 2 * math.pi
+
 FAULTS: dict[str, tuple[int, int]] = {
     "overcurrent": (0x2310, 0x02),
     "following_error": (0x8611, 0x20),
@@ -81,6 +83,8 @@ class Drive:
         self.injected: set[str] = set()
         self.overcurrent_ma = 0.95 * self.params.max_current_ma
         self.peak_rpm = 0.0
+        #: the encoder index output (level, host time ns), wired to a latch input
+        self.index_output: Callable[[bool, int], None] | None = None
         #: called with (time, trace_row()) after every input update when tracing
         self.tracer: Callable[[int, tuple[int | str, ...]], None] | None = None
         self._init_od()
@@ -283,9 +287,27 @@ class Drive:
             self.t_ns += n * dt_ns  # de-energised at rest: nothing moves, skip exactly
             return
         n = min(n, 200_000)  # a long pause is caught up at most 20 s
-        for _ in range(n):
-            self._substep()
+        index = self.index_output
+        if index is None:
+            for _ in range(n):
+                self._substep()
+        else:
+            t = self.t_ns
+            for _ in range(n):
+                rev = math.floor(s.angle / TWO_PI)
+                self._substep()
+                t += dt_ns
+                if math.floor(s.angle / TWO_PI) != rev:
+                    self._index_pulse(index, t)
         self.t_ns += n * dt_ns if n < 200_000 else now_ns - self.t_ns
+
+    def _index_pulse(self, index: Callable[[bool, int], None], t_ns: int) -> None:
+        """The encoder's index (N) pulse, once per revolution at angle 0, as wide as one
+        count at the present speed. Ref: seed 004 §5.1.14 (encoder); decision D14."""
+        rpm = abs(self.servo.rpm) or 1.0
+        width_ns = max(1000, int(60e9 / (self.params.ppr * rpm)))
+        index(True, t_ns)
+        index(False, t_ns + width_ns)
 
     def _substep(self) -> None:
         s = self.servo

@@ -851,6 +851,11 @@ class Esc:
             self.set_al_event(regs.EV_SYNC0)
         self.ctx.timers_dirty = True
 
+    def sync1_tick(self) -> None:
+        """A due SYNC1 pulse: status, and AL event 0x0220.3 if mapped. Ref: §5.32 bit 3."""
+        if self.dc.sync1_pulse():
+            self.set_al_event(regs.EV_SYNC1)
+
     def _pr_dc_sync_status(self, ra: int, rs: int) -> None:
         """PDI read of 0x098E/0x098F clears AL event 0x0220.2/.3. Ref: Tables 108, 109."""
         self.clr_al_event(regs.EV_SYNC0 if ra == regs.DC_SYNC0_STATUS else regs.EV_SYNC1)
@@ -867,7 +872,21 @@ class Esc:
         """Ref: TMC8460 §5.50.5 Tables 114, 115."""
 
     def _er_dc_latch_time(self, ra: int, rs: int) -> None:
-        """ECAT read of a latch time clears its status flag. Ref: Tables 118-121 note."""
+        """ECAT read of a latch time clears its status flag and the DC latch event.
+        Ref: Tables 118-121 note; §5.24 Table 35 (0x0210.0)."""
         idx = (ra - regs.DC_LATCH0_POS) // 8
         status = regs.DC_LATCH0_STATUS + (idx >> 1)
         self.mem[status] &= ~(1 << (idx & 1)) & 0xFF
+        self._clr_ecat_event(regs.ECAT_EV_DC_LATCH)
+
+    def latch_input(self, unit: int, level: bool, host_ns: int) -> None:
+        """The LATCH ``unit`` pin is driven to ``level`` at host time ``host_ns``. The pin
+        is a latch input only when 0x0151 says so (bit 2: SYNC0/LATCH0, bit 6:
+        SYNC1/LATCH1; 0 = latch input). Ref: TMC8460 §5.28.2 Table 42, §5.50.5."""
+        m = self.mem
+        if m[regs.SYNC_LATCH_CONFIG] & (0x04 if unit == 0 else 0x40):
+            return  # the pin is a SYNC output
+        if bool(m[regs.DC_LATCH0_STATUS + unit] & 0x04) == level:
+            return  # no edge
+        if self.dc.latch_edge(unit, level, host_ns):
+            self._set_ecat_event(regs.ECAT_EV_DC_LATCH)

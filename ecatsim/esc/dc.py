@@ -26,8 +26,10 @@ class DcUnit:
         "local_ref",
         "mem",
         "next_sync0",
+        "next_sync1",
         "position",
         "rate_ppb",
+        "sync1_countdown",
         "t_ref",
         "turnaround_ns",
     )
@@ -54,6 +56,10 @@ class DcUnit:
         self.local_ref = start_ns
         #: system time of the next SYNC0 pulse, or None while the SYNC unit is off
         self.next_sync0: int | None = None
+        #: system time of the next SYNC1 pulse (None: none scheduled), and how many more
+        #: SYNC0 pulses until one is scheduled
+        self.next_sync1: int | None = None
+        self.sync1_countdown = 0
 
     def arrival_ns(self, frame_t_ns: int) -> int:
         """When a frame sent at ``frame_t_ns`` reaches this slave's port 0."""
@@ -142,13 +148,18 @@ class DcUnit:
         """
         m = self.mem
         act = m[regs.DC_ACTIVATION]
-        if act & 0x01 and act & 0x02:
+        self.next_sync1 = None
+        self.sync1_countdown = 1
+        m[regs.DC_ACTIVATION_STATUS] &= 0xFC
+        if act & 0x01 and act & 0x06:
             start = int(_U64.unpack_from(m, regs.DC_START_TIME)[0])
             self.next_sync0 = start
-            m[regs.DC_ACTIVATION_STATUS] |= 0x01  # first SYNC0 pulse pending
+            if act & 0x02:
+                m[regs.DC_ACTIVATION_STATUS] |= 0x01  # first SYNC0 pulse pending
+            if act & 0x04:
+                m[regs.DC_ACTIVATION_STATUS] |= 0x02  # first SYNC1 pulse pending
         else:
             self.next_sync0 = None
-            m[regs.DC_ACTIVATION_STATUS] &= 0xFE
 
     def sync0_deadline(self) -> int | None:
         """Host time of the next SYNC0 pulse."""
@@ -165,6 +176,11 @@ class DcUnit:
         if self.next_sync0 is None:
             return False
         cycle = int(_U32.unpack_from(m, regs.DC_SYNC0_CYCLE)[0])
+        if m[regs.DC_ACTIVATION] & 0x04:
+            self._schedule_sync1(self.next_sync0, cycle)
+        if not m[regs.DC_ACTIVATION] & 0x02:
+            self.next_sync0 = self.next_sync0 + cycle if cycle else None  # SYNC1 only
+            return False
         m[regs.DC_ACTIVATION_STATUS] &= 0xFE
         m[regs.DC_SYNC0_STATUS] |= 0x01
         if cycle == 0:
@@ -176,6 +192,57 @@ class DcUnit:
                 self.next_sync0 += (behind // cycle) * cycle
             _U64.pack_into(m, regs.DC_START_TIME, self.next_sync0 & MASK64)
         return bool(m[regs.SYNC_LATCH_CONFIG] & 0x08)
+
+    def _schedule_sync1(self, sync0_time: int, cycle0: int) -> None:
+        """SYNC1 follows SYNC0: every n-th SYNC0 pulse (n = 0x09A4 // 0x09A0, at least 1)
+        plus the remainder (0x09A4 mod 0x09A0) as a delay; with SYNC0 single shot, once
+        at SYNC0 + 0x09A4. Ref: TMC8460 §5.50.4 Table 113; decision DC5."""
+        cycle1 = int(_U32.unpack_from(self.mem, regs.DC_SYNC1_CYCLE)[0])
+        self.sync1_countdown -= 1
+        if self.sync1_countdown > 0:
+            return
+        if cycle0:
+            self.sync1_countdown = max(1, cycle1 // cycle0)
+            self.next_sync1 = sync0_time + cycle1 % cycle0
+        else:
+            self.next_sync1 = sync0_time + cycle1
+        _U64.pack_into(self.mem, regs.DC_NEXT_SYNC1, self.next_sync1 & MASK64)
+
+    def sync1_deadline(self) -> int | None:
+        """Host time of the next SYNC1 pulse."""
+        return None if self.next_sync1 is None else self.host_time_of(self.next_sync1)
+
+    def sync1_pulse(self) -> bool:
+        """Generate the due SYNC1 pulse; True if SYNC1 is mapped to 0x0220.3.
+        Ref: TMC8460 §5.50.4 Tables 105, 109; §5.28.2 Table 42 (0x0151 bit 7)."""
+        m = self.mem
+        self.next_sync1 = None
+        m[regs.DC_ACTIVATION_STATUS] &= 0xFD
+        m[regs.DC_SYNC1_STATUS] |= 0x01
+        return bool(m[regs.SYNC_LATCH_CONFIG] & 0x80)
+
+    # -- latch in unit ----------------------------------------------------------------
+
+    def latch_edge(self, unit: int, rising: bool, host_ns: int) -> bool:
+        """An edge on LATCH ``unit``'s input at host time ``host_ns``: capture the system
+        time (continuous mode: every edge; single event: the first until the time is read).
+        Returns True if a time was captured. Ref: TMC8460 §5.50.5 Tables 114-121.
+        """
+        m = self.mem
+        status = regs.DC_LATCH0_STATUS + unit
+        if rising:
+            m[status] |= 0x04  # pin state
+        else:
+            m[status] &= 0xFB
+        bit = 0x01 if rising else 0x02
+        single = m[regs.DC_LATCH0_CONTROL + unit] & bit
+        if single and m[status] & bit:
+            return False  # single event: only the first edge until read out
+        reg = regs.DC_LATCH0_POS + 16 * unit + (0 if rising else 8)
+        _U64.pack_into(m, reg, self.system_time(host_ns))
+        if single:
+            m[status] |= bit
+        return True
 
     def reset_filters(self) -> None:
         """Writing 0x0930/0x0934 resets the difference and speed counter diff. Ref: Table 99."""

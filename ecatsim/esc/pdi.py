@@ -84,6 +84,11 @@ class Pdi:
     def position(self) -> int:
         return self._esc.position
 
+    def latch_input(self, unit: int, level: bool, host_ns: int) -> None:
+        """Drive the LATCH ``unit`` input pin (the application's signal, e.g. an encoder
+        index pulse) at host time ``host_ns``. Ref: TMC8460 §5.50.5."""
+        self._esc.latch_input(unit, level, host_ns)
+
     def operational(self) -> bool:
         """DL status 0x0110.0: EEPROM loaded, PDI operational. Ref: §5.19 Table 30."""
         return bool(self._esc.mem[regs.DL_STATUS] & 0x01)

@@ -89,3 +89,72 @@ def test_a_late_daemon_keeps_the_order_of_frames_and_pulses() -> None:
     b.clock.t = b.t0 + 2 * MS + 500_000
     assert b.lrw(333, b.clock.t) == 222
     assert b.seg.sync0_ticks == 3
+
+
+def sys_time(b: DcBench) -> int:
+    return b.seg.escs[0].dc.system_time(b.clock.t)
+
+
+def test_sync1_after_sync0_by_its_cycle_time() -> None:
+    """SOEM's dc_sync01: SYNC1 cycle time below the SYNC0 cycle is a shift after each
+    SYNC0; a multiple of it makes SYNC1 every n-th SYNC0 (decision DC5)."""
+    b = DcBench()
+    t = TinyMaster(b.seg)
+    m = b.seg.escs[0].mem
+    t.apwr(0, 0x0981, b"\x00")
+    t.apwr(0, 0x09A4, struct.pack("<I", 300_000))
+    t.apwr(0, 0x0981, b"\x07")
+    assert t.aprd(0, 0x0984, 1).data == b"\x03"  # first SYNC0 and SYNC1 pending
+    b.at(b.t0)
+    assert struct.unpack("<Q", t.aprd(0, 0x0998, 8).data)[0] == b.start + 300_000
+    assert t.aprd(0, 0x098F, 1).data == b"\x00" and t.aprd(0, 0x0984, 1).data == b"\x02"
+    b.at(b.t0 + 300_000)
+    assert t.aprd(0, 0x098F, 1).data == b"\x01" and t.aprd(0, 0x0984, 1).data == b"\x00"
+    # every second SYNC0
+    t.apwr(0, 0x0981, b"\x00")
+    m[0x098F] = 0
+    start = sys_time(b) + 2 * MS
+    t.apwr(0, 0x09A4, struct.pack("<I", 2 * MS))
+    t.apwr(0, 0x0990, struct.pack("<Q", start))
+    t.apwr(0, 0x0981, b"\x07")
+    t0 = b.seg.escs[0].dc.sync0_deadline()
+    assert t0 is not None
+    b.at(t0)
+    assert struct.unpack("<Q", t.aprd(0, 0x0998, 8).data)[0] == start  # with this SYNC0
+    b.at(t0 + 1)
+    assert m[0x098F] == 0x01
+    m[0x098F] = 0
+    b.at(t0 + MS + 1)
+    assert m[0x098F] == 0x00  # not with the next SYNC0 ...
+    b.at(t0 + 2 * MS + 1)
+    assert m[0x098F] == 0x01  # ... but with the one after
+
+
+def test_latch_single_event_and_continuous() -> None:
+    """LATCH1 (SII 0x0151 bit 6 = 0: a latch input) captures the system time of edges.
+    Ref: TMC8460 §5.50.5 Tables 114-121."""
+    b = DcBench()
+    t = TinyMaster(b.seg)
+    esc = b.seg.escs[0]
+    assert t.aprd(0, 0x0151, 1).data[0] & 0x40 == 0
+    t.apwr(0, 0x09A9, b"\x01")  # LATCH1 positive edge: single event
+    b.clock.t += 1000
+    esc.latch_input(1, True, b.clock.t)
+    first = sys_time(b)
+    b.clock.t += 5000
+    esc.latch_input(1, False, b.clock.t)
+    neg = sys_time(b)
+    esc.latch_input(1, True, b.clock.t + 7000)  # ignored: single event, not read yet
+    assert t.aprd(0, 0x09AF, 1).data == b"\x05"  # event positive edge, pin high
+    assert esc.mem[0x0210] & 0x01  # ECAT event: DC latch
+    assert struct.unpack("<Q", t.aprd(0, 0x09C8, 8).data)[0] == neg  # continuous: latest
+    assert struct.unpack("<Q", t.aprd(0, 0x09C0, 8).data)[0] == first
+    assert t.aprd(0, 0x09AF, 1).data == b"\x04"  # read out: the event flag is cleared
+    assert not esc.mem[0x0210] & 0x01
+    esc.latch_input(1, False, b.clock.t + 8000)
+    esc.latch_input(1, True, b.clock.t + 9000)  # the next single event
+    assert t.aprd(0, 0x09AF, 1).data == b"\x05"
+    assert struct.unpack("<Q", t.aprd(0, 0x09C0, 8).data)[0] == esc.dc.system_time(b.clock.t + 9000)
+    # LATCH0's pin is the SYNC0 output (0x0151 bit 2 = 1): no latch input there
+    esc.latch_input(0, True, b.clock.t)
+    assert t.aprd(0, 0x09AE, 1).data == b"\x00"

@@ -6,6 +6,7 @@ Ref: seed 004 §6-§9; CiA 402-2.
 from __future__ import annotations
 
 import gc
+import itertools
 import os
 import struct
 import time
@@ -312,3 +313,51 @@ def test_homing_on_index_pulse_then_current_position(
     for _ in range(200):
         sw, _m, pos, _t, vel, _d = c.run(0x1F)
     assert abs(pos - 1000) <= 40 and abs(vel) < 5  # home offset at the index, stopped there
+
+
+def test_index_pulse_latched_and_sync1(master_factory: Any, daemon_factory: Any) -> None:
+    """The encoder index pulse drives LATCH1 (0x09A8-0x09CF): at 600 rpm it comes every
+    100 ms, and the latched system times say so. SYNC1 follows SYNC0 by its cycle time
+    (SOEM's dc_sync01). Ref: TMC8460 §5.50.4-5.50.5; decisions D14, DC5."""
+    daemon_factory()
+    m = master_factory()
+    assert m.config_init() == 1
+    s = m.slaves[0]
+    s.sdo_write(0x6060, 0, struct.pack("<b", 3))
+    s.sdo_write(0x6083, 0, struct.pack("<I", 6000))
+    assert m.config_dc()
+    s.dc_sync(True, 1_000_000, 0, 250_000)
+    to_op(m)
+    assert s._fprd(0x0981, 1)[0] == 0x07  # SYNC unit, SYNC0, SYNC1
+    c = Cycle(m)
+    for _ in range(200):  # SOEM starts SYNC0 100 ms after dc_sync
+        c.run(0x00)
+    enable(c)
+    for _ in range(400):
+        vel = c.run(0x0F, vel=600)[4]
+    assert abs(vel - 600) <= 5
+    s._fpwr(0x09A9, b"\x00")  # LATCH1: continuous on both edges
+    times = []
+    for _ in range(8):  # 320 ms: at least 3 turns
+        for _ in range(40):
+            c.run(0x0F, vel=600)
+        times.append(struct.unpack("<Q", s._fprd(0x09C0, 8))[0])
+    distinct = sorted(set(times))
+    assert len(distinct) >= 3, times
+    for a, b in itertools.pairwise(distinct):
+        revs = (b - a) / 100e6
+        assert abs(revs - round(revs)) < 0.01 and round(revs) >= 1, (a, b)  # 100 ms a turn
+    # single event: the first edge is kept until the time is read
+    s._fpwr(0x09A9, b"\x01")
+    for _ in range(150):
+        c.run(0x0F, vel=600)
+    status = s._fprd(0x09AF, 1)[0]
+    assert status & 0x01
+    first = struct.unpack("<Q", s._fprd(0x09C0, 8))[0]
+    assert s._fprd(0x09AF, 1)[0] & 0x01 == 0  # read out: cleared
+    assert first > distinct[-1]
+    # SYNC1: 250 us after each SYNC0
+    next0 = struct.unpack("<Q", s._fprd(0x0990, 8))[0]
+    next1 = struct.unpack("<Q", s._fprd(0x0998, 8))[0]
+    assert (next1 - next0) % 1_000_000 == 250_000
+    assert s._fprd(0x098F, 1)[0] & 0x01  # SYNC1 has fired
