@@ -37,6 +37,8 @@ SW_DIRECTION = 0x8000
 
 # CiA 402 error codes (603Fh) and 1001h bits. Ref: CiA 402-2 Annex; CiA 301 Table 21.
 TWO_PI = 2 * math.pi
+#: closed current loop time constant the default 2041h gains give (s)
+CURRENT_LOOP_TAU = 2.5e-4
 
 FAULTS: dict[str, tuple[int, int]] = {
     "overcurrent": (0x2310, 0x02),
@@ -112,6 +114,12 @@ class Drive:
             self._set(0x2020, self.params.pole_pairs, 2)
         if 0x2081 in self.od:
             self._set(0x2081, self.params.ppr, 2)
+        if 0x2041 in self.od and self._v(0x2041, 5) == 0:
+            # current loops: pole-zero cancellation for a 250 us closed loop (decision D15)
+            p = self.params
+            kp, ki = p.inductance / CURRENT_LOOP_TAU, p.resistance / CURRENT_LOOP_TAU
+            for sub, value in ((5, kp * 256), (6, ki), (7, kp * 256), (8, ki)):
+                self._set(0x2041, min(32767, round(value)), sub)
         if 0x2042 in self.od and self._v(0x2042, 3) == 0:
             self._set(0x2042, round(self.servo.gains.vel_kp * 256), 3)
             self._set(0x2042, round(self.servo.gains.vel_ki), 4)
@@ -122,6 +130,12 @@ class Drive:
     def _load_gains(self) -> None:
         """Map 2042h/2043h to the loops (see docs/decisions.md D5)."""
         g = self.servo.gains
+        if 0x2041 in self.od:
+            g.cur_kp = self._v(0x2041, 5) / 256.0
+            g.cur_ki = float(self._v(0x2041, 6))
+            g.flux_kp = self._v(0x2041, 7) / 256.0
+            g.flux_ki = float(self._v(0x2041, 8))
+            self.servo.id_ref_ma = float(self._v(0x2041, 3))
         g.vel_kp = self._v(0x2042, 3) / 256.0
         g.vel_ki = float(self._v(0x2042, 4))
         g.pos_kp = self._v(0x2043, 4) / 4096.0
@@ -495,7 +509,11 @@ class Drive:
         self._set(0x6077, round(s.iq_ma))
         self._set(0x6074, round(s.iq_ref_ma))
         self._set(0x60F4, round(self.p_demand - pos))
+        self._set(0x2041, round(s.iq_ref_ma), 1)
         self._set(0x2041, round(s.iq_ma), 2)
+        self._set(0x2041, round(s.id_ma), 4)
+        self._set(0x2041, round(s.iq_ref_ma - s.iq_ma), 9)
+        self._set(0x2041, round(s.iq_integ * 1000.0), 10)  # mV
         self._set(0x2042, round(rpm), 2)
         self._set(0x2043, pos, 3)
         self._set(0x2081, pos % self.params.ppr, 3)

@@ -1,10 +1,12 @@
 """Simulated servo: motor and load, cascaded loops, encoder; integrated on fixed substeps.
 
-Mechanics: J dw/dt = Kt*iq - B*w - Tc*sign(w) - T_load. The FOC current loop is a
-first-order lag of the torque current (iq) towards its reference; the velocity loop is a PI
-(2042h), the position loop a P (2043h) with velocity feed-forward. Limits: 2050h, 6072h,
-607Fh. Every substep has the same length, so the trajectory does not depend on how often
-the master sends frames. Ref: seed 004 §5.1.7-5.1.10, §5.1.14; CiA 402-2 §10-§12.
+Mechanics: J dw/dt = Kt*iq - B*w - Tc*sign(w) - T_load. The FOC current loops (torque iq
+and flux id, 2041h) are digital PIs at the substep rate driving the winding, an R-L circuit
+with back EMF Ke*w (Ke = Kt) integrated exactly over each substep (zero-order hold), the
+voltage limited by the supply; the velocity loop is a PI (2042h), the position loop a P
+(2043h) with velocity feed-forward. Limits: 2050h, 6072h, 607Fh. Every substep has the
+same length, so the trajectory does not depend on how often the master sends frames.
+Ref: seed 004 §5.1.7-5.1.10, §5.1.14; CiA 402-2 §10-§12.
 """
 
 from __future__ import annotations
@@ -28,7 +30,9 @@ class MotorParams:
     coulomb: float = 2.0e-3  # Nm
     load: float = 0.0  # Nm, external, opposing positive rotation
     ppr: int = 4096  # encoder counts per revolution (2081h:02)
-    current_tau: float = 2.5e-4  # s, closed current loop time constant
+    resistance: float = 1.0  # ohm, winding (phase)
+    inductance: float = 1.0e-3  # H, winding (d and q alike)
+    supply_voltage: float = 48.0  # V, the most the current loop can apply
     max_current_ma: int = 20000
     substep: float = 1.0e-4  # s
 
@@ -37,6 +41,10 @@ class MotorParams:
 class Gains:
     """Loop gains in engineering units (mapped from 2041h-2043h by the drive)."""
 
+    cur_kp: float = 4.0  # V per A (2041h:05 / 256; L / 250 us)
+    cur_ki: float = 4000.0  # V per A*s (2041h:06; R / 250 us)
+    flux_kp: float = 4.0  # V per A (2041h:07 / 256)
+    flux_ki: float = 4000.0  # V per A*s (2041h:08)
     vel_kp: float = 12.5  # mA per rpm
     vel_ki: float = 960.0  # mA per rpm*s
     pos_kp: float = 0.7  # rpm per count
@@ -47,9 +55,14 @@ class Servo:
 
     __slots__ = (
         "angle",
+        "decay",
         "gains",
         "i_limit_ma",
+        "id_integ",
+        "id_ma",
+        "id_ref_ma",
         "integ",
+        "iq_integ",
         "iq_ma",
         "iq_ref_ma",
         "omega",
@@ -64,7 +77,13 @@ class Servo:
         self.omega = 0.0  # rad/s
         self.iq_ma = 0.0
         self.iq_ref_ma = 0.0
+        self.id_ma = 0.0
+        self.id_ref_ma = 0.0  # flux target (2041h:03)
+        self.iq_integ = 0.0  # V, current PI integrators
+        self.id_integ = 0.0
         self.integ = 0.0
+        # R-L winding over one substep: i' = i*decay + (1 - decay) * v / R
+        self.decay = math.exp(-params.resistance * params.substep / params.inductance)
         self.i_limit_ma = float(params.max_current_ma)
         self.vel_limit_rpm = 1e9
 
@@ -87,6 +106,7 @@ class Servo:
     # ----------------------------------------------------------------- control
     def reset_integrators(self) -> None:
         self.integ = 0.0
+        self.iq_integ = self.id_integ = 0.0
 
     def current_from_velocity(self, v_ref_rpm: float, ff_ma: float = 0.0) -> float:
         """Velocity PI (anti-windup by clamping) -> torque current reference in mA."""
@@ -104,16 +124,40 @@ class Servo:
         """Position P with velocity feed-forward -> velocity reference in rpm."""
         return self.gains.pos_kp * (p_ref - self.angle / TWO_PI * self.p.ppr) + v_ff_rpm
 
+    def _current_loop(
+        self, ref_ma: float, i_ma: float, integ: float, kp: float, ki: float, emf: float
+    ) -> tuple[float, float]:
+        """One substep of a current PI (anti-windup by clamping at the supply voltage) on
+        the R-L winding with back EMF ``emf``: (new current mA, new integrator V).
+        Ref: seed 004 §5.1.7 (2041h); decision D15."""
+        p = self.p
+        err = (ref_ma - i_ma) / 1000.0  # A
+        v = kp * err + integ + emf  # the back EMF is fed forward (decoupled)
+        vmax = p.supply_voltage
+        if -vmax < v < vmax:
+            integ += ki * err * p.substep  # anti-windup: hold while saturated
+        v = max(-vmax, min(vmax, v))
+        i = i_ma / 1000.0
+        i = i * self.decay + (1.0 - self.decay) * (v - emf) / p.resistance
+        return i * 1000.0, integ
+
     def step(self, iq_ref_ma: float) -> None:
         """One substep: current loop lag, then mechanics (semi-implicit Euler)."""
         p = self.p
         dt = p.substep
         lim = self.i_limit_ma
         self.iq_ref_ma = max(-lim, min(lim, iq_ref_ma))
-        a = 1.0 - math.exp(-dt / p.current_tau) if p.current_tau > 0 else 1.0
-        self.iq_ma += (self.iq_ref_ma - self.iq_ma) * a
-        if self.iq_ref_ma == 0.0 and abs(self.iq_ma) < 1e-3:
-            self.iq_ma = 0.0
+        g = self.gains
+        emf = p.kt * self.omega  # V, Ke = Kt
+        self.iq_ma, self.iq_integ = self._current_loop(
+            self.iq_ref_ma, self.iq_ma, self.iq_integ, g.cur_kp, g.cur_ki, emf
+        )
+        if self.id_ref_ma or self.id_ma:
+            self.id_ma, self.id_integ = self._current_loop(
+                self.id_ref_ma, self.id_ma, self.id_integ, g.flux_kp, g.flux_ki, 0.0
+            )
+        if self.iq_ref_ma == 0.0 and abs(self.iq_ma) < 1e-3 and self.omega == 0.0:
+            self.iq_ma = self.iq_integ = 0.0
         drive = p.kt * self.iq_ma / 1000.0 - p.load - p.viscous * self.omega
         if self.omega > 1e-9:
             drive -= p.coulomb
