@@ -12,12 +12,12 @@ import struct
 import time
 from typing import Any
 
+import pysoem
 import pytest
 
-from tests.integration.test_esc_master import to_op
+from tests.integration.test_esc_master import RX_TIMEOUT_US, to_op
 
 pytestmark = pytest.mark.integration
-from tests.integration.test_esc_master import RX_TIMEOUT_US  # noqa: E402
 
 RX = struct.Struct("<HihI")  # 6040, 607A, 6071, 60FF
 TX = struct.Struct("<HbihiI")  # 6041, 6061, 6064, 6077, 606C, 60FD
@@ -361,3 +361,33 @@ def test_index_pulse_latched_and_sync1(master_factory: Any, daemon_factory: Any)
     next1 = struct.unpack("<Q", s._fprd(0x0998, 8))[0]
     assert (next1 - next0) % 1_000_000 == 250_000
     assert s._fprd(0x098F, 1)[0] & 0x01  # SYNC1 has fired
+
+
+def test_master_stops_cycling_watchdog_stops_the_motor(
+    master_factory: Any, daemon_factory: Any
+) -> None:
+    """Loss of the master in OP (seed 004 §3.2): the process-data watchdog expires, the
+    slave leaves OP with 0x001B, the drive drops to switch on disabled and the motor runs
+    down to standstill (watched in the inputs the master reads again in SAFEOP)."""
+    c = start(master_factory, daemon_factory, 3, x6083=10000)
+    m, s = c.m, c.s
+    enable(c)
+    for _ in range(300):
+        vel = c.run(0x0F, vel=1000)[4]
+    assert abs(vel - 1000) <= 10
+    time.sleep(0.25)  # the master is gone for 2.5x the 100 ms watchdog
+    m.read_state()
+    assert s.state == pysoem.SAFEOP_STATE | pysoem.STATE_ERROR
+    assert s.al_status == 0x001B
+    speeds = []
+    for _ in range(3000):
+        m.send_processdata()
+        m.receive_processdata(RX_TIMEOUT_US)
+        sw, _m, _p, _t, vel, _d = TX.unpack(bytes(s.input))
+        speeds.append(vel)
+        if vel == 0:
+            break
+        time.sleep(0.001)
+    assert sw & 0x4F == 0x40  # switch on disabled: no torque
+    assert speeds[-1] == 0, speeds[-5:]  # at standstill
+    assert all(b <= a for a, b in itertools.pairwise(speeds))  # slowing down all the way
