@@ -1,9 +1,11 @@
-"""Demo master (pysoem): find the drives, bring them to OP, enable the CiA 402 drive, make a
-profile-position move and a velocity run, and print a short table of what came back."""
+"""Demo master (pysoem): find the drives, start distributed clocks (SYNC0 every cycle), bring
+them to OP, enable the CiA 402 drive, make a profile-position move and then follow a sine in
+cyclic synchronous position mode, and print short tables of what came back."""
 
 from __future__ import annotations
 
 import argparse
+import math
 import struct
 import sys
 import time
@@ -12,7 +14,7 @@ import pysoem
 
 RX = struct.Struct("<HihI")  # 6040 controlword, 607A target position, 6071 torque, 60FF velocity
 TX = struct.Struct("<HbihiI")  # 6041, 6061, 6064 position, 6077 torque, 606C velocity, 60FD
-PP, PV = 1, 3
+PP, CSP = 1, 8
 
 
 class Bus:
@@ -67,6 +69,7 @@ def main() -> int:
     ap.add_argument("--iface", default="ecat0")
     ap.add_argument("--period-us", type=int, default=1000)
     ap.add_argument("--target", type=int, default=50_000, help="pp target (encoder counts)")
+    ap.add_argument("--amplitude", type=int, default=20_000, help="csp sine (counts)")
     args = ap.parse_args()
 
     master = pysoem.Master()
@@ -83,8 +86,13 @@ def main() -> int:
             s.sdo_write(0x6081, 0, struct.pack("<I", 1000))  # profile velocity, rpm
             s.sdo_write(0x6083, 0, struct.pack("<I", 4000))  # acceleration, rpm/s
             s.sdo_write(0x6084, 0, struct.pack("<I", 4000))
+        master.config_dc()
+        for s in master.slaves:
+            s.dc_sync(True, args.period_us * 1000)
         bus = Bus(master, args.period_us)
         to_op(master, bus)
+        for _ in range(150):  # SOEM starts SYNC0 100 ms after dc_sync
+            bus.cycle(0)
         print(f"OP: expected WKC {master.expected_wkc}; pp move to {args.target} counts")
         enable(bus, args.target)
         print(f"{'t [ms]':>7} {'statusword':>10} {'position':>9} {'velocity':>9}")
@@ -97,13 +105,27 @@ def main() -> int:
             if sw & 0x0400 and i > 10:
                 print(f"{bus.cycles - t0:7d} {sw:#10x} {pos:9d} {vel:9d}  target reached")
                 break
-        for s in master.slaves:  # mode switch over SDO while enabled, then run at 600 rpm
-            s.sdo_write(0x6060, 0, struct.pack("<b", PV))
-        for _ in range(600):
-            sw, _m, pos, _t, vel, _d = bus.cycle(0x0F, vel=600)
-        print(f"pv: velocity {vel} rpm at position {pos}")
-        for _ in range(400):
-            bus.cycle(0x0F, vel=0)
+        # csp: a sine around where the move ended, one target per SYNC0
+        for s in master.slaves:  # mode switch over SDO while enabled
+            s.sdo_write(0x6060, 0, struct.pack("<b", CSP))
+        amplitude, freq = args.amplitude, 1.0
+        centre = bus.cycle(0x0F, pos)[2]
+        print(f"csp: sine of {amplitude} counts at {freq:g} Hz, DC SYNC0 every cycle")
+        print(f"{'t [ms]':>7} {'target':>9} {'position':>9} {'velocity':>9} {'error':>6}")
+        n = int(2.0 / (args.period_us / 1e6))
+        worst = 0
+        for k in range(n + 1):
+            t_s = k * args.period_us / 1e6
+            target = centre + round(amplitude * math.sin(2 * math.pi * freq * t_s))
+            sw, _m, pos, _t, vel, _d = bus.cycle(0x0F, target)
+            if k > 20:
+                worst = max(worst, abs(target - pos))
+            if k % 250 == 0:
+                err = target - pos
+                print(f"{round(t_s * 1000):7d} {target:9d} {pos:9d} {vel:9d} {err:6d}")
+        print(f"csp: largest distance to the newest target {worst} counts")
+        for _ in range(50):
+            bus.cycle(0x0F, centre)
         bus.cycle(0x06)
         rtts = sorted(bus.rtts)
         print(

@@ -16,7 +16,7 @@ from ecatsim.device import cia402
 from ecatsim.device.cia402 import Command, PdsState
 from ecatsim.device.servo import RPM, MotorParams, Profile, Servo, ramp
 from ecatsim.slave.al import AlState
-from ecatsim.slave.od import ObjectDictionary
+from ecatsim.slave.od import Entry, ObjectDictionary
 
 log = structlog.get_logger("ecatsim.drive")
 
@@ -37,6 +37,7 @@ SW_DIRECTION = 0x8000
 
 # CiA 402 error codes (603Fh) and 1001h bits. Ref: CiA 402-2 Annex; CiA 301 Table 21.
 TWO_PI = 2 * math.pi
+_MISSING = object()
 #: closed current loop time constant the default 2041h gains give (s)
 CURRENT_LOOP_TAU = 2.5e-4
 
@@ -61,6 +62,11 @@ class Drive:
         emcy_clear: Callable[[], None] | None = None,
     ) -> None:
         self.od = od
+        self._entries: dict[int, tuple[Entry, int, int] | None] = {}
+        # OD values the substeps use, read once per advance() (see _snapshot)
+        self.q_60ff = self.q_6083 = self.q_6084 = self.q_607a = self.q_60b0 = 0
+        self.q_60b1 = self.q_6071 = self.q_60b2 = self.q_6065 = self.q_6085 = 0
+        self.q_605a = 0
         self.params = params or MotorParams()
         self.servo = Servo(self.params)
         self.profile = Profile()
@@ -92,21 +98,37 @@ class Drive:
         self._init_od()
 
     # ----------------------------------------------------------------- OD helpers
-    def _v(self, index: int, sub: int = 0) -> int:
-        if index not in self.od:
-            return 0
-        v = self.od.value(index, sub)
-        return int(v) if not isinstance(v, str | bytes) else 0
-
-    def _set(self, index: int, value: int, sub: int = 0) -> None:
+    def _entry(self, index: int, sub: int) -> tuple[Entry, int, int] | None:
+        """The OD entry (with its integer range), looked up once: the OD's entries are
+        fixed objects, only their values change."""
+        key = (index << 8) | sub
+        hit = self._entries.get(key, _MISSING)
+        if hit is not _MISSING:
+            return hit  # type: ignore[return-value]
+        found: tuple[Entry, int, int] | None = None
         if index in self.od:
             e = self.od.entry(index, sub)
             bits = e.bits
             if e.dtype.startswith("INTEGER"):
-                lo, hi = -(1 << (bits - 1)), (1 << (bits - 1)) - 1
+                found = (e, -(1 << (bits - 1)), (1 << (bits - 1)) - 1)
             else:
-                lo, hi = 0, (1 << bits) - 1
-            e.value = max(lo, min(hi, int(value)))
+                found = (e, 0, (1 << bits) - 1)
+        self._entries[key] = found
+        return found
+
+    def _v(self, index: int, sub: int = 0) -> int:
+        hit = self._entry(index, sub)
+        if hit is None:
+            return 0
+        v = hit[0].value
+        return v if isinstance(v, int) else 0
+
+    def _set(self, index: int, value: int, sub: int = 0) -> None:
+        hit = self._entry(index, sub)
+        if hit is not None:
+            e, lo, hi = hit
+            v = int(value)
+            e.value = lo if v < lo else hi if v > hi else v
 
     def _init_od(self) -> None:
         if 0x2020 in self.od:
@@ -301,6 +323,7 @@ class Drive:
             self.t_ns += n * dt_ns  # de-energised at rest: nothing moves, skip exactly
             return
         n = min(n, 200_000)  # a long pause is caught up at most 20 s
+        self._snapshot()
         index = self.index_output
         if index is None:
             for _ in range(n):
@@ -323,6 +346,15 @@ class Drive:
         index(True, t_ns)
         index(False, t_ns + width_ns)
 
+    def _snapshot(self) -> None:
+        """The OD values the substeps use. They only change between advance() calls (PDO
+        outputs and SDO writes are applied after advancing), so read them once."""
+        v = self._v
+        self.q_60ff, self.q_6083, self.q_6084 = v(0x60FF), v(0x6083), v(0x6084)
+        self.q_607a, self.q_60b0, self.q_60b1 = v(0x607A), v(0x60B0), v(0x60B1)
+        self.q_6071, self.q_60b2, self.q_6065 = v(0x6071), v(0x60B2), v(0x6065)
+        self.q_6085, self.q_605a = v(0x6085), v(0x605A)
+
     def _substep(self) -> None:
         s = self.servo
         dt = self.params.substep
@@ -333,13 +365,13 @@ class Drive:
         if st == PdsState.OPERATION_ENABLED:
             iq = self._mode_substep(dt)
         elif st in (PdsState.QUICK_STOP_ACTIVE, PdsState.FAULT_REACTION_ACTIVE):
-            decel = float(self._v(0x6085) or 2000)
+            decel = float(self.q_6085 or 2000)
             self.v_demand_rpm = ramp(self.v_demand_rpm, 0.0, decel, decel, dt)
             iq = s.current_from_velocity(self.v_demand_rpm)
             if self.v_demand_rpm == 0.0 and abs(s.rpm) < 1.0:
                 if st == PdsState.FAULT_REACTION_ACTIVE:
                     self.state = PdsState.FAULT  # transition 14
-                elif self._v(0x605A) < 5:
+                elif self.q_605a < 5:
                     self.state = PdsState.SWITCH_ON_DISABLED  # transition 12
         s.step(iq)
         if abs(s.iq_ma) > self.overcurrent_ma and self.state in cia402.POWERED:
@@ -366,21 +398,21 @@ class Drive:
         if mode not in (PP, CSP):
             self.p_demand = s.angle / (2 * math.pi) * self.params.ppr  # follows the actual
         if mode == PV:
-            target = 0.0 if halt else float(self._v(0x60FF))
-            acc = float(self._v(0x6083) or 1)
-            dec = float(self._v(0x6084) or 1)
+            target = 0.0 if halt else float(self.q_60ff)
+            acc = float(self.q_6083 or 1)
+            dec = float(self.q_6084 or 1)
             self.v_demand_rpm = ramp(self.v_demand_rpm, target, acc, dec, dt)
             return s.current_from_velocity(self.v_demand_rpm)
         if mode == CSV:
-            v = float(self._v(0x60FF) + self._v(0x60B1))
+            v = float(self.q_60ff + self.q_60b1)
             self.v_demand_rpm = v
             return s.current_from_velocity(v)
         if mode == CSP:
-            self.p_demand = float(self._v(0x607A) + self._v(0x60B0))
+            self.p_demand = float(self.q_607a + self.q_60b0)
             self._check_following()
             return s.current_from_velocity(s.velocity_from_position(self.p_demand, self.v_ff_rpm))
         if mode == CST:
-            return float(self._v(0x6071) + self._v(0x60B2))
+            return float(self.q_6071 + self.q_60b2)
         if mode == HM:
             return self._homing(dt)
         return s.current_from_velocity(0.0)
@@ -447,7 +479,7 @@ class Drive:
         self._hold_here()
 
     def _check_following(self) -> None:
-        window = self._v(0x6065)
+        window = self.q_6065
         if not window or window == 0xFFFFFFFF:
             return
         err = self.p_demand - self.servo.angle / (2 * math.pi) * self.params.ppr
