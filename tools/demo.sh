@@ -27,7 +27,8 @@ ip link set "$SLAVE_IF" up
 OUT=${ECATSIM_DEMO_OUT:-demo-out}
 mkdir -p "$OUT"
 LOG="$OUT/daemon.log"
-.venv/bin/ecatsim run --iface "$SLAVE_IF" --trace "$OUT/trace.csv" "$@" >"$LOG" 2>&1 &
+.venv/bin/ecatsim run --iface "$SLAVE_IF" --rt-priority 40 --trace "$OUT/trace.csv" "$@" \
+    >"$LOG" 2>&1 &
 DAEMON=$!
 trap 'kill $DAEMON 2>/dev/null || true; wait $DAEMON 2>/dev/null || true' EXIT
 for _ in $(seq 100); do

