@@ -8,6 +8,7 @@ seed 004 §2.1 (max. 9 mapping entries), §4.1.7-4.1.11.
 
 from __future__ import annotations
 
+import struct
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -40,13 +41,54 @@ class Field:
 
 
 @dataclass(frozen=True, slots=True)
+class Codec:
+    """A whole process image as one struct: the mapped entries in order, padding skipped."""
+
+    st: struct.Struct
+    entries: tuple[Entry, ...]
+
+
+@dataclass(frozen=True, slots=True)
 class Plan:
-    """The compiled process images."""
+    """The compiled process images (with a one-struct codec where every field allows it)."""
 
     rx: tuple[Field, ...]
     tx: tuple[Field, ...]
     rx_size: int
     tx_size: int
+    rx_codec: Codec | None = None
+    tx_codec: Codec | None = None
+
+
+#: struct codes of the integer types, by (signed, bits). Ref: ETG.1000.6 Table 64.
+_CODES = {
+    (True, 8): "b", (False, 8): "B", (True, 16): "h", (False, 16): "H",
+    (True, 32): "i", (False, 32): "I", (True, 64): "q", (False, 64): "Q",
+}  # fmt: skip
+
+
+def codec(fields: tuple[Field, ...], size: int) -> Codec | None:
+    """One struct for an image of byte-aligned integer fields; None if any field is of
+    another type (strings, REAL32, 24-bit types: the per-entry path handles those)."""
+    fmt, pos, entries = ["<"], 0, []
+    for f in fields:
+        if f.offset > pos:
+            fmt.append(f"{f.offset - pos}x")
+        if f.entry is None:
+            fmt.append(f"{f.size}x")
+        else:
+            dtype = f.entry.dtype
+            if not dtype.startswith(("INTEGER", "UNSIGNED", "BOOLEAN")):
+                return None
+            code = _CODES.get((dtype.startswith("INTEGER"), f.size * 8))
+            if code is None:
+                return None
+            fmt.append(code)
+            entries.append(f.entry)
+        pos = f.offset + f.size
+    if size > pos:
+        fmt.append(f"{size - pos}x")
+    return Codec(struct.Struct("".join(fmt)), tuple(entries))
 
 
 def _mapped(od: ObjectDictionary, value: int, rx: bool) -> tuple[Entry | None, int]:
@@ -126,7 +168,10 @@ def compile_plan(od: ObjectDictionary) -> Plan:
     if TX_ASSIGN in od and int(od[TX_ASSIGN].entries[0].value) >= 1:
         f, tx_bits = mapping_fields(od, TX_MAP)
         tx = f
-    return Plan(tuple(rx), tuple(tx), (rx_bits + 7) // 8, (tx_bits + 7) // 8)
+    rx_size, tx_size = (rx_bits + 7) // 8, (tx_bits + 7) // 8
+    return Plan(
+        tuple(rx), tuple(tx), rx_size, tx_size, codec(tuple(rx), rx_size), codec(tuple(tx), tx_size)
+    )
 
 
 class CoeDevice(Protocol):
@@ -170,13 +215,24 @@ class PdoImage:
         return self.plan.tx_size
 
     def set_outputs(self, data: bytes, now_ns: int) -> None:
-        for f in self.plan.rx:
-            if f.entry is not None:
-                f.entry.value = f.entry.decode(data[f.offset : f.offset + f.size])
+        c = self.plan.rx_codec
+        if c is not None and len(data) >= c.st.size:
+            for e, v in zip(c.entries, c.st.unpack_from(data), strict=True):
+                e.value = v
+        else:
+            for f in self.plan.rx:
+                if f.entry is not None:
+                    f.entry.value = f.entry.decode(data[f.offset : f.offset + f.size])
         self.device.outputs_applied(now_ns)
 
     def get_inputs(self, now_ns: int) -> bytes:
         self.device.update_inputs(now_ns)
+        c = self.plan.tx_codec
+        if c is not None:
+            try:
+                return c.st.pack(*[e.value for e in c.entries])
+            except struct.error:
+                pass  # a value out of its type's range: encoded (masked) entry by entry
         out = bytearray(self.plan.tx_size)
         for f in self.plan.tx:
             if f.entry is not None:

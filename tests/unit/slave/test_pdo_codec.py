@@ -1,0 +1,56 @@
+"""The one-struct process image codec gives exactly the bytes of the per-entry path.
+Ref: ETG.1000.6 §5.6.7.4 (PDO mapping), Table 64 (data types)."""
+
+from __future__ import annotations
+
+import struct
+
+from ecatsim.description import default_description
+from ecatsim.slave.od_build import build_od
+from ecatsim.slave.pdo import Field, PdoImage, Plan, codec, compile_plan
+
+
+class Quiet:
+    def outputs_applied(self, now_ns: int) -> None: ...
+
+    def update_inputs(self, now_ns: int) -> None: ...
+
+    def al_state_changed(self, state: object, now_ns: int) -> None: ...
+
+
+def slow(plan: Plan) -> Plan:
+    return Plan(plan.rx, plan.tx, plan.rx_size, plan.tx_size)
+
+
+def test_default_images_have_a_codec_and_it_matches_the_slow_path() -> None:
+    od = build_od(default_description(), 1)
+    img = PdoImage(od, Quiet())  # type: ignore[arg-type]
+    plan = img.plan
+    assert plan.rx_codec is not None and plan.rx_codec.st.format == "<Hihi"
+    assert plan.tx_codec is not None and plan.tx_codec.st.format == "<HbihiI"
+    out = struct.pack("<HihI", 0x1F, -123456, -300, 0xFFFFFF38)
+    img.set_outputs(out, 0)
+    fast_rx = [od.value(i, 0) for i in (0x6040, 0x607A, 0x6071, 0x60FF)]
+    assert fast_rx == [0x1F, -123456, -300, -200]
+    img.plan = slow(plan)
+    img.set_outputs(out, 0)
+    assert [od.value(i, 0) for i in (0x6040, 0x607A, 0x6071, 0x60FF)] == fast_rx
+    img.plan = plan
+    for index, value in ((0x6041, 0x1637), (0x6061, -3), (0x6064, -99), (0x6077, 12)):
+        od.set(index, 0, value)
+    fast = img.get_inputs(0)
+    img.plan = slow(plan)
+    assert img.get_inputs(0) == fast
+    od.set(0x6077, 0, 1 << 20)  # out of INTEGER16 range: the masked per-entry encoding
+    img.plan = plan
+    masked = img.get_inputs(0)
+    img.plan = slow(plan)
+    assert img.get_inputs(0) == masked
+
+
+def test_no_codec_for_types_struct_cannot_carry() -> None:
+    od = build_od(default_description(), 1)
+    e = od.entry(0x1008, 0)  # a VISIBLE_STRING
+    assert codec((Field(0, 4, e),), 4) is None
+    assert codec((Field(0, 2, None), Field(2, 2, od.entry(0x6040, 0))), 6) is not None
+    assert compile_plan(od).tx_size == 17
