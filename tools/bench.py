@@ -1,6 +1,8 @@
 """Benchmark: the daemon against a real master and against a C echo floor, same run.
 
-    sudo .venv/bin/python tools/bench.py --slaves 1 4 16 --cycles 5000 --period-us 1000
+    sudo .venv/bin/python tools/bench.py --slaves 1 4 16 --seconds 10 --period-us 1000
+    sudo .venv/bin/python tools/bench.py --modes blocking busy-poll --max-rate --hold 60
+    sudo .venv/bin/ecatsim bench -- --slaves 1 4     (the same, from the CLI)
 
 For each N it starts the daemon (N TMC8670 drives) in a private network namespace, brings
 the segment to OP with pysoem (DC active) in another, runs cyclic exchange and records the
@@ -45,9 +47,10 @@ int main(int argc, char **argv) {
     a.sll_family = AF_PACKET; a.sll_protocol = htons(0x88A4);
     a.sll_ifindex = if_nametoindex(argv[1]);
     if (s < 0 || bind(s, (struct sockaddr *)&a, sizeof a) < 0) { perror("echo"); return 1; }
+    int busy = argc > 2 && strcmp(argv[2], "busy") == 0;  /* the same wake-up mode */
     unsigned char buf[2048];
     for (;;) {
-        ssize_t n = recv(s, buf, sizeof buf, 0);
+        ssize_t n = recv(s, buf, sizeof buf, busy ? MSG_DONTWAIT : 0);
         if (n < 30 || (buf[6] & 2)) continue;       /* our own replies come back too */
         buf[6] |= 2;                                 /* processed: source MAC bit 1 */
         unsigned len = (buf[22] | (buf[23] << 8)) & 0x7FF;
@@ -104,55 +107,83 @@ def cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def pysoem_run(pair: NetnsPair, n: int, cycles: int, period_us: int, pid: int) -> dict[str, Any]:
+def pysoem_master(pair: NetnsPair, n: int, period_us: int) -> Any:
+    """A pysoem master with the segment in OP, DC active (SYNC0 every cycle)."""
     import pysoem
 
     m = pysoem.Master()
     with in_netns(pair.master_ns):
         m.open(pair.master_if)
-    try:
-        assert m.config_init() == n
-        m.config_dc()
-        m.config_map()
-        m.state_check(pysoem.SAFEOP_STATE, 5_000_000)
-        m.state = pysoem.OP_STATE
+    if m.config_init() != n:
+        m.close()
+        raise SystemExit(f"bench: the master found {m.config_init()} slaves, not {n}")
+    m.config_dc()
+    for s in m.slaves:
+        s.dc_sync(True, period_us * 1000)
+    m.config_map()
+    m.state_check(pysoem.SAFEOP_STATE, 5_000_000)
+    m.state = pysoem.OP_STATE
+    m.send_processdata()
+    m.receive_processdata(50_000)
+    m.write_state()
+    for _ in range(500):
         m.send_processdata()
         m.receive_processdata(50_000)
-        m.write_state()
-        for _ in range(500):
-            m.send_processdata()
-            m.receive_processdata(50_000)
-            if m.state_check(pysoem.OP_STATE, 5000) == pysoem.OP_STATE:
-                break
-        rtts, lost, wkc_err = [], 0, 0
-        cpu0 = cpu_seconds(pid)
-        t_next = time.perf_counter()
-        for _ in range(cycles):
-            t = time.perf_counter()
-            m.send_processdata()
-            w = m.receive_processdata(2 * period_us)
-            rtts.append(time.perf_counter() - t)
-            if w < 0:
-                lost += 1
-            elif w != m.expected_wkc:
-                wkc_err += 1
-            t_next += period_us / 1e6
-            d = t_next - time.perf_counter()
-            if d > 0:
-                time.sleep(d)
-        cpu = cpu_seconds(pid) - cpu0
-        return {"rtt_us": stats(rtts), "lost": lost, "wkc_errors": wkc_err,
-                "cpu_per_cycle_us": round(cpu / cycles * 1e6, 1)}  # fmt: skip
-    finally:
+        if m.state_check(pysoem.OP_STATE, 5000) == pysoem.OP_STATE:
+            break
+    if m.read_state() != pysoem.OP_STATE:
         m.close()
+        raise SystemExit("bench: the segment did not reach OP")
+    return m
+
+
+def cycles(m: Any, seconds: float, period_us: int, pid: int) -> dict[str, Any]:
+    """Cyclic exchange for ``seconds``: round trips, lost frames (no reply within two
+    periods), WKC mismatches, the daemon's CPU per cycle and in % of one core."""
+    rtts, lost, wkc_err = [], 0, 0
+    cpu0, wall0 = cpu_seconds(pid), time.perf_counter()
+    t_next = wall0
+    n = max(1, int(seconds * 1e6 / period_us))
+    for _ in range(n):
+        t = time.perf_counter()
+        m.send_processdata()
+        w = m.receive_processdata(2 * period_us)
+        rtts.append(time.perf_counter() - t)
+        if w < 0:
+            lost += 1
+        elif w != m.expected_wkc:
+            wkc_err += 1
+        t_next += period_us / 1e6
+        d = t_next - time.perf_counter()
+        if d > 0:
+            time.sleep(d)
+    cpu, wall = cpu_seconds(pid) - cpu0, time.perf_counter() - wall0
+    return {"period_us": period_us, "cycles": n, "rtt_us": stats(rtts), "lost": lost,
+            "wkc_errors": wkc_err, "cpu_per_cycle_us": round(cpu / n * 1e6, 1),
+            "cpu_percent": round(cpu / wall * 100, 1)}  # fmt: skip
+
+
+def max_rate(m: Any, pid: int, hold_s: float) -> dict[str, Any] | None:
+    """The highest cycle rate (of 8, 4, 2, 1 kHz and 500 Hz) that holds 0 lost frames and
+    0 WKC errors for ``hold_s`` seconds."""
+    for period in (125, 250, 500, 1000, 2000):
+        r = cycles(m, hold_s, period, pid)
+        print(f"      {1e6 / period:6.0f} Hz for {hold_s:g} s: lost {r['lost']} "
+              f"wkc-err {r['wkc_errors']} cpu {r['cpu_percent']} %")  # fmt: skip
+        if r["lost"] == 0 and r["wkc_errors"] == 0:
+            return {"rate_hz": round(1e6 / period), "hold_s": hold_s, **r}
+    return None
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__)
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--slaves", type=int, nargs="+", default=[1, 4, 16])
-    ap.add_argument("--cycles", type=int, default=5000)
+    ap.add_argument("--seconds", type=float, default=5.0, help="cyclic exchange per run")
     ap.add_argument("--period-us", type=int, default=1000)
-    ap.add_argument("--busy-poll", action="store_true")
+    ap.add_argument("--modes", nargs="+", choices=["blocking", "busy-poll"], default=["blocking"])
+    ap.add_argument("--cpu", type=int, help="pin the daemon (and the floor) to this CPU")
+    ap.add_argument("--max-rate", action="store_true", help="also search the highest rate")
+    ap.add_argument("--hold", type=float, default=60.0, help="seconds a rate must hold")
     args = ap.parse_args()
     if os.geteuid() != 0:
         print("bench: needs root (namespaces, raw sockets)", file=sys.stderr)
@@ -163,37 +194,45 @@ def main() -> int:
                    check=True)  # fmt: skip
     frame = dg.ethernet_frame([dg.build_logical(dg.Cmd.LRW, 0, bytes(29))])
     results: dict[str, Any] = {"machine": platform.node(), "cpus": os.cpu_count(),
+                               "kernel": platform.release(),
                                "python": platform.python_version(), "runs": []}  # fmt: skip
-    extra = ("--busy-poll",) if args.busy_poll else ()
-    for n in args.slaves:
-        with NetnsPair() as pair:
-            proc = subprocess.Popen(["ip", "netns", "exec", pair.slave_ns, str(echo),
-                                     pair.slave_if])  # fmt: skip
-            time.sleep(0.2)
-            floor, floor_lost = raw_rtt(pair, frame, 2000)
-            proc.kill()
-            proc.wait()
-            d = Daemon(pair, ("--slaves", str(n), *extra), tmp / f"daemon{n}.log")
-            d.start(timeout=60)
-            try:
-                raw, raw_lost = raw_rtt(pair, frame, 2000)
-                run = pysoem_run(pair, n, args.cycles, args.period_us, d.pid)
-            finally:
-                d.stop()
-        fl, em = stats(floor), stats(raw)
-        row = {
-            "slaves": n,
-            "floor_rtt_us": fl,
-            "raw_rtt_us": em,
-            "ratio_median": round(em["median"] / fl["median"], 2),
-            "raw_lost": raw_lost + floor_lost,
-            **run,
-        }
-        results["runs"].append(row)
-        print(f"N={n:3d} floor {fl['median']:7.1f} us  emulator {em['median']:7.1f} us  "
-              f"(x{row['ratio_median']})  pysoem median {run['rtt_us']['median']:7.1f} "
-              f"p99 {run['rtt_us']['p99']:7.1f} us  lost {run['lost']} wkc-err "
-              f"{run['wkc_errors']}  daemon cpu/cycle {run['cpu_per_cycle_us']} us")  # fmt: skip
+    pin = ["taskset", "-c", str(args.cpu)] if args.cpu is not None else []
+    for mode in args.modes:
+        busy = mode == "busy-poll"
+        extra = (*(("--busy-poll",) if busy else ()),
+                 *(("--cpu", str(args.cpu)) if args.cpu is not None else ()))  # fmt: skip
+        for n in args.slaves:
+            with NetnsPair() as pair:
+                proc = subprocess.Popen(["ip", "netns", "exec", pair.slave_ns, *pin, str(echo),
+                                         pair.slave_if, "busy" if busy else "block"])  # fmt: skip
+                time.sleep(0.2)
+                floor, floor_lost = raw_rtt(pair, frame, 2000)
+                proc.kill()
+                proc.wait()
+                d = Daemon(pair, ("--slaves", str(n), *extra), tmp / f"daemon{n}{mode}.log")
+                d.start(timeout=60)
+                try:
+                    raw, raw_lost = raw_rtt(pair, frame, 2000)
+                    assert d.pid is not None
+                    m = pysoem_master(pair, n, args.period_us)
+                    try:
+                        run = cycles(m, args.seconds, args.period_us, d.pid)
+                        rate = max_rate(m, d.pid, args.hold) if args.max_rate else None
+                    finally:
+                        m.close()
+                finally:
+                    d.stop()
+            fl, em = stats(floor), stats(raw)
+            row = {"mode": mode, "slaves": n, "floor_rtt_us": fl, "raw_rtt_us": em,
+                   "ratio_median": round(em["median"] / fl["median"], 2),
+                   "raw_lost": raw_lost + floor_lost, **run, "max_rate": rate}  # fmt: skip
+            results["runs"].append(row)
+            print(f"{mode:9s} N={n:3d} floor {fl['median']:7.1f} us  emulator "
+                  f"{em['median']:7.1f} us (x{row['ratio_median']})  pysoem median "
+                  f"{run['rtt_us']['median']:7.1f} p99 {run['rtt_us']['p99']:7.1f} us  lost "
+                  f"{run['lost']} wkc-err {run['wkc_errors']}  daemon "
+                  f"{run['cpu_per_cycle_us']} us/cycle {run['cpu_percent']} %"
+                  + (f"  max {rate['rate_hz']} Hz" if rate else ""))  # fmt: skip
     out = ROOT / "bench" / "results"
     out.mkdir(parents=True, exist_ok=True)
     path = out / f"bench-{time.strftime('%Y%m%d-%H%M%S')}.json"
