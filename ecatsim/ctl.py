@@ -184,6 +184,8 @@ class ControlSocket:
             if od is None:
                 raise ValueError(f"slave {slave} has no object dictionary")
             index, sub = int(req["index"]), int(req.get("sub", 0))
+            if od.refresh is not None:
+                od.refresh()
             if "value" in req:
                 od.set(index, sub, req["value"])
             v = od.value(index, sub)

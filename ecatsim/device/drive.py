@@ -96,6 +96,7 @@ class Drive:
         #: called with (time, trace_row()) after every input update when tracing
         self.tracer: Callable[[int, tuple[int | str, ...]], None] | None = None
         self._init_od()
+        od.refresh = self._publish_sdo_only
 
     # ----------------------------------------------------------------- OD helpers
     def _entry(self, index: int, sub: int) -> tuple[Entry, int, int] | None:
@@ -535,7 +536,6 @@ class Drive:
             sw |= SW_DIRECTION
         self._set(0x6041, sw)
         self._set(0x6061, mode)
-        self._set(0x6063, pos)
         self._set(0x6064, pos)
         self._set(0x606C, round(rpm))
         self._set(0x6062, round(self.p_demand))
@@ -543,15 +543,22 @@ class Drive:
         self._set(0x6077, round(s.iq_ma))
         self._set(0x6074, round(s.iq_ref_ma))
         self._set(0x60F4, round(self.p_demand - pos))
+        self._set(0x603F, self.fault_code)
+
+    def _publish_sdo_only(self) -> None:
+        """Values no PDO can carry, refreshed when the OD is read (SDO upload, control
+        socket) rather than every cycle. Ref: seed 004 §5.1.7-5.1.14 (PDO mapping: no)."""
+        s = self.servo
+        pos = s.counts
+        self._set(0x6063, pos)
         self._set(0x2041, round(s.iq_ref_ma), 1)
         self._set(0x2041, round(s.iq_ma), 2)
         self._set(0x2041, round(s.id_ma), 4)
         self._set(0x2041, round(s.iq_ref_ma - s.iq_ma), 9)
         self._set(0x2041, round(s.iq_integ * 1000.0), 10)  # mV
-        self._set(0x2042, round(rpm), 2)
+        self._set(0x2042, round(s.rpm), 2)
         self._set(0x2043, pos, 3)
         self._set(0x2081, pos % self.params.ppr, 3)
-        self._set(0x603F, self.fault_code)
 
     @property
     def velocity_rad_s(self) -> float:

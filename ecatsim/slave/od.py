@@ -197,6 +197,8 @@ class ObjectDictionary:
 
     def __init__(self, objects: list[OdObject]) -> None:
         self.objects = {o.index: o for o in sorted(objects, key=lambda o: o.index)}
+        #: set by the application: brings values no PDO carries up to date before a read
+        self.refresh: Callable[[], None] | None = None
 
     def __contains__(self, index: int) -> bool:
         return index in self.objects
@@ -226,6 +228,8 @@ class ObjectDictionary:
     def read(self, index: int, sub: int) -> bytes:
         """SDO upload of one entry. Ref: ETG.1000.6 §5.6.2.4."""
         e = self.entry(index, sub)
+        if self.refresh is not None:
+            self.refresh()
         if e.access == "wo":
             raise SdoAbort(ABORT_WRITE_ONLY)
         return e.encode()
@@ -245,6 +249,8 @@ class ObjectDictionary:
 
         Ref: ETG.1000.6 §5.6.2.4 (complete access); SOEM's ecx_readPDOassignCA.
         """
+        if self.refresh is not None:
+            self.refresh()
         obj = self.objects.get(index)
         if obj is None:
             raise SdoAbort(ABORT_NO_OBJECT)
