@@ -110,16 +110,21 @@ def test_pv_example_2000_rpm(master_factory: Any, daemon_factory: Any) -> None:
 
 
 def test_cst_example_torque_step(master_factory: Any, daemon_factory: Any) -> None:
+    """§9.2: a torque step; the acceleration is the torque over the inertia, within 5 % of
+    the friction-free value. The step is 3 A (150 mNm): the default Coulomb friction (2 mNm)
+    takes 1.3 %, the viscous friction B*w grows as B/J * t, so the fit uses the first 60 ms
+    after the current loop settled (about 2 % on average)."""
+    torque_ma = 3000
     c = start(master_factory, daemon_factory, 10)
     enable(c)
     samples = []
-    for _ in range(200):
+    for _ in range(80):
         t_send = time.perf_counter()
-        _sw, _m, _p, torque, vel, _d = c.run(0x0F, torque=1000)
+        _sw, _m, _p, torque, vel, _d = c.run(0x0F, torque=torque_ma)
         samples.append((t_send, vel))
-    assert torque == 1000
-    # acceleration: least-squares slope of velocity over time after the current loop has
-    # settled (rpm/s -> rad/s^2); the fit averages out the master's own timing jitter
+    assert abs(torque - torque_ma) <= 5  # 6077h follows within the current loop's accuracy
+    # acceleration: least-squares slope of velocity over time (rpm/s -> rad/s^2); the fit
+    # averages out the master's own timing jitter
     pts = samples[20:]
     t_mean = sum(t for t, _ in pts) / len(pts)
     v_mean = sum(v for _, v in pts) / len(pts)
@@ -127,9 +132,8 @@ def test_cst_example_torque_step(master_factory: Any, daemon_factory: Any) -> No
         (t - t_mean) ** 2 for t, _ in pts
     )
     accel = slope * 2 * 3.141592653589793 / 60
-    # friction free: Kt * I / J; the default motor's Coulomb friction (2 mNm) lowers it ~4 %
-    ideal = KT * 1.0 / J
-    assert 0.90 * ideal <= accel <= 1.02 * ideal
+    ideal = KT * torque_ma / 1000 / J  # friction free: Kt * I / J
+    assert 0.95 * ideal <= accel <= 1.02 * ideal, accel / ideal
 
 
 def test_csp_sine_with_dc_sync0(master_factory: Any, daemon_factory: Any, tmp_path: Any) -> None:
@@ -391,3 +395,42 @@ def test_master_stops_cycling_watchdog_stops_the_motor(
     assert sw & 0x4F == 0x40  # switch on disabled: no torque
     assert speeds[-1] == 0, speeds[-5:]  # at standstill
     assert all(b <= a for a, b in itertools.pairwise(speeds))  # slowing down all the way
+
+
+@pytest.mark.parametrize(
+    ("kind", "code"),
+    [("following_error", 0x8611), ("encoder_loss", 0x7305), ("overtemperature", 0x4310)],
+)
+def test_drive_faults_emcy_and_reset(
+    master_factory: Any, daemon_factory: Any, tmp_path: Any, kind: str, code: int
+) -> None:
+    """Each drive fault injected at run time: fault reaction, fault, 603Fh, an EMCY pysoem
+    receives; fault reset recovers once the cause is cleared. Ref: issue "drive" (faults)."""
+    from ecatsim.ctl import request
+
+    sock = tmp_path / "ctl.sock"
+    daemon_factory("--ctl", str(sock))
+    m = master_factory()
+    assert m.config_init() == 1
+    s = m.slaves[0]
+    emcys: list[Any] = []
+    s.add_emergency_callback(emcys.append)
+    s.sdo_write(0x6060, 0, struct.pack("<b", 3))
+    to_op(m)
+    c = Cycle(m)
+    enable(c)
+    reply = request(sock, {"cmd": "inject", "fault": {"kind": kind, "slave": 0}})
+    assert reply["ok"], reply
+    for _ in range(100):
+        sw = c.run(0x0F)[0]
+        s.mbx_receive()
+        if sw & 0x4F == 0x08 and emcys:
+            break
+    assert sw & 0x4F == 0x08  # fault
+    assert [e.error_code for e in emcys] == [code]
+    assert struct.unpack("<H", s.sdo_read(0x603F, 0))[0] == code
+    assert request(sock, {"cmd": "clear", "id": reply["id"]})["cleared"] == 1
+    for cw in (0x00, 0x80):
+        for _ in range(3):
+            sw = c.run(cw)[0]
+    assert sw & 0x4F == 0x40  # fault reset -> switch on disabled
