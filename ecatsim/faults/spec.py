@@ -118,32 +118,29 @@ class FaultSpec:
         return out
 
 
-def _int(raw: dict[str, Any], key: str, lo: int, hi: int) -> int | None:
+def _number(raw: dict[str, Any], key: str, lo: float, hi: float, kind: type) -> Any:
+    """``raw[key]`` as an int or float within lo..hi (a string is parsed), or None."""
     v = raw.get(key)
     if v is None:
         return None
+    name = "an integer" if kind is int else "a number"
     if isinstance(v, str):
         try:
-            v = int(v, 0)
+            v = int(v, 0) if kind is int else float(v)
         except ValueError:
-            raise FaultSpecError(f"{key}: expected an integer, got {v!r}") from None
-    if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
-        raise FaultSpecError(f"{key}: expected an integer {lo}..{hi}, got {v!r}")
-    return v
+            raise FaultSpecError(f"{key}: expected {name}, got {v!r}") from None
+    ok_type = isinstance(v, int) if kind is int else isinstance(v, int | float)
+    if isinstance(v, bool) or not ok_type or not lo <= v <= hi:
+        raise FaultSpecError(f"{key}: expected {name} {lo}..{hi}, got {v!r}")
+    return kind(v)
+
+
+def _int(raw: dict[str, Any], key: str, lo: int, hi: int) -> int | None:
+    return _number(raw, key, lo, hi, int)  # type: ignore[no-any-return]
 
 
 def _float(raw: dict[str, Any], key: str, lo: float, hi: float) -> float | None:
-    v = raw.get(key)
-    if v is None:
-        return None
-    if isinstance(v, str):
-        try:
-            v = float(v)
-        except ValueError:
-            raise FaultSpecError(f"{key}: expected a number, got {v!r}") from None
-    if isinstance(v, bool) or not isinstance(v, int | float) or not lo <= v <= hi:
-        raise FaultSpecError(f"{key}: expected a number {lo}..{hi}, got {v!r}")
-    return float(v)
+    return _number(raw, key, lo, hi, float)  # type: ignore[no-any-return]
 
 
 def parse_fault(raw: object) -> FaultSpec:

@@ -251,12 +251,9 @@ def test_overcurrent_emcy_quick_stop_and_fault_reset(
     """An injected overcurrent (control socket) faults the drive with an EMCY that pysoem
     receives; a fault reset recovers once the cause is gone; quick stop uses 6085h."""
     from ecatsim.ctl import request
+    from tests.integration.test_faults import ctl_slave
 
-    sock = tmp_path / "ctl.sock"
-    daemon_factory("--ctl", str(sock))
-    m = master_factory()
-    assert m.config_init() == 1
-    s = m.slaves[0]
+    sock, m, s = ctl_slave(daemon_factory, master_factory, tmp_path)
     emcys: list[Any] = []
     s.add_emergency_callback(emcys.append)
     s.sdo_write(0x6060, 0, struct.pack("<b", 3))
@@ -407,12 +404,9 @@ def test_drive_faults_emcy_and_reset(
     """Each drive fault injected at run time: fault reaction, fault, 603Fh, an EMCY pysoem
     receives; fault reset recovers once the cause is cleared. Ref: issue "drive" (faults)."""
     from ecatsim.ctl import request
+    from tests.integration.test_faults import ctl_slave
 
-    sock = tmp_path / "ctl.sock"
-    daemon_factory("--ctl", str(sock))
-    m = master_factory()
-    assert m.config_init() == 1
-    s = m.slaves[0]
+    sock, m, s = ctl_slave(daemon_factory, master_factory, tmp_path)
     emcys: list[Any] = []
     s.add_emergency_callback(emcys.append)
     s.sdo_write(0x6060, 0, struct.pack("<b", 3))

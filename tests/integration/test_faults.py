@@ -20,6 +20,17 @@ from tests.integration.test_esc_master import to_op
 pytestmark = pytest.mark.integration
 
 
+def ctl_slave(daemon_factory: Any, master_factory: Any, tmp_path: Path) -> tuple[Path, Any, Any]:
+    """One drive behind a control socket, found by a master (PREOP): (socket, master,
+    slave); SDO reads wait up to 200 ms."""
+    sock = tmp_path / "ctl.sock"
+    daemon_factory("--ctl", str(sock))
+    m = master_factory()
+    m.sdo_read_timeout = 200_000
+    assert m.config_init() == 1
+    return sock, m, m.slaves[0]
+
+
 def op_with_ctl(
     daemon_factory: Any, master_factory: Any, tmp_path: Path, n: int
 ) -> tuple[Path, Any, Callable[[], int]]:
@@ -38,11 +49,7 @@ def op_with_ctl(
 
 
 def test_al_refuse_and_fall(daemon_factory: Any, master_factory: Any, tmp_path: Path) -> None:
-    sock = tmp_path / "ctl.sock"
-    daemon_factory("--ctl", str(sock))
-    m = master_factory()
-    assert m.config_init() == 1
-    s = m.slaves[0]
+    sock, m, s = ctl_slave(daemon_factory, master_factory, tmp_path)
     assert request(sock, {"cmd": "al_refuse", "slave": 0, "code": 0x0017})["ok"]
     m.config_map()
     assert m.state_check(pysoem.SAFEOP_STATE, 300_000) != pysoem.SAFEOP_STATE
@@ -67,12 +74,7 @@ def test_al_refuse_and_fall(daemon_factory: Any, master_factory: Any, tmp_path: 
 def test_mailbox_no_reply_then_recovers(
     daemon_factory: Any, master_factory: Any, tmp_path: Path
 ) -> None:
-    sock = tmp_path / "ctl.sock"
-    daemon_factory("--ctl", str(sock))
-    m = master_factory()
-    m.sdo_read_timeout = 200_000
-    assert m.config_init() == 1
-    s = m.slaves[0]
+    sock, _m, s = ctl_slave(daemon_factory, master_factory, tmp_path)
     assert request(sock, {"cmd": "mbx_drop", "slave": 0, "count": 1})["ok"]
     with pytest.raises((pysoem.WkcError, pysoem.SdoError, pysoem.MailboxError)):
         s.sdo_read(0x1000, 0)  # no reply: the master times out
@@ -141,12 +143,7 @@ def test_delay_and_corrupt_seen_as_late_frame_and_bad_inputs(
 def test_mailbox_faults_seen_by_pysoem(
     daemon_factory: Any, master_factory: Any, tmp_path: Path
 ) -> None:
-    sock = tmp_path / "ctl.sock"
-    daemon_factory("--ctl", str(sock))
-    m = master_factory()
-    m.sdo_read_timeout = 200_000
-    assert m.config_init() == 1
-    s = m.slaves[0]
+    sock, m, s = ctl_slave(daemon_factory, master_factory, tmp_path)
     inject(sock, kind="sdo_abort", index=0x6060, code=0x08000022)
     with pytest.raises(pysoem.SdoError) as sdo_err:
         s.sdo_read(0x6060, 0)
@@ -172,12 +169,7 @@ def test_mailbox_faults_seen_by_pysoem(
 def test_toggle_error_and_wrong_counter_seen_by_pysoem(
     daemon_factory: Any, master_factory: Any, tmp_path: Path
 ) -> None:
-    sock = tmp_path / "ctl.sock"
-    daemon_factory("--ctl", str(sock))
-    m = master_factory()
-    m.sdo_read_timeout = 200_000
-    assert m.config_init() == 1
-    s = m.slaves[0]
+    sock, _m, s = ctl_slave(daemon_factory, master_factory, tmp_path)
     # a 20-byte input mailbox: the 7-byte device name needs a segmented upload
     s.state = pysoem.INIT_STATE
     s.write_state()
