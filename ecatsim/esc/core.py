@@ -215,6 +215,8 @@ class Esc:
         self.fmmus = ()
         self.sm_windows = ()
         self.al_control_locked = False
+        self.dc.reset_sync()
+        self.ctx.timers_dirty = True
         self.wd.deadline_ns = 0
         self.wd.reconfigure()
         m[regs.WD_STATUS_PD] &= 0xFE  # "expired" until first triggered (reset value 0)

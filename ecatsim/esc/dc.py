@@ -193,6 +193,14 @@ class DcUnit:
             _U64.pack_into(m, regs.DC_START_TIME, self.next_sync0 & MASK64)
         return bool(m[regs.SYNC_LATCH_CONFIG] & 0x08)
 
+    def reset_sync(self) -> None:
+        """Reset: the SYNC unit stops and the time loop forgets its correction (the local
+        clock runs on, as the oscillator does). Ref: TMC8460 §5 reset values of 0x0981."""
+        self.next_sync0 = None
+        self.next_sync1 = None
+        self.sync1_countdown = 0
+        self.rate_ppb = 0.0
+
     def _schedule_sync1(self, sync0_time: int, cycle0: int) -> None:
         """SYNC1 follows SYNC0: every n-th SYNC0 pulse (n = 0x09A4 // 0x09A0, at least 1)
         plus the remainder (0x09A4 mod 0x09A0) as a delay; with SYNC0 single shot, once

@@ -296,6 +296,8 @@ class FaultEngine:
         app = getattr(fw, "app", None)
         if app is not None:
             app.al_state_changed(AlState.INIT, now_ns)
+        self.segment.escs[pos].dc.reset_sync()  # no power, no SYNC pulses
+        self.segment.ctx.timers_dirty = True
         self.set_cable(pos, 0, False)
         self.set_cable(pos, 1, False)
         self.powered_off.append(PowerReturn(due_ns, pos))

@@ -158,3 +158,15 @@ def test_latch_single_event_and_continuous() -> None:
     # LATCH0's pin is the SYNC0 output (0x0151 bit 2 = 1): no latch input there
     esc.latch_input(0, True, b.clock.t)
     assert t.aprd(0, 0x09AE, 1).data == b"\x00"
+
+
+def test_reset_stops_the_sync_unit() -> None:
+    """A power cycle or 'RES' reset returns 0x0981 to 0: no more pulses until activated."""
+    b = DcBench()
+    b.at(b.t0)
+    assert b.seg.sync0_ticks == 1
+    b.seg.escs[0].hardware_reset()
+    b.at(b.t0 + 5 * MS)
+    assert b.seg.sync0_ticks == 1
+    assert b.seg.escs[0].dc.sync0_deadline() is None
+    assert b.seg.next_deadline() is None
