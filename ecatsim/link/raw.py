@@ -63,6 +63,8 @@ _IFREQ_FLAGS = struct.Struct("16sH")
 #: SO_TIMESTAMPNS: the kernel's receive time (CLOCK_REALTIME) as struct timespec
 SO_TIMESTAMPNS = 35
 TIMESPEC = struct.Struct("=qq")
+#: a receive time stamp older than this means the wall clock was stepped meanwhile
+MAX_RX_AGE_NS = 1_000_000_000
 _ANC_SIZE = socket.CMSG_SPACE(AUXDATA.size) + socket.CMSG_SPACE(TIMESPEC.size)
 
 
@@ -215,7 +217,8 @@ class RawLink:
                     sec, nsec = TIMESPEC.unpack_from(data)
                     # realtime stamp -> monotonic: subtract how long ago it was
                     age = time.time_ns() - (sec * 1_000_000_000 + nsec)
-                    self.rx_ns = time.monotonic_ns() - max(0, age)
+                    if 0 <= age < MAX_RX_AGE_NS:  # else the wall clock was stepped: use now
+                        self.rx_ns = time.monotonic_ns() - age
                 elif level == SOL_PACKET and typ == PACKET_AUXDATA and len(data) >= AUXDATA.size:
                     status, _l, _s, _m, _n, tci, tpid = AUXDATA.unpack_from(data)
                     if status & TP_STATUS_VLAN_VALID and n >= 12 and n + 4 <= len(buf):
