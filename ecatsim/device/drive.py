@@ -90,7 +90,6 @@ class Drive:
         self.fault_code = 0
         self.injected: set[str] = set()
         self.overcurrent_ma = 0.95 * self.params.max_current_ma
-        self.peak_rpm = 0.0
         #: the encoder index output (level, host time ns), wired to a latch input
         self.index_output: Callable[[bool, int], None] | None = None
         #: called with (time, trace_row()) after every input update when tracing
@@ -362,8 +361,6 @@ class Drive:
         s = self.servo
         dt = self.params.substep
         st = self.state
-        if "encoder_loss" in self.injected or "overtemperature" in self.injected:
-            pass  # stays faulted while the cause is present
         iq = 0.0
         if st == PdsState.OPERATION_ENABLED:
             iq = self._mode_substep(dt)
@@ -379,7 +376,6 @@ class Drive:
         s.step(iq)
         if abs(s.iq_ma) > self.overcurrent_ma and self.state in cia402.POWERED:
             self._fault("overcurrent")
-        self.peak_rpm = max(self.peak_rpm, abs(s.rpm))
 
     def _mode_substep(self, dt: float) -> float:
         s = self.servo
