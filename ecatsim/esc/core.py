@@ -345,13 +345,19 @@ class Esc:
         else:
             to_pdi = st & regs.SM_ST_IRQ_READ
             to_ecat = st & regs.SM_ST_IRQ_WRITE
+        ecat_on = bool(to_ecat and sm.control & regs.SM_CTRL_ECAT_IRQ)
+        pdi_on = bool(to_pdi and sm.control & regs.SM_CTRL_PDI_IRQ)
+        mirror = ecat_on | (pdi_on << 1)
+        if mirror == sm.mirror:
+            return  # the event registers already say so (only SM accesses change these bits)
+        sm.mirror = mirror
         ebit = regs.ECAT_EV_SM0 << sm.n
         abit = regs.EV_SM0 << sm.n
-        if to_ecat and sm.control & regs.SM_CTRL_ECAT_IRQ:
+        if ecat_on:
             self._set_ecat_event(ebit)
         else:
             self._clr_ecat_event(ebit)
-        if to_pdi and sm.control & regs.SM_CTRL_PDI_IRQ:
+        if pdi_on:
             self.set_al_event(abit)
         else:
             self.clr_al_event(abit)

@@ -39,6 +39,7 @@ class SyncManager:
         "locked",
         "mailbox",
         "mbx_full",
+        "mirror",
         "n",
         "r",
         "r_open",
@@ -67,6 +68,8 @@ class SyncManager:
         self.r_open = False
         self.w_open = False
         self.status = 0
+        #: the event bits last mirrored into 0x0210/0x0220 (-1: mirror on the next change)
+        self.mirror = -1
 
     # -- configuration -------------------------------------------------------------
 
@@ -94,6 +97,7 @@ class SyncManager:
         self.r_open = False
         self.w_open = False
         self.status = 0
+        self.mirror = -1
         self._sync()
 
     def window(self) -> tuple[int, int] | None:
