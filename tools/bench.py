@@ -193,7 +193,11 @@ def main() -> int:
     subprocess.run(["cc", "-O2", "-o", str(echo), "-x", "c", "-"], input=ECHO_C.encode(),
                    check=True)  # fmt: skip
     frame = dg.ethernet_frame([dg.build_logical(dg.Cmd.LRW, 0, bytes(29))])
+    cpu_model = next((ln.split(":", 1)[1].strip() for ln in
+                      Path("/proc/cpuinfo").read_text().splitlines()
+                      if ln.startswith("model name")), platform.machine())  # fmt: skip
     results: dict[str, Any] = {"machine": platform.node(), "cpus": os.cpu_count(),
+                               "cpu_model": cpu_model,
                                "kernel": platform.release(),
                                "python": platform.python_version(), "runs": []}  # fmt: skip
     pin = ["taskset", "-c", str(args.cpu)] if args.cpu is not None else []
