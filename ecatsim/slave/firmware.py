@@ -17,6 +17,7 @@ from ecatsim.esc.pdi import (
     AL_STATUS,
     AL_STATUS_CODE,
     DC_ACTIVATION,
+    DC_ACTIVATION_STATUS,
     DC_SYNC0_STATUS,
     EV_AL_CONTROL,
     EV_SM0,
@@ -52,6 +53,7 @@ CTRL_PD_IN = 0x00  # buffered, ECAT reads
 #: Events the firmware serves (AL event mask). SM1 (mailbox read by the master) is only
 #: unmasked while replies are queued. Ref: TMC8460 §5.30, §5.32 Table 46.
 EV_SM1 = EV_SM0 << 1
+PD_EVENTS = (EV_SM0 << SM_PD_OUT) | (EV_SM0 << SM_PD_IN)  # outputs written, inputs read
 EVENT_MASK = EV_AL_CONTROL | EV_SM_ACTIVATION | EV_WATCHDOG_PD | EV_SYNC0 | (0x0D * EV_SM0)
 
 
@@ -99,10 +101,8 @@ class Firmware:
         self.emergency: Emergency | None = None
         self.device: object | None = None
         self.coe: CoeProtocol | None = None
-        #: outputs received in DC mode, applied at the next SYNC0
-        self.pending_outputs: bytes | None = None
-        #: the last input image (captured at SYNC0 in DC mode)
-        self.sync_inputs: bytes | None = None
+        #: DC synchronous with the pulses running: SM2/SM3 events wait for SYNC0
+        self.pd_masked = False
         #: injected fault: refuse the next state change with this AL status code
         self.refuse_next: int | None = None
         self.bootstrap_supported = bootstrap_supported
@@ -126,6 +126,7 @@ class Firmware:
         if not p.operational():
             return
         self.event_mask = EVENT_MASK
+        self.pd_masked = False
         p.w32(AL_EVENT_MASK, EVENT_MASK)
         for n in (SM_MBX_OUT, SM_MBX_IN, SM_PD_OUT, SM_PD_IN):
             p.sm_deactivate(n, True)
@@ -156,28 +157,31 @@ class Firmware:
             p.u16(WD_STATUS_PD)  # acknowledges the event
             if self.state == AlState.OP:
                 self.fail(AlState.SAFEOP, al.CODE_SM_WATCHDOG, now_ns)
-        pd_events = ev & ((EV_SM0 << SM_PD_OUT) | (EV_SM0 << SM_PD_IN))
-        dc = bool(pd_events or ev & EV_SYNC0) and (p.u8(DC_ACTIVATION) & 0x03) == 0x03
-        if ev & (EV_SM0 << SM_PD_OUT):
-            out = p.sm_read(SM_PD_OUT)
-            if out is not None and self.state == AlState.OP:
-                if dc:
-                    self.pending_outputs = out  # applied at SYNC0
-                else:
-                    self.app.set_outputs(out, now_ns)  # free run: applied when SM2 is written
-        if ev & EV_SYNC0:
-            p.u8(DC_SYNC0_STATUS)  # acknowledges the event
-            if self.pending_outputs is not None and self.state == AlState.OP:
-                self.app.set_outputs(self.pending_outputs, now_ns)
-                self.pending_outputs = None
-            self.sync_inputs = None
-            self._write_inputs(now_ns)  # inputs captured at SYNC0
-        elif pd_events:
-            if dc and self.sync_inputs is not None:
-                # the master took the inputs: offer the SYNC0 capture again (clears SM3 event)
-                self.pdi.sm_write(SM_PD_IN, self.sync_inputs)
-            else:
+        pd_events = ev & PD_EVENTS
+        dc = (p.u8(DC_ACTIVATION) & 0x03) == 0x03
+        if dc:
+            # DC synchronous: the newest outputs are taken and applied at SYNC0 and the inputs
+            # captured there; frames do not wake the firmware (SM2/SM3 events are masked once
+            # the pulses run). Ref: ETG.1000.6 §5.3 (DC mode); decision DC3.
+            if ev & EV_SYNC0:
+                p.u8(DC_SYNC0_STATUS)  # acknowledges the event
+                if ev & (EV_SM0 << SM_PD_OUT):
+                    out = p.sm_read(SM_PD_OUT)
+                    if out is not None and self.state == AlState.OP:
+                        self.app.set_outputs(out, now_ns)
                 self._write_inputs(now_ns)
+            elif pd_events & (EV_SM0 << SM_PD_IN) and p.u8(DC_ACTIVATION_STATUS) & 0x01:
+                self._write_inputs(now_ns)  # no pulse yet: keep the inputs fresh meanwhile
+        else:
+            if ev & (EV_SM0 << SM_PD_OUT):
+                out = p.sm_read(SM_PD_OUT)
+                if out is not None and self.state == AlState.OP:
+                    self.app.set_outputs(out, now_ns)  # free run: applied when SM2 is written
+            if ev & EV_SYNC0:
+                p.u8(DC_SYNC0_STATUS)
+            if pd_events:
+                self._write_inputs(now_ns)
+        self.pd_masked = dc and not p.u8(DC_ACTIVATION_STATUS) & 0x01
         self.service_mailbox(ev, now_ns)
 
     def service_mailbox(self, ev: int, now_ns: int) -> None:
@@ -189,12 +193,18 @@ class Firmware:
         if mbx is None:
             if ev & (EV_SM0 << SM_MBX_OUT):
                 self.pdi.sm_read(SM_MBX_OUT)
+            want = EVENT_MASK & ~PD_EVENTS if self.pd_masked else EVENT_MASK
+            if want != self.event_mask:
+                self.event_mask = want
+                self.pdi.w32(AL_EVENT_MASK, want)
             return
         if ev & (EV_SM0 << SM_MBX_OUT):
             mbx.receive()
         if ev & EV_SM1:
             mbx.flush()
         want = EVENT_MASK | (EV_SM1 if mbx.out else 0)
+        if self.pd_masked:
+            want &= ~PD_EVENTS
         if want != self.event_mask:
             self.event_mask = want
             self.pdi.w32(AL_EVENT_MASK, want)
@@ -208,9 +218,7 @@ class Firmware:
 
     def _write_inputs(self, now_ns: int) -> None:
         if self.state in (AlState.SAFEOP, AlState.OP):
-            image = self.app.get_inputs(now_ns)
-            self.sync_inputs = image
-            self.pdi.sm_write(SM_PD_IN, image)
+            self.pdi.sm_write(SM_PD_IN, self.app.get_inputs(now_ns))
 
     # ----------------------------------------------------------------- AL control
 

@@ -58,17 +58,18 @@ def start(master_factory: Any, daemon_factory: Any, mode: int, **sdo: int | byte
 
 
 def enable(c: Cycle, **kw: int) -> None:
-    """Controlword 6, 7, 15 as in the examples; statusword after each step."""
-    for _ in range(3):
+    """Controlword 6, 7, 15 as in the examples; statusword after each step (5 cycles a
+    step: with DC, a command takes effect at the next SYNC0 and shows one pulse later)."""
+    for _ in range(5):
         sw = c.run(0x00, **kw)[0]
     assert sw & 0x6F == 0x40 or sw & 0x4F == 0x40  # switch on disabled
-    for _ in range(3):
+    for _ in range(5):
         sw = c.run(0x06, **kw)[0]
     assert sw & 0x6F == 0x21  # ready to switch on
-    for _ in range(3):
+    for _ in range(5):
         sw = c.run(0x07, **kw)[0]
     assert sw & 0x6F == 0x23  # switched on
-    for _ in range(3):
+    for _ in range(5):
         sw = c.run(0x0F, **kw)[0]
     assert sw & 0x6F == 0x27  # operation enabled
     assert sw & 0x0210 == 0x0210  # remote, voltage enabled
