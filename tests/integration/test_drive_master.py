@@ -57,21 +57,20 @@ def start(master_factory: Any, daemon_factory: Any, mode: int, **sdo: int | byte
     return Cycle(m)
 
 
+#: (controlword, statusword mask, expected statusword) of the enable sequence
+ENABLE_STEPS = ((0x00, 0x4F, 0x40), (0x06, 0x6F, 0x21), (0x07, 0x6F, 0x23), (0x0F, 0x6F, 0x27))
+
+
 def enable(c: Cycle, **kw: int) -> None:
-    """Controlword 6, 7, 15 as in the examples; statusword after each step (5 cycles a
-    step: with DC, a command takes effect at the next SYNC0 and shows one pulse later)."""
-    for _ in range(5):
-        sw = c.run(0x00, **kw)[0]
-    assert sw & 0x6F == 0x40 or sw & 0x4F == 0x40  # switch on disabled
-    for _ in range(5):
-        sw = c.run(0x06, **kw)[0]
-    assert sw & 0x6F == 0x21  # ready to switch on
-    for _ in range(5):
-        sw = c.run(0x07, **kw)[0]
-    assert sw & 0x6F == 0x23  # switched on
-    for _ in range(5):
-        sw = c.run(0x0F, **kw)[0]
-    assert sw & 0x6F == 0x27  # operation enabled
+    """Controlword 6, 7, 15 as in the examples; the statusword checked after each step. A
+    step may take a few cycles (with DC a command acts at the next SYNC0 and shows at the
+    one after), so each waits up to 50 cycles, as a master does."""
+    for cw, mask, want in ENABLE_STEPS:
+        for _ in range(50):
+            sw = c.run(cw, **kw)[0]
+            if sw & mask == want:
+                break
+        assert sw & mask == want, f"controlword 0x{cw:02X}: statusword 0x{sw:04X}"
     assert sw & 0x0210 == 0x0210  # remote, voltage enabled
 
 
@@ -185,10 +184,12 @@ def test_csp_sine_with_dc_sync0(master_factory: Any, daemon_factory: Any, tmp_pa
     for _ in range(200):  # SOEM starts SYNC0 100 ms after dc_sync: let it run first
         all_cycle(0x00, 0)
     assert m.slaves[0]._fprd(0x0984, 1)[0] & 0x01 == 0  # first SYNC0 no longer pending
-    for cw in (0x00, 0x06, 0x07, 0x0F):
-        for _ in range(5):
+    for cw, mask, want in ENABLE_STEPS:
+        for _ in range(50):
             rows = all_cycle(cw, 0)
-    assert all(r[0] & 0x6F == 0x27 for r in rows)
+            if all(r[0] & mask == want for r in rows):
+                break
+        assert all(r[0] & mask == want for r in rows), (cw, [hex(r[0]) for r in rows])
     amplitude, freq = 20_000, 0.5  # counts, Hz
     # bound: with velocity feed-forward the error is about a_max / (w_pos * w_vel)
     a_max = (2 * math.pi * freq) ** 2 * amplitude  # counts/s^2
