@@ -114,9 +114,10 @@ def pysoem_master(pair: NetnsPair, n: int, period_us: int) -> Any:
     m = pysoem.Master()
     with in_netns(pair.master_ns):
         m.open(pair.master_if)
-    if m.config_init() != n:
+    found = m.config_init()
+    if found != n:
         m.close()
-        raise SystemExit(f"bench: the master found {m.config_init()} slaves, not {n}")
+        raise SystemExit(f"bench: the master found {found} slaves, not {n}")
     m.config_dc()
     for s in m.slaves:
         s.dc_sync(True, period_us * 1000)
