@@ -191,15 +191,13 @@ class Daemon:
                         os.read(self._wake_r, 64)
                     except OSError:
                         pass
-                elif efd == fd:
-                    while self.handle_one(buf):
-                        pass
                 elif efd == ctl_fd and self.ctl is not None:
                     try:
                         self.ctl.serve()
                     except Exception as exc:
                         self._failure("ctl", exc)
-            # a frame that came in since poll returned is older than "now": serve it first
+            # frames first (one that came in since poll returned is older than "now"), then
+            # the timers: every frame is served before the pulses that come after it
             while self.handle_one(buf):
                 pass
             self._service_timers()
