@@ -99,8 +99,7 @@ class Daemon:
         seg = self.segment
         t_rx = link.rx_ns or seg.clock.now_ns()
         try:
-            if seg.sync_escs:
-                seg.sync_until(t_rx)  # pulses due before this frame arrived come first
+            seg.pulses_due(t_rx)  # pulses due before this frame arrived come first
             reply = seg.process(buf, off, n, t_rx)
         except Exception as exc:  # the loop never dies on a frame
             self._failure("process", exc)

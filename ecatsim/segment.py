@@ -20,6 +20,9 @@ from ecatsim.wire.datagram import CIRCULATING, LEN_MASK, MORE_FOLLOWS
 #: overdue SYNC0 pulses fired one by one before the rest are skipped (a stall this long,
 #: or a forward jump of the system time, is not caught up). Decision DC2.
 MAX_SYNC0_CATCHUP = 64
+#: frames arriving this long before the earliest SYNC deadline skip the per-slave check;
+#: larger than any clock correction that does not mark the timers dirty (dc.MOVE_NS)
+PULSE_HINT_MARGIN_NS = 200_000
 
 # Command codes as plain ints for the hot path. Ref: ETG.1000.4 Table 11.
 NOP, APRD, APWR, APRW, FPRD, FPWR, FPRW, BRD, BWR, BRW, LRD, LWR, LRW, ARMW, FRMW = range(15)
@@ -60,6 +63,8 @@ class Segment:
         self.bad_frames = 0
         self.sync0_ticks = 0
         self.sync0_late_ns = 0
+        #: host time before which no SYNC pulse can be due (recomputed by sync_until)
+        self._pulse_hint = 0
         n = len(self.escs)
         for i, esc in enumerate(self.escs):
             esc.set_topology(n - 1 - i)
@@ -268,8 +273,7 @@ class Segment:
         SYNC0 pulses due by ``now_ns``, then persist EEPROM images that changed. Never
         called between receive and reply."""
         t = self.clock.now_ns() if now_ns is None else now_ns
-        if self.sync_escs:
-            self.sync_until(t)  # first: each pulse is handled at its own, earlier, time
+        self.pulses_due(t)  # first: each pulse is handled at its own, earlier, time
         for esc in self.escs:
             if esc.wd.deadline_ns:
                 esc.check_timers(t)
@@ -281,6 +285,11 @@ class Segment:
             for pos in sorted(ctx.flush):
                 self.persist(pos)
             ctx.flush.clear()
+
+    def pulses_due(self, t: int) -> None:
+        """sync_until(t), unless no pulse can be due by ``t`` (the per-frame fast path)."""
+        if t >= self._pulse_hint or self.ctx.timers_dirty:
+            self.sync_until(t)
 
     def sync_until(self, t: int) -> None:
         """Fire every SYNC0 pulse due by ``t`` in time order, each handled by the firmware
@@ -308,6 +317,12 @@ class Segment:
                     self.sync0_late_ns = t - d
                 if fw is not None and esc.position in ctx.pending:
                     fw.service(d)
+        hint = 1 << 62
+        for esc in self.sync_escs:
+            for d in (esc.dc.sync0_deadline(), esc.dc.sync1_deadline()):
+                if d is not None and d < hint:
+                    hint = d
+        self._pulse_hint = hint - PULSE_HINT_MARGIN_NS
 
     @property
     def sync_escs(self) -> list[Esc]:

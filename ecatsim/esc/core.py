@@ -822,11 +822,13 @@ class Esc:
         nbytes = 8 if self.wr_e >= ra + 8 else 4
         if self.wr_s > ra:
             return  # compared only if at least the first byte was written
-        self.dc.system_time_written(self.ctx.t_ns, value, nbytes)
+        if self.dc.system_time_written(self.ctx.t_ns, value, nbytes):
+            self.ctx.timers_dirty = True  # the clock jumped: SYNC deadlines moved
         self.dc.refresh_system_time(self.ctx.t_ns)
 
     def _ew_dc_system_time_offset(self, ra: int, rs: int, old: bytes) -> None:
-        """Ref: TMC8460 §5.50.2 Table 96."""
+        """A new offset moves the SYNC deadlines in host time. Ref: TMC8460 §5.50.2 Table 96."""
+        self.ctx.timers_dirty = True
 
     def _ew_dc_system_time_delay(self, ra: int, rs: int, old: bytes) -> None:
         """Ref: TMC8460 §5.50.2 Table 97."""

@@ -15,6 +15,9 @@ from ecatsim.esc import regs
 _U32 = struct.Struct("<I")
 _U64 = struct.Struct("<Q")
 MASK64 = (1 << 64) - 1
+#: a local-clock correction larger than this invalidates cached SYNC deadlines (ns); the
+#: segment's pulse hint keeps a larger margin (segment.PULSE_HINT_MARGIN_NS)
+MOVE_NS = 50_000
 
 
 class DcUnit:
@@ -25,6 +28,7 @@ class DcUnit:
         "hop_ns",
         "local_ref",
         "mem",
+        "moved_ns",
         "next_sync0",
         "next_sync1",
         "position",
@@ -50,6 +54,7 @@ class DcUnit:
         self.hop_ns = hop_ns
         self.turnaround_ns = turnaround_ns
         self.rate_ppb = 0.0
+        self.moved_ns = 0  # corrections since the last "deadlines moved"
         # The local clock is piecewise linear: local_ref at host time t_ref, running at
         # speed() since. Corrections rebase it, so a rate change never jumps the time.
         self.t_ref = 0
@@ -106,11 +111,13 @@ class DcUnit:
         """
         _U64.pack_into(self.mem, regs.DC_SYSTEM_TIME, self.system_time(self.arrival_ns(frame_t_ns)))
 
-    def system_time_written(self, frame_t_ns: int, value: int, nbytes: int) -> None:
+    def system_time_written(self, frame_t_ns: int, value: int, nbytes: int) -> bool:
         """Compare the written system time with the local copy and feed the control loop.
 
         The difference is filtered into 0x092C (bit 31: local copy smaller). A 32-bit write
-        is compared modulo 2^32. Ref: TMC8460 §5.50.2 Tables 95, 98, 101.
+        is compared modulo 2^32. Returns True once the corrections add up to more than
+        MOVE_NS (SYNC deadlines cached in host time are then stale).
+        Ref: TMC8460 §5.50.2 Tables 95, 98, 101.
         """
         delay = int(_U32.unpack_from(self.mem, regs.DC_SYSTEM_TIME_DELAY)[0])
         local = self.system_time(self.arrival_ns(frame_t_ns)) - delay
@@ -125,12 +132,18 @@ class DcUnit:
         t = self.arrival_ns(frame_t_ns)
         self._rebase(t)
         if abs(diff) > 1_000_000:
-            self.local_ref -= diff  # far off: jump, as after a new offset
+            step = diff  # far off: jump, as after a new offset
         else:
-            self.local_ref -= int(diff * gain)
+            step = int(diff * gain)
             self.rate_ppb = max(-1e6, min(1e6, self.rate_ppb - diff * gain * 5.0))
+        self.local_ref -= step
         mag = min(abs(diff), 0x7FFFFFFF)
         _U32.pack_into(self.mem, regs.DC_SYSTEM_TIME_DIFF, mag | (0x80000000 if diff < 0 else 0))
+        self.moved_ns += abs(step)
+        if self.moved_ns > MOVE_NS:
+            self.moved_ns = 0
+            return True
+        return False
 
     def host_time_of(self, system_ns: int) -> int:
         """Inverse of system_time(): when the host clock reaches ``system_ns`` here."""

@@ -170,3 +170,18 @@ def test_reset_stops_the_sync_unit() -> None:
     assert b.seg.sync0_ticks == 1
     assert b.seg.escs[0].dc.sync0_deadline() is None
     assert b.seg.next_deadline() is None
+
+
+def test_pulse_hint_follows_an_offset_change() -> None:
+    """Frames far from a pulse skip the per-slave check; a new system time offset (0x0920)
+    moves the deadlines and is honoured at once (Ref: TMC8460 §5.50.2 Table 96)."""
+    b = DcBench()
+    t = TinyMaster(b.seg)
+    b.at(b.t0)
+    assert b.seg.sync0_ticks == 1
+    off = struct.unpack("<Q", t.aprd(0, 0x0920, 8).data)[0]
+    t.apwr(0, 0x0920, struct.pack("<Q", off + 600_000))  # system time 0.6 ms ahead
+    d = b.seg.escs[0].dc.sync0_deadline()
+    assert d is not None and d == b.t0 + MS - 600_000
+    b.lrw(1, d + 1000)  # a frame just after the moved pulse: the pulse comes first
+    assert b.seg.sync0_ticks == 2
