@@ -5,6 +5,7 @@ from __future__ import annotations
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -136,3 +137,24 @@ def test_daemon_keeps_only_cap_net_raw_and_switches_user(
     m = master_factory()  # type: ignore[operator]
     assert m.config_init() == 1  # still serving frames
     assert d.alive()
+
+
+def test_default_control_socket_under_the_run_directory(daemon_factory: Any) -> None:
+    """Without --ctl the daemon serves /run/ecatsim/LINK.sock (directory 0700, socket 0600);
+    `ecatsim ctl --link LINK status` finds it; a second daemon on the same link is refused
+    with one line; the socket is removed on exit."""
+    import json
+    import stat
+
+    d = daemon_factory()
+    sock = Path("/run/ecatsim") / f"{d.pair.slave_if}.sock"
+    assert stat.S_IMODE(sock.stat().st_mode) == 0o600
+    assert stat.S_IMODE(sock.parent.stat().st_mode) == 0o700
+    r = ecatsim("ctl", "--link", d.pair.slave_if, "status")
+    assert r.returncode == 0, r.stderr
+    status = json.loads(r.stdout)
+    assert status["ok"] and status["slaves"][0]["al_status"] == 0x01 and status["faults"] == []
+    line = one_error_line(ecatsim("run", "--iface", d.pair.slave_if, ns=d.pair.slave_ns))
+    assert "another daemon serves this control socket" in line
+    d.stop()
+    assert not sock.exists()
