@@ -867,8 +867,12 @@ class Esc:
             self.set_al_event(regs.EV_SYNC1)
 
     def _pr_dc_sync_status(self, ra: int, rs: int) -> None:
-        """PDI read of 0x098E/0x098F clears AL event 0x0220.2/.3. Ref: Tables 108, 109."""
+        """PDI read of 0x098E/0x098F clears AL event 0x0220.2/.3; in acknowledge mode (pulse
+        length 0x0982 = 0) it also clears the SYNC state bit. Ref: Tables 106, 108, 109."""
         self.clr_al_event(regs.EV_SYNC0 if ra == regs.DC_SYNC0_STATUS else regs.EV_SYNC1)
+        m = self.mem
+        if not (m[regs.DC_PULSE_LENGTH] | m[regs.DC_PULSE_LENGTH + 1]):
+            m[ra] &= 0xFE
 
     def _ew_dc_start_time(self, ra: int, rs: int, old: bytes) -> None:
         """Start time is writable only while the SYNC unit is off. Ref: Table 110."""

@@ -185,3 +185,21 @@ def test_pulse_hint_follows_an_offset_change() -> None:
     assert d is not None and d == b.t0 + MS - 600_000
     b.lrw(1, d + 1000)  # a frame just after the moved pulse: the pulse comes first
     assert b.seg.sync0_ticks == 2
+
+
+def test_acknowledge_mode_clears_the_sync_state_on_pdi_read() -> None:
+    """Pulse length 0 (0x0982): acknowledge mode, the SYNC0 state stays set until the PDI
+    reads 0x098E. With a pulse length the PDI read leaves it. Ref: TMC8460 Tables 106, 108."""
+    from ecatsim.esc.pdi import Pdi
+
+    b = DcBench()
+    esc = b.seg.escs[0]
+    pdi = Pdi(esc)
+    assert esc.mem[0x0982] | esc.mem[0x0983]  # the TMC8670 SII sets a 1 us pulse
+    b.at(b.t0)
+    assert esc.mem[0x098E] & 0x01
+    pdi.u8(0x098E)
+    assert esc.mem[0x098E] & 0x01  # pulse mode: the read does not acknowledge
+    esc.mem[0x0982:0x0984] = b"\x00\x00"  # acknowledge mode
+    pdi.u8(0x098E)
+    assert not esc.mem[0x098E] & 0x01
