@@ -185,24 +185,23 @@ class Firmware:
         self.service_mailbox(ev, now_ns)
 
     def service_mailbox(self, ev: int, now_ns: int) -> None:
-        """Serve SM0 (requests) and SM1 (replies taken by the master).
+        """Serve SM0 (requests) and SM1 (replies taken by the master), then set the event
+        mask: SM1 while replies wait, SM2/SM3 not while DC pulses drive the process data.
 
         Without mailbox protocols a request is read and dropped so the event clears.
         """
         mbx = self.mbx
+        want = EVENT_MASK
         if mbx is None:
             if ev & (EV_SM0 << SM_MBX_OUT):
                 self.pdi.sm_read(SM_MBX_OUT)
-            want = EVENT_MASK & ~PD_EVENTS if self.pd_masked else EVENT_MASK
-            if want != self.event_mask:
-                self.event_mask = want
-                self.pdi.w32(AL_EVENT_MASK, want)
-            return
-        if ev & (EV_SM0 << SM_MBX_OUT):
-            mbx.receive()
-        if ev & EV_SM1:
-            mbx.flush()
-        want = EVENT_MASK | (EV_SM1 if mbx.out else 0)
+        else:
+            if ev & (EV_SM0 << SM_MBX_OUT):
+                mbx.receive()
+            if ev & EV_SM1:
+                mbx.flush()
+            if mbx.out:
+                want |= EV_SM1
         if self.pd_masked:
             want &= ~PD_EVENTS
         if want != self.event_mask:
