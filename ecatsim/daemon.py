@@ -8,6 +8,7 @@ Ref: design.md "One frame through the layers", habits 3 and 6.
 
 from __future__ import annotations
 
+import ctypes
 import os
 import select
 import signal
@@ -25,7 +26,19 @@ from ecatsim.wire.frame import ecat_offset, mark_processed
 log = structlog.get_logger("ecatsim.daemon")
 
 MAX_FRAME = 2048
-IDLE_TIMEOUT_MS = 200
+IDLE_TIMEOUT_S = 0.2
+#: prctl(2) option: the slack the kernel may add to this thread's timer expiries
+PR_SET_TIMERSLACK = 29
+
+
+def fine_timer_slack() -> None:
+    """Ask for 1 ns of timer slack: a normal thread's sleeps may otherwise end up to 50 us
+    late, which is SYNC0 jitter (real-time threads get none anyway). Ref: prctl(2)."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(PR_SET_TIMERSLACK, ctypes.c_ulong(1), 0, 0, 0)
+    except (OSError, AttributeError):
+        pass  # not Linux: the default slack stays
 
 
 class ControlServer(Protocol):
@@ -166,25 +179,23 @@ class Daemon:
         """Serve until stop() is called."""
         buf = bytearray(MAX_FRAME)
         fd = self.link.fileno()
-        poller = select.poll()
-        poller.register(fd, select.POLLIN)
-        poller.register(self._wake_r, select.POLLIN)
-        ctl_fd = -1
-        if self.ctl is not None:
-            ctl_fd = self.ctl.fileno()
-            poller.register(ctl_fd, select.POLLIN)
+        ctl_fd = self.ctl.fileno() if self.ctl is not None else -1
+        watch = [f for f in (fd, self._wake_r, ctl_fd) if f >= 0]
         clock = self.segment.clock
+        fine_timer_slack()
         while not self._stop:
             if self.busy_poll:
                 if not self.handle_one(buf):
                     self._service_timers()
                 continue
             deadline = self._deadline()
-            timeout: float = IDLE_TIMEOUT_MS
+            timeout = IDLE_TIMEOUT_S
             if deadline is not None:
-                timeout = max(0.0, min(timeout, (deadline - clock.now_ns()) / 1e6))
-            events = poller.poll(timeout)
-            for efd, _ev in events:
+                timeout = max(0.0, min(timeout, (deadline - clock.now_ns()) / 1e9))
+            # select(2), not poll(2): poll's timeout is in whole milliseconds, which would
+            # wake the loop up to 1 ms after a SYNC0 deadline (decision P1)
+            ready, _, _ = select.select(watch, (), (), timeout)
+            for efd in ready:
                 if efd == self._wake_r:
                     try:
                         os.read(self._wake_r, 64)

@@ -5,12 +5,15 @@
     sudo .venv/bin/ecatsim bench -- --slaves 1 4     (the same, from the CLI)
 
 For each N it starts the daemon (N TMC8670 drives) in a private network namespace, brings
-the segment to OP with pysoem (DC active) in another, runs cyclic exchange and records the
-round trip of each send_processdata()/receive_processdata() pair, lost frames, WKC
-mismatches and the daemon's CPU time. The floor is a minimal C responder (compiled here with
-the system compiler) that answers the same raw LRW frame; the daemon is timed with the same
-raw frame too, so the ratio compares like with like. Results: a table on stdout and JSON in
-bench/results/. Ref: docs/performance.md.
+the segment to OP with pysoem (DC active, SYNC0 every cycle) in another, runs cyclic
+exchange kept mid-way between SYNC0 pulses and records the round trip of each
+send_processdata()/receive_processdata() pair, lost frames, WKC mismatches and the daemon's
+CPU time. Then the daemon is frozen and the floor, a minimal C responder compiled here with
+the system compiler, answers the same master's same frames in the same wake-up mode: the
+ratio of the medians is the figure the targets use. Each run is made unpinned and with
+master, daemon and floor pinned to one CPU (design.md "Measuring speed"). A raw LRW frame
+timed before bring-up (slaves in INIT) is reported too. Results: a table on stdout and JSON
+in bench/results/. Ref: docs/performance.md.
 """
 
 from __future__ import annotations
@@ -19,7 +22,9 @@ import argparse
 import json
 import os
 import platform
+import signal
 import socket
+import struct
 import subprocess
 import sys
 import tempfile
@@ -138,10 +143,14 @@ def pysoem_master(pair: NetnsPair, n: int, period_us: int) -> Any:
     return m
 
 
-def cycles(m: Any, seconds: float, period_us: int, pid: int) -> dict[str, Any]:
+def cycles(m: Any, seconds: float, period_us: int, pid: int, lock: bool = True) -> dict[str, Any]:
     """Cyclic exchange for ``seconds``: round trips, lost frames (no reply within two
-    periods), WKC mismatches, the daemon's CPU per cycle and in % of one core."""
+    periods), WKC mismatches, the daemon's CPU per cycle and in % of one core. With
+    ``lock`` the cycle is kept mid-way between SYNC0 pulses by the DC time of the replies,
+    as SOEM's examples do (ec_sync)."""
     rtts, lost, wkc_err = [], 0, 0
+    cycle_ns = period_us * 1000
+    sync0 = struct.unpack("<Q", m.slaves[0]._fprd(0x0990, 8))[0] if lock else None
     cpu0, wall0 = cpu_seconds(pid), time.perf_counter()
     t_next = wall0
     n = max(1, int(seconds * 1e6 / period_us))
@@ -155,6 +164,8 @@ def cycles(m: Any, seconds: float, period_us: int, pid: int) -> dict[str, Any]:
         elif w != m.expected_wkc:
             wkc_err += 1
         t_next += period_us / 1e6
+        if sync0 is not None and w > 0:
+            t_next += 0.1 * (cycle_ns / 2 - (m.dc_time - sync0) % cycle_ns) / 1e9
         d = t_next - time.perf_counter()
         if d > 0:
             time.sleep(d)
@@ -164,13 +175,58 @@ def cycles(m: Any, seconds: float, period_us: int, pid: int) -> dict[str, Any]:
             "cpu_percent": round(cpu / wall * 100, 1)}  # fmt: skip
 
 
-def max_rate(m: Any, pid: int, hold_s: float, rates: list[int]) -> dict[str, Any] | None:
+def with_master(
+    pair: NetnsPair,
+    n: int,
+    period_us: int,
+    echo: Path | None,
+    echo_mode: str,
+    seconds: float,
+    pin: list[str],
+    daemon_pid: int,
+) -> dict[str, Any]:
+    """Cyclic exchange against the daemon, then, with the same pysoem master and frames,
+    against the C echo swapped in for the daemon (design.md "Measuring speed")."""
+    m = pysoem_master(pair, n, period_us)
+    try:
+        run = cycles(m, seconds, period_us, daemon_pid)
+        if echo is None:
+            return run
+        os.kill(daemon_pid, signal.SIGSTOP)  # the daemon is frozen, its socket idle
+        proc = subprocess.Popen(["ip", "netns", "exec", pair.slave_ns, *pin, str(echo),
+                                 pair.slave_if, echo_mode])  # fmt: skip
+        try:
+            time.sleep(0.3)
+            floor = cycles(m, seconds, period_us, proc.pid, lock=False)
+        finally:
+            proc.kill()
+            proc.wait()
+            os.kill(daemon_pid, signal.SIGCONT)
+        run["floor_rtt_us"] = floor["rtt_us"]
+        run["floor_lost"] = floor["lost"]
+        run["ratio_median"] = round(run["rtt_us"]["median"] / floor["rtt_us"]["median"], 2)
+        return run
+    finally:
+        m.close()
+
+
+def max_rate(n: int, extra: tuple[str, ...], hold_s: float, rates: list[int],
+             tmp: Path) -> dict[str, Any] | None:  # fmt: skip
     """The highest of ``rates`` (Hz) that holds 0 lost frames and 0 WKC errors for
-    ``hold_s`` seconds (the issue's 10-minute runs: ``--rates 1000 --hold 600``)."""
+    ``hold_s`` seconds, SYNC0 at the same rate; each rate on a fresh daemon and bring-up
+    (the issue's 10-minute runs: ``--rates 1000 --hold 600``)."""
     for period in sorted(round(1e6 / r) for r in rates):
-        r = cycles(m, hold_s, period, pid)
+        with NetnsPair() as pair:
+            d = Daemon(pair, ("--slaves", str(n), *extra), tmp / f"rate{n}-{period}.log")
+            d.start(timeout=60)
+            try:
+                assert d.pid is not None
+                r = with_master(pair, n, period, None, "", hold_s, [], d.pid)
+            finally:
+                d.stop()
         print(f"      {1e6 / period:6.0f} Hz for {hold_s:g} s: lost {r['lost']} "
-              f"wkc-err {r['wkc_errors']} cpu {r['cpu_percent']} %")  # fmt: skip
+              f"wkc-err {r['wkc_errors']} cpu {r['cpu_percent']} % "
+              f"rtt p99.9 {r['rtt_us']['p999']} us")  # fmt: skip
         if r["lost"] == 0 and r["wkc_errors"] == 0:
             return {"rate_hz": round(1e6 / period), "hold_s": hold_s, **r}
     return None
@@ -182,6 +238,9 @@ def main() -> int:
     ap.add_argument("--seconds", type=float, default=5.0, help="cyclic exchange per run")
     ap.add_argument("--period-us", type=int, default=1000)
     ap.add_argument("--modes", nargs="+", choices=["blocking", "busy-poll"], default=["blocking"])
+    ap.add_argument("--placements", nargs="+", choices=["unpinned", "same-cpu"],
+                    default=["unpinned", "same-cpu"],
+                    help="same-cpu pins master, daemon and floor to --cpu (default 0)")  # fmt: skip
     ap.add_argument("--cpu", type=int, help="pin the daemon (and the floor) to this CPU")
     ap.add_argument("--max-rate", action="store_true", help="also search the highest rate")
     ap.add_argument("--hold", type=float, default=60.0, help="seconds a rate must hold")
@@ -202,43 +261,48 @@ def main() -> int:
                                "cpu_model": cpu_model,
                                "kernel": platform.release(),
                                "python": platform.python_version(), "runs": []}  # fmt: skip
-    pin = ["taskset", "-c", str(args.cpu)] if args.cpu is not None else []
+    all_cpus = os.sched_getaffinity(0)
     for mode in args.modes:
         busy = mode == "busy-poll"
-        extra = (*(("--busy-poll",) if busy else ()),
-                 *(("--cpu", str(args.cpu)) if args.cpu is not None else ()))  # fmt: skip
-        for n in args.slaves:
-            with NetnsPair() as pair:
-                proc = subprocess.Popen(["ip", "netns", "exec", pair.slave_ns, *pin, str(echo),
-                                         pair.slave_if, "busy" if busy else "block"])  # fmt: skip
-                time.sleep(0.2)
-                floor, floor_lost = raw_rtt(pair, frame, 2000)
-                proc.kill()
-                proc.wait()
-                d = Daemon(pair, ("--slaves", str(n), *extra), tmp / f"daemon{n}{mode}.log")
-                d.start(timeout=60)
-                try:
-                    raw, raw_lost = raw_rtt(pair, frame, 2000)
-                    assert d.pid is not None
-                    m = pysoem_master(pair, n, args.period_us)
+        echo_mode = "busy" if busy else "block"
+        for placement in args.placements:
+            cpu = args.cpu if placement == "unpinned" else (args.cpu or 0)
+            pin = ["taskset", "-c", str(cpu)] if cpu is not None else []
+            extra = (*(("--busy-poll",) if busy else ()),
+                     *(("--cpu", str(cpu)) if cpu is not None else ()))  # fmt: skip
+            os.sched_setaffinity(0, {cpu} if placement == "same-cpu" else all_cpus)
+            for n in args.slaves:
+                with NetnsPair() as pair:
+                    proc = subprocess.Popen(["ip", "netns", "exec", pair.slave_ns, *pin,
+                                             str(echo), pair.slave_if, echo_mode])  # fmt: skip
+                    time.sleep(0.2)
+                    floor_raw, floor_lost = raw_rtt(pair, frame, 2000)
+                    proc.kill()
+                    proc.wait()
+                    d = Daemon(pair, ("--slaves", str(n), *extra),
+                               tmp / f"daemon{n}{mode}{placement}.log")  # fmt: skip
+                    d.start(timeout=60)
                     try:
-                        run = cycles(m, args.seconds, args.period_us, d.pid)
-                        rate = max_rate(m, d.pid, args.hold, args.rates) if args.max_rate else None
+                        raw, raw_lost = raw_rtt(pair, frame, 2000)
+                        assert d.pid is not None
+                        run = with_master(pair, n, args.period_us, echo, echo_mode,
+                                          args.seconds, pin, d.pid)  # fmt: skip
                     finally:
-                        m.close()
-                finally:
-                    d.stop()
-            fl, em = stats(floor), stats(raw)
-            row = {"mode": mode, "slaves": n, "floor_rtt_us": fl, "raw_rtt_us": em,
-                   "ratio_median": round(em["median"] / fl["median"], 2),
-                   "raw_lost": raw_lost + floor_lost, **run, "max_rate": rate}  # fmt: skip
-            results["runs"].append(row)
-            print(f"{mode:9s} N={n:3d} floor {fl['median']:7.1f} us  emulator "
-                  f"{em['median']:7.1f} us (x{row['ratio_median']})  pysoem median "
-                  f"{run['rtt_us']['median']:7.1f} p99 {run['rtt_us']['p99']:7.1f} us  lost "
-                  f"{run['lost']} wkc-err {run['wkc_errors']}  daemon "
-                  f"{run['cpu_per_cycle_us']} us/cycle {run['cpu_percent']} %"
-                  + (f"  max {rate['rate_hz']} Hz" if rate else ""))  # fmt: skip
+                        d.stop()
+                rate = max_rate(n, extra, args.hold, args.rates, tmp) if args.max_rate else None
+                fl, em = stats(floor_raw), stats(raw)
+                row = {"mode": mode, "placement": placement, "slaves": n, **run,
+                       "raw_floor_rtt_us": fl, "raw_rtt_us": em,
+                       "raw_ratio_median": round(em["median"] / fl["median"], 2),
+                       "raw_lost": raw_lost + floor_lost, "max_rate": rate}  # fmt: skip
+                results["runs"].append(row)
+                print(f"{mode:9s} {placement:8s} N={n:3d} pysoem median "
+                      f"{run['rtt_us']['median']:7.1f} p99 {run['rtt_us']['p99']:7.1f} us, "
+                      f"floor {run['floor_rtt_us']['median']:7.1f} us "
+                      f"(x{run['ratio_median']})  lost {run['lost']} wkc-err "
+                      f"{run['wkc_errors']}  daemon {run['cpu_per_cycle_us']} us/cycle "
+                      f"{run['cpu_percent']} %  raw frame x{row['raw_ratio_median']}"
+                      + (f"  max {rate['rate_hz']} Hz" if rate else ""))  # fmt: skip
     out = ROOT / "bench" / "results"
     out.mkdir(parents=True, exist_ok=True)
     path = out / f"bench-{time.strftime('%Y%m%d-%H%M%S')}.json"
