@@ -23,6 +23,8 @@ MAX_SYNC0_CATCHUP = 64
 #: frames arriving this long before the earliest SYNC deadline skip the per-slave check;
 #: larger than any clock correction that does not mark the timers dirty (dc.MOVE_NS)
 PULSE_HINT_MARGIN_NS = 200_000
+#: "no deadline" in the comparisons of deadlines
+NO_DEADLINE = 1 << 62
 
 # Command codes as plain ints for the hot path. Ref: ETG.1000.4 Table 11.
 NOP, APRD, APWR, APRW, FPRD, FPWR, FPRW, BRD, BWR, BRW, LRD, LWR, LRW, ARMW, FRMW = range(15)
@@ -65,6 +67,8 @@ class Segment:
         self.sync0_late_ns = 0
         #: host time before which no SYNC pulse can be due (recomputed by sync_until)
         self._pulse_hint = 0
+        #: host time of the earliest SYNC0/SYNC1 pulse (NO_DEADLINE: none)
+        self._next_sync = 0
         n = len(self.escs)
         for i, esc in enumerate(self.escs):
             esc.set_topology(n - 1 - i)
@@ -299,11 +303,13 @@ class Segment:
         Ref: TMC8460 §5.50.4 (SYNC0 generation); ETG.1000.6 §5.3 (DC synchronous mode).
         """
         ctx = self.ctx
+        nxt = NO_DEADLINE
         for esc in self.sync_escs:
+            dc = esc.dc
             fw = self.firmware[esc.position] if self.firmware else None
             for k in range(MAX_SYNC0_CATCHUP + 1):
-                d1 = esc.dc.sync1_deadline()
-                d = esc.dc.sync0_deadline()
+                d1 = dc.sync1_deadline() if dc.next_sync1 is not None else None
+                d = dc.sync0_deadline()
                 if d1 is not None and d1 <= t and (d is None or d1 < d):
                     esc.sync1_tick()  # registers only: the firmware acts on SYNC0
                     continue
@@ -317,12 +323,26 @@ class Segment:
                     self.sync0_late_ns = t - d
                 if fw is not None and esc.position in ctx.pending:
                     fw.service(d)
-        hint = 1 << 62
+            else:
+                d, d1 = dc.sync0_deadline(), dc.sync1_deadline()
+            if d is not None and d < nxt:
+                nxt = d
+            if d1 is not None and d1 < nxt:
+                nxt = d1
+        self._set_next_sync(nxt)
+
+    def _set_next_sync(self, nxt: int) -> None:
+        self._next_sync = nxt
+        self._pulse_hint = nxt - PULSE_HINT_MARGIN_NS
+
+    def _refresh_next_sync(self) -> None:
+        """Recompute the earliest SYNC deadline (after a DC register change)."""
+        nxt = NO_DEADLINE
         for esc in self.sync_escs:
             for d in (esc.dc.sync0_deadline(), esc.dc.sync1_deadline()):
-                if d is not None and d < hint:
-                    hint = d
-        self._pulse_hint = hint - PULSE_HINT_MARGIN_NS
+                if d is not None and d < nxt:
+                    nxt = d
+        self._set_next_sync(nxt)
 
     @property
     def sync_escs(self) -> list[Esc]:
@@ -333,13 +353,17 @@ class Segment:
         return self._sync_escs
 
     def next_deadline(self) -> int | None:
-        """The earliest timer deadline (ns), for the daemon's poll timeout."""
-        ds = [e.wd.deadline_ns for e in self.escs if e.wd.deadline_ns]
-        for e in self.sync_escs:
-            d = e.dc.sync0_deadline()
-            if d is not None:
-                ds.append(d)
-        return min(ds) if ds else None
+        """The earliest timer deadline (ns), for the daemon's poll timeout. SYNC deadlines
+        are those computed when the pulses last ran or a DC register last changed; the time
+        loop moves them by less than the ESC's MOVE_NS until it marks them stale."""
+        if self.ctx.timers_dirty:
+            self._refresh_next_sync()
+        best = self._next_sync
+        for e in self.escs:
+            d = e.wd.deadline_ns
+            if d and d < best:
+                best = d
+        return None if best == NO_DEADLINE else best
 
 
 def _physical(esc: Esc, op: int, ado: int, data: memoryview) -> int:

@@ -5,9 +5,7 @@ loopback link with a manual clock.
 
     .venv/bin/python tools/cycle_profile.py --drives 1 --cycles 2000          # us per cycle
     .venv/bin/python tools/cycle_profile.py --drives 16 --profile | head -40  # cProfile
-    valgrind --tool=callgrind .venv/bin/python tools/cycle_profile.py --cycles 600 --mark
-        (instructions per cycle: the difference between two --mark runs, see
-        docs/performance.md "How to measure")
+    tools/icount.sh 1 --idle       # instructions per cycle (callgrind, two run lengths)
 
 Ref: docs/performance.md.
 """
@@ -40,7 +38,7 @@ CSP = 8
 class CspCycle:
     """N drives in OP, enabled in csp, SYNC0 at 1 ms; ``step()`` runs one cycle."""
 
-    def __init__(self, drives: int, device: str = "tmc8670") -> None:
+    def __init__(self, drives: int, device: str = "tmc8670", enable: bool = True) -> None:
         self.n = drives
         self.seg, self.clock = segment_of(drives, device=device)
         t = TinyMaster(self.seg)
@@ -65,8 +63,9 @@ class CspCycle:
         self.t = t0
         self.k = 0
         self.target = 0
-        for cw in (0x06, 0x07, 0x0F, 0x0F, 0x0F):  # shutdown, switch on, enable operation
-            self.step(cw)
+        self.cw = 0x0F if enable else 0x00
+        for cw in (0x06, 0x07, 0x0F, 0x0F, 0x0F) if enable else ():
+            self.step(cw)  # shutdown, switch on, enable operation
 
     def frame(self, cw: int) -> bytes:
         out = b"".join(struct.pack("<HiHi", cw, self.target, 0, 0) for _ in range(self.n))
@@ -77,13 +76,13 @@ class CspCycle:
             ]
         )
 
-    def step(self, cw: int = 0x0F) -> None:
+    def step(self, cw: int | None = None) -> None:
         self.clock.t = self.t
         self.clock.t = self.t + 20_000  # the timer wakes a little late, as poll(2) does
         self.daemon._service_timers()  # SYNC0
         self.clock.t = self.t + MS // 2
         self.target = int(20_000 * (1 - math.cos(self.k * 2e-3 * math.pi)))
-        self.link.master_send(self.frame(cw))
+        self.link.master_send(self.frame(self.cw if cw is None else cw))
         self.link.rx_ns = self.clock.t
         self.daemon.handle_one(self.buf)
         reply = self.link.master_recv()
@@ -97,9 +96,10 @@ def main() -> int:
     ap.add_argument("--drives", type=int, default=1)
     ap.add_argument("--cycles", type=int, default=2000)
     ap.add_argument("--device", default="tmc8670", help="tmc8670 | echo")
+    ap.add_argument("--idle", action="store_true", help="drives in OP but not enabled")
     ap.add_argument("--profile", action="store_true", help="cProfile, sorted by own time")
     args = ap.parse_args()
-    c = CspCycle(args.drives, args.device)
+    c = CspCycle(args.drives, args.device, enable=not args.idle)
     for _ in range(100):  # warm up
         c.step()
     if args.profile:

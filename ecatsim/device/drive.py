@@ -14,7 +14,19 @@ import structlog
 
 from ecatsim.device import cia402
 from ecatsim.device.cia402 import Command, PdsState
-from ecatsim.device.servo import RPM, MotorParams, Profile, Servo, ramp
+from ecatsim.device.servo import (
+    POSITION,
+    RPM,
+    STOP_FOLLOWING,
+    STOP_INDEX,
+    STOP_OVERCURRENT,
+    TORQUE,
+    VELOCITY,
+    MotorParams,
+    Profile,
+    Servo,
+    ramp,
+)
 from ecatsim.slave.al import AlState
 from ecatsim.slave.od import Entry, ObjectDictionary
 
@@ -49,6 +61,9 @@ FAULTS: dict[str, tuple[int, int]] = {
 }
 
 Emcy = Callable[[int, int, bytes], None]
+#: what the servo is asked to follow: (kind, reference, velocity feed-forward rpm, following
+#: error window in counts or 0), see Servo.run
+Demand = tuple[int, float, float, float]
 
 
 class Drive:
@@ -327,18 +342,33 @@ class Drive:
         n = min(n, 200_000)  # a long pause is caught up at most 20 s
         self._snapshot()
         index = self.index_output
-        if index is None:
-            for _ in range(n):
-                self._substep()
-        else:
-            t = self.t_ns
-            for _ in range(n):
-                rev = math.floor(s.angle / TWO_PI)
-                self._substep()
-                t += dt_ns
-                if math.floor(s.angle / TWO_PI) != rev:
-                    self._index_pulse(index, t)
+        t = self.t_ns
+        left = n
+        while left > 0:
+            demand = self._steady_demand()
+            steps = left
+            if demand is None:  # the demand moves every substep (profiles, ramps)
+                demand = self._substep_demand(self.params.substep)
+                steps = 1
+            kind, ref, v_ff, window = demand
+            done, why = s.run(steps, kind, ref, v_ff, window, self._trip(), index is not None)
+            if why == STOP_FOLLOWING:
+                self._fault("following_error")  # this substep still runs on the demand
+                more, why = s.run(1, kind, ref, v_ff, 0.0, self._trip(), index is not None)
+                done += more
+            left -= done
+            t += done * dt_ns
+            if why == STOP_OVERCURRENT:
+                self._fault("overcurrent")
+            elif why == STOP_INDEX and index is not None:
+                self._index_pulse(index, t)
+        if self.state == PdsState.OPERATION_ENABLED and self.mode not in (PP, CSP):
+            self.p_demand = s.angle / TWO_PI * self.params.ppr  # follows the actual
         self.t_ns += n * dt_ns if n < 200_000 else now_ns - self.t_ns
+
+    def _trip(self) -> float:
+        """The current above which a substep ends in an overcurrent fault."""
+        return self.overcurrent_ma if self.state in cia402.POWERED else math.inf
 
     def _index_pulse(self, index: Callable[[bool, int], None], t_ns: int) -> None:
         """The encoder's index (N) pulse, once per revolution at angle 0, as wide as one
@@ -357,32 +387,48 @@ class Drive:
         self.q_6071, self.q_60b2, self.q_6065 = v(0x6071), v(0x60B2), v(0x6065)
         self.q_6085, self.q_605a = v(0x6085), v(0x605A)
 
-    def _substep(self) -> None:
-        s = self.servo
-        dt = self.params.substep
+    def _steady_demand(self) -> Demand | None:
+        """The servo demand if it stays the same over the substeps to come (the OD values
+        are fixed until the next advance), else None. Ref: CiA 402-2 §10-§12."""
         st = self.state
-        iq = 0.0
-        if st == PdsState.OPERATION_ENABLED:
-            iq = self._mode_substep(dt)
-        elif st in (PdsState.QUICK_STOP_ACTIVE, PdsState.FAULT_REACTION_ACTIVE):
+        if st not in cia402.POWERED:
+            return (TORQUE, 0.0, 0.0, 0.0)  # voltage off: the motor coasts
+        if st != PdsState.OPERATION_ENABLED:
+            return None  # quick stop / fault reaction ramps
+        mode = self.mode
+        if mode == CSP:
+            self.p_demand = float(self.q_607a + self.q_60b0)
+            return (POSITION, self.p_demand, self.v_ff_rpm, self._window())
+        if mode == CSV:
+            v = float(self.q_60ff + self.q_60b1)
+            self.v_demand_rpm = v
+            return (VELOCITY, v, 0.0, 0.0)
+        if mode == CST:
+            return (TORQUE, float(self.q_6071 + self.q_60b2), 0.0, 0.0)
+        if mode == PV:
+            target = 0.0 if self.prev_cw & 0x0100 else float(self.q_60ff)
+            return (VELOCITY, target, 0.0, 0.0) if self.v_demand_rpm == target else None
+        if mode in (PP, HM):
+            return None
+        return (VELOCITY, 0.0, 0.0, 0.0)
+
+    def _substep_demand(self, dt: float) -> Demand:
+        """The demand for one substep where it moves every substep: pp profile, pv ramp,
+        homing, and the quick stop / fault reaction ramp (transitions 12 and 14 when the
+        ramp ends at standstill). Ref: CiA 402-2 §8 (FSA), §12.3 (pp), §12.5 (pv)."""
+        s = self.servo
+        st = self.state
+        if st in (PdsState.QUICK_STOP_ACTIVE, PdsState.FAULT_REACTION_ACTIVE):
             decel = float(self.q_6085 or 2000)
             self.v_demand_rpm = ramp(self.v_demand_rpm, 0.0, decel, decel, dt)
-            iq = s.current_from_velocity(self.v_demand_rpm)
             if self.v_demand_rpm == 0.0 and abs(s.rpm) < 1.0:
                 if st == PdsState.FAULT_REACTION_ACTIVE:
                     self.state = PdsState.FAULT  # transition 14
                 elif self.q_605a < 5:
                     self.state = PdsState.SWITCH_ON_DISABLED  # transition 12
-        s.step(iq)
-        if abs(s.iq_ma) > self.overcurrent_ma and self.state in cia402.POWERED:
-            self._fault("overcurrent")
-
-    def _mode_substep(self, dt: float) -> float:
-        s = self.servo
-        mode = self.mode
+            return (VELOCITY, self.v_demand_rpm, 0.0, 0.0)
         halt = bool(self.prev_cw & 0x0100)
-        cps = self.params.ppr / 60.0  # counts/s per rpm
-        if mode == PP:
+        if self.mode == PP:
             prof = self.profile
             if halt:
                 prof.target = (
@@ -392,29 +438,19 @@ class Drive:
                 )
             prof.step(dt)
             self.p_demand = prof.pos
-            self._check_following()
-            return s.current_from_velocity(s.velocity_from_position(prof.pos, prof.vel / cps))
-        if mode not in (PP, CSP):
-            self.p_demand = s.angle / (2 * math.pi) * self.params.ppr  # follows the actual
-        if mode == PV:
+            return (POSITION, prof.pos, prof.vel / (self.params.ppr / 60.0), self._window())
+        if self.mode == PV:
             target = 0.0 if halt else float(self.q_60ff)
             acc = float(self.q_6083 or 1)
             dec = float(self.q_6084 or 1)
             self.v_demand_rpm = ramp(self.v_demand_rpm, target, acc, dec, dt)
-            return s.current_from_velocity(self.v_demand_rpm)
-        if mode == CSV:
-            v = float(self.q_60ff + self.q_60b1)
-            self.v_demand_rpm = v
-            return s.current_from_velocity(v)
-        if mode == CSP:
-            self.p_demand = float(self.q_607a + self.q_60b0)
-            self._check_following()
-            return s.current_from_velocity(s.velocity_from_position(self.p_demand, self.v_ff_rpm))
-        if mode == CST:
-            return float(self.q_6071 + self.q_60b2)
-        if mode == HM:
-            return self._homing(dt)
-        return s.current_from_velocity(0.0)
+            return (VELOCITY, self.v_demand_rpm, 0.0, 0.0)
+        return (VELOCITY, self._homing(dt), 0.0, 0.0)
+
+    def _window(self) -> float:
+        """Following error window 6065h (0 or FFFFFFFFh: not checked). Ref: CiA 402-2."""
+        w = self.q_6065
+        return 0.0 if w == 0xFFFFFFFF else float(w)
 
     def _pp_setpoint(self) -> None:
         """New set point on the rising edge of bit 4; bit 6 relative. Ref: seed 004 Table 76."""
@@ -440,7 +476,8 @@ class Drive:
             self.set_point_ack = False
 
     def _homing(self, dt: float) -> float:
-        """Homing on the current position (35/37) or on the index pulse (33/34).
+        """Homing on the current position (35/37) or on the index pulse (33/34): the
+        velocity demand for one substep.
 
         Ref: CiA 402-2 §11 (homing methods); 6098h, 6099h, 609Ah, 607Ch.
         """
@@ -450,21 +487,20 @@ class Drive:
         if start and not self.homing_active and not self.homing_done:
             self.homing_active = True
         if not self.homing_active:
-            return s.current_from_velocity(0.0)
+            return 0.0
         if method in (35, 37):
             self._home_here()
-            return s.current_from_velocity(0.0)
+            return 0.0
         direction = -1.0 if method == 33 else 1.0
         speed = float(self._v(0x6099, 2) or 100)
         acc = float(self._v(0x609A) or 1000)
         self.v_demand_rpm = ramp(self.v_demand_rpm, direction * speed, acc, acc, dt)
-        before = s.angle
-        iq = s.current_from_velocity(self.v_demand_rpm)
+        v = self.v_demand_rpm
         # index pulse once per revolution at angle 0 (mod 2 pi): detect the crossing
         after = s.angle + s.omega * dt
-        if math.floor(before / (2 * math.pi)) != math.floor(after / (2 * math.pi)):
+        if math.floor(s.angle / TWO_PI) != math.floor(after / TWO_PI):
             self._home_here()
-        return iq
+        return v
 
     def _home_here(self) -> None:
         s = self.servo
@@ -476,14 +512,6 @@ class Drive:
         self.homing_done = True
         self.v_demand_rpm = 0.0
         self._hold_here()
-
-    def _check_following(self) -> None:
-        window = self.q_6065
-        if not window or window == 0xFFFFFFFF:
-            return
-        err = self.p_demand - self.servo.angle / (2 * math.pi) * self.params.ppr
-        if abs(err) > window:
-            self._fault("following_error")
 
     # ----------------------------------------------------------------- statusword
     def _publish(self) -> None:

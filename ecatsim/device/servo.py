@@ -17,6 +17,10 @@ from dataclasses import dataclass
 TWO_PI = 2.0 * math.pi
 RPM = TWO_PI / 60.0  # rad/s per rpm
 
+# What Servo.run's reference is, and why it stopped early.
+TORQUE, VELOCITY, POSITION = 0, 1, 2
+STOP_NONE, STOP_FOLLOWING, STOP_OVERCURRENT, STOP_INDEX = 0, 1, 2, 3
+
 
 @dataclass(frozen=True, slots=True)
 class MotorParams:
@@ -108,27 +112,12 @@ class Servo:
         self.integ = 0.0
         self.iq_integ = self.id_integ = 0.0
 
-    def current_from_velocity(self, v_ref_rpm: float, ff_ma: float = 0.0) -> float:
-        """Velocity PI (anti-windup by clamping) -> torque current reference in mA."""
-        v_ref = max(-self.vel_limit_rpm, min(self.vel_limit_rpm, v_ref_rpm))
-        err = v_ref - self.rpm
-        dt = self.p.substep
-        g = self.gains
-        out = g.vel_kp * err + self.integ + ff_ma
-        lim = self.i_limit_ma
-        if -lim < out < lim:
-            self.integ += g.vel_ki * err * dt
-        return max(-lim, min(lim, out))
-
-    def velocity_from_position(self, p_ref: float, v_ff_rpm: float) -> float:
-        """Position P with velocity feed-forward -> velocity reference in rpm."""
-        return self.gains.pos_kp * (p_ref - self.angle / TWO_PI * self.p.ppr) + v_ff_rpm
-
     def _current_loop(
         self, ref_ma: float, i_ma: float, integ: float, kp: float, ki: float, emf: float
     ) -> tuple[float, float]:
         """One substep of a current PI (anti-windup by clamping at the supply voltage) on
-        the R-L winding with back EMF ``emf``: (new current mA, new integrator V).
+        the R-L winding with back EMF ``emf``: (new current mA, new integrator V). The
+        torque axis runs the same arithmetic inlined in run().
         Ref: seed 004 §5.1.7 (2041h); decision D15."""
         p = self.p
         err = (ref_ma - i_ma) / 1000.0  # A
@@ -142,40 +131,123 @@ class Servo:
         return i * 1000.0, integ
 
     def step(self, iq_ref_ma: float) -> None:
-        """One substep: current loop lag, then mechanics (semi-implicit Euler)."""
+        """One substep with a torque current reference."""
+        self.run(1, TORQUE, iq_ref_ma)
+
+    def run(
+        self,
+        n: int,
+        kind: int,
+        ref: float,
+        v_ff_rpm: float = 0.0,
+        window: float = 0.0,
+        i_trip_ma: float = math.inf,
+        index: bool = False,
+    ) -> tuple[int, int]:
+        """Up to ``n`` substeps with a constant demand; returns (substeps done, why it
+        stopped early or STOP_NONE).
+
+        ``kind`` says what ``ref`` is: TORQUE (current mA), VELOCITY (rpm, through the
+        velocity PI) or POSITION (counts, through the position P with velocity feed-forward
+        ``v_ff_rpm``, then the velocity PI). Each substep: the demand's loops, the torque
+        current PI on the winding (and the flux PI if it carries current), then mechanics
+        (semi-implicit Euler) with viscous and Coulomb friction. It stops early, with the
+        substep count so far, before a substep where the position error exceeds ``window``
+        (POSITION, window > 0: STOP_FOLLOWING), after one where |iq| exceeds ``i_trip_ma``
+        (STOP_OVERCURRENT) and, with ``index``, after one that crossed angle 0 mod 2 pi
+        (STOP_INDEX): the caller acts, then continues.
+        One loop, all state in locals: this is the frame path's largest cost per drive.
+        Ref: seed 004 §5.1.7-5.1.10; decision D15.
+        """
         p = self.p
-        dt = p.substep
-        lim = self.i_limit_ma
-        self.iq_ref_ma = max(-lim, min(lim, iq_ref_ma))
         g = self.gains
-        emf = p.kt * self.omega  # V, Ke = Kt
-        self.iq_ma, self.iq_integ = self._current_loop(
-            self.iq_ref_ma, self.iq_ma, self.iq_integ, g.cur_kp, g.cur_ki, emf
-        )
-        if self.id_ref_ma or self.id_ma:
-            self.id_ma, self.id_integ = self._current_loop(
-                self.id_ref_ma, self.id_ma, self.id_integ, g.flux_kp, g.flux_ki, 0.0
-            )
-        if self.iq_ref_ma == 0.0 and abs(self.iq_ma) < 1e-3 and self.omega == 0.0:
-            self.iq_ma = self.iq_integ = 0.0
-        drive = p.kt * self.iq_ma / 1000.0 - p.load - p.viscous * self.omega
-        if self.omega > 1e-9:
-            drive -= p.coulomb
-        elif self.omega < -1e-9:
-            drive += p.coulomb
-        elif abs(drive) <= p.coulomb:
-            drive = 0.0  # static friction holds
-        else:
-            drive -= math.copysign(p.coulomb, drive)
-        new = self.omega + drive / p.inertia * dt
-        if (
-            self.omega != 0.0
-            and (new > 0) != (self.omega > 0)
-            and abs(p.kt * self.iq_ma / 1000.0 - p.load) <= p.coulomb
-        ):
-            new = 0.0  # friction stops the motor, it does not reverse it
-        self.omega = new
-        self.angle += self.omega * dt
+        dt = p.substep
+        ppr = p.ppr
+        kt = p.kt
+        load = p.load
+        viscous = p.viscous
+        coulomb = p.coulomb
+        inertia = p.inertia
+        vmax_v = p.supply_voltage
+        resistance = p.resistance
+        decay = self.decay
+        lim = self.i_limit_ma
+        vlim = self.vel_limit_rpm
+        vel_kp, vel_ki, pos_kp = g.vel_kp, g.vel_ki, g.pos_kp
+        cur_kp, cur_ki = g.cur_kp, g.cur_ki
+        angle = self.angle
+        omega = self.omega
+        iq = self.iq_ma
+        iq_integ = self.iq_integ
+        integ = self.integ
+        iq_ref = self.iq_ref_ma
+        flux = bool(self.id_ref_ma or self.id_ma)
+        done = 0
+        why = STOP_NONE
+        while done < n:
+            if kind == TORQUE:
+                out = ref
+            else:
+                if kind == POSITION:
+                    err_p = ref - angle / TWO_PI * ppr
+                    if window and abs(err_p) > window:
+                        why = STOP_FOLLOWING
+                        break
+                    v_ref = pos_kp * err_p + v_ff_rpm
+                else:
+                    v_ref = ref
+                # velocity PI, anti-windup by clamping
+                v_ref = -vlim if v_ref < -vlim else vlim if v_ref > vlim else v_ref
+                err = v_ref - omega / RPM
+                out = vel_kp * err + integ
+                if -lim < out < lim:
+                    integ += vel_ki * err * dt
+            # torque current PI on the winding (see _current_loop)
+            iq_ref = -lim if out < -lim else lim if out > lim else out
+            emf = kt * omega
+            err_a = (iq_ref - iq) / 1000.0
+            v = cur_kp * err_a + iq_integ + emf
+            if -vmax_v < v < vmax_v:
+                iq_integ += cur_ki * err_a * dt
+            v = -vmax_v if v < -vmax_v else vmax_v if v > vmax_v else v
+            iq = (iq / 1000.0 * decay + (1.0 - decay) * (v - emf) / resistance) * 1000.0
+            if flux:
+                self.id_ma, self.id_integ = self._current_loop(
+                    self.id_ref_ma, self.id_ma, self.id_integ, g.flux_kp, g.flux_ki, 0.0
+                )
+            if iq_ref == 0.0 and omega == 0.0 and abs(iq) < 1e-3:
+                iq = iq_integ = 0.0
+            # mechanics
+            torque = kt * iq / 1000.0
+            drive = torque - load - viscous * omega
+            if omega > 1e-9:
+                drive -= coulomb
+            elif omega < -1e-9:
+                drive += coulomb
+            elif abs(drive) <= coulomb:
+                drive = 0.0  # static friction holds
+            else:
+                drive -= math.copysign(coulomb, drive)
+            new = omega + drive / inertia * dt
+            if omega != 0.0 and (new > 0) != (omega > 0) and abs(torque - load) <= coulomb:
+                new = 0.0  # friction stops the motor, it does not reverse it
+            rev = math.floor(angle / TWO_PI) if index else 0
+            omega = new
+            angle += omega * dt
+            done += 1
+            if abs(iq) > i_trip_ma:
+                why = STOP_OVERCURRENT
+                break
+            if index and math.floor(angle / TWO_PI) != rev:
+                why = STOP_INDEX
+                break
+        self.angle = angle
+        self.omega = omega
+        self.iq_ma = iq
+        self.iq_integ = iq_integ
+        self.integ = integ
+        self.iq_ref_ma = iq_ref
+        return done, why
 
 
 class Profile:

@@ -429,6 +429,17 @@ class Esc:
             hi = min(lad + n, f.lstop)
             phys = f.pstart + (lo - f.lstart)
             view = data[lo - lad : hi - lad]
+            sm = f.sm
+            if sm is not None:  # the whole map lies in one SM window: no window search
+                if write:
+                    if not sm.ecat_may_write():
+                        return False
+                    sm.ecat_write(phys - sm.start, view)
+                    return True
+                if not sm.ecat_may_read():
+                    return False
+                sm.ecat_read(phys - sm.start, view)
+                return True
             if write:
                 return bool(self.ecat_write(phys, view))
             return bool(self.ecat_read(phys, view))
@@ -512,6 +523,19 @@ class Esc:
                 wins.append((w[0], w[1], sm))
         wins.sort(key=lambda x: x[0])
         self.sm_windows = tuple(wins)
+        self._route_fmmus()
+
+    def _route_fmmus(self) -> None:
+        """Give each byte-aligned FMMU the SM whose window holds its whole physical range
+        (exactly one window may touch it), compiled when FMMUs or SM windows change."""
+        for f in self.fmmus:
+            f.sm = None
+            if f.aligned:
+                ps = f.pstart
+                pe = ps + (f.lstop - f.lstart)
+                hits = self._hits(ps, pe)
+                if len(hits) == 1 and hits[0][0] <= ps and pe <= hits[0][1]:
+                    f.sm = hits[0][2]
 
     # -- plain memory ------------------------------------------------------------------
 
@@ -746,6 +770,7 @@ class Esc:
     def _ew_fmmu(self, ra: int, rs: int, old: bytes) -> None:
         """Recompile the FMMU maps when any FMMU register changes. Ref: TMC8460 §5.48."""
         self.fmmus = compile_fmmus(self.mem)
+        self._route_fmmus()
         self.ctx.logical_dirty = True
 
     def _ew_sm_config(self, ra: int, rs: int, old: bytes) -> None:

@@ -6,8 +6,12 @@ Ref: TMC8460 §5.48 Tables 75-84; ETG.1000.4 §6.6 (FMMU).
 from __future__ import annotations
 
 import struct
+from typing import TYPE_CHECKING
 
 from ecatsim.esc import regs
+
+if TYPE_CHECKING:
+    from ecatsim.esc.sm import SyncManager
 
 #: logical start u32, length u16, log start bit u8, log stop bit u8, phys start u16,
 #: phys start bit u8, type u8, activate u8.  Ref: TMC8460 §5.48 Table 75.
@@ -22,9 +26,22 @@ class FmmuMap:
 
     ``lbit``/``lend`` span the logical bits [lbit, lend); ``pbit`` is the physical bit
     that the first logical bit maps to. ``aligned`` marks byte-aligned maps (fast path).
+    ``sm`` is the SyncManager whose window holds the whole physical range, if exactly one
+    does (set by the ESC whenever FMMUs or SM windows change): the copy goes straight to it.
     """
 
-    __slots__ = ("aligned", "lbit", "lend", "lstart", "lstop", "pbit", "pstart", "read", "write")
+    __slots__ = (
+        "aligned",
+        "lbit",
+        "lend",
+        "lstart",
+        "lstop",
+        "pbit",
+        "pstart",
+        "read",
+        "sm",
+        "write",
+    )
 
     def __init__(
         self, lstart: int, length: int, lsb: int, lstop: int, pstart: int, psb: int, typ: int
@@ -38,6 +55,7 @@ class FmmuMap:
         self.lstart = lstart
         self.lstop = lstart + length
         self.pstart = pstart
+        self.sm: SyncManager | None = None
 
 
 def compile_fmmus(mem: bytearray) -> tuple[FmmuMap, ...]:

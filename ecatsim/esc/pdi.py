@@ -164,13 +164,25 @@ class Pdi:
 
     # -- typed helpers -------------------------------------------------------------
 
+    # A register without a PDI read side effect is read straight from memory: registers
+    # are never behind an SM window (decision E22), so only the hooks make a difference.
+
     def u8(self, addr: int) -> int:
+        esc = self._esc
+        if addr < regs.REGISTER_END and not esc.t.pdi_r_hooked[addr]:
+            return esc.mem[addr]
         return self.read(addr, 1)[0]
 
     def u16(self, addr: int) -> int:
+        esc = self._esc
+        if addr + 2 <= regs.REGISTER_END and esc.t.pdi_r_hooked.find(1, addr, addr + 2) < 0:
+            return int(_U16.unpack_from(esc.mem, addr)[0])
         return int(_U16.unpack(self.read(addr, 2))[0])
 
     def u32(self, addr: int) -> int:
+        esc = self._esc
+        if addr + 4 <= regs.REGISTER_END and esc.t.pdi_r_hooked.find(1, addr, addr + 4) < 0:
+            return int(_U32.unpack_from(esc.mem, addr)[0])
         return int(_U32.unpack(self.read(addr, 4))[0])
 
     def w16(self, addr: int, value: int) -> None:

@@ -136,9 +136,12 @@ class SyncManager:
                 self.status &= ~regs.SM_ST_IRQ_READ
             if last:
                 self.w_open = False
-                self.l = self.w
-                busy = (self.l, self.r) if self.r_open else (self.l,)
-                self.w = next(b for b in (0, 1, 2) if b not in busy)
+                latest = self.l = self.w
+                # the lowest buffer neither latest nor being read
+                if self.r_open and self.r != latest:
+                    self.w = 3 - latest - self.r
+                else:
+                    self.w = 1 if latest == 0 else 0
                 self.status |= regs.SM_ST_IRQ_WRITE
         if first or last:
             self._sync()
