@@ -50,6 +50,10 @@ SW_DIRECTION = 0x8000
 # CiA 402 error codes (603Fh) and 1001h bits. Ref: CiA 402-2 Annex; CiA 301 Table 21.
 TWO_PI = 2 * math.pi
 _MISSING = object()
+#: actual values refreshed at every input update, in the order _publish() computes them
+PUBLISHED = (0x6041, 0x6061, 0x6064, 0x606C, 0x6062, 0x606B, 0x6077, 0x6074, 0x60F4, 0x603F)
+#: OD values the substeps use, read once per advance() into the q_ attributes, in order
+SNAPSHOT = (0x60FF, 0x6083, 0x6084, 0x607A, 0x60B0, 0x60B1, 0x6071, 0x60B2, 0x6065, 0x6085, 0x605A)
 #: closed current loop time constant the default 2041h gains give (s)
 CURRENT_LOOP_TAU = 2.5e-4
 
@@ -78,6 +82,9 @@ class Drive:
     ) -> None:
         self.od = od
         self._entries: dict[int, tuple[Entry, int, int] | None] = {}
+        #: the entries _publish() writes every cycle, in PUBLISHED order (looked up once)
+        self._published: tuple[tuple[Entry, int, int] | None, ...] | None = None
+        self._snapshot_hits: tuple[tuple[Entry, int, int] | None, ...] | None = None
         # OD values the substeps use, read once per advance() (see _snapshot)
         self.q_60ff = self.q_6083 = self.q_6084 = self.q_607a = self.q_60b0 = 0
         self.q_60b1 = self.q_6071 = self.q_60b2 = self.q_6065 = self.q_6085 = 0
@@ -381,11 +388,22 @@ class Drive:
     def _snapshot(self) -> None:
         """The OD values the substeps use. They only change between advance() calls (PDO
         outputs and SDO writes are applied after advancing), so read them once."""
-        v = self._v
-        self.q_60ff, self.q_6083, self.q_6084 = v(0x60FF), v(0x6083), v(0x6084)
-        self.q_607a, self.q_60b0, self.q_60b1 = v(0x607A), v(0x60B0), v(0x60B1)
-        self.q_6071, self.q_60b2, self.q_6065 = v(0x6071), v(0x60B2), v(0x6065)
-        self.q_6085, self.q_605a = v(0x6085), v(0x605A)
+        hits = self._snapshot_hits
+        if hits is None:
+            hits = self._snapshot_hits = tuple(self._entry(i, 0) for i in SNAPSHOT)
+        (
+            self.q_60ff,
+            self.q_6083,
+            self.q_6084,
+            self.q_607a,
+            self.q_60b0,
+            self.q_60b1,
+            self.q_6071,
+            self.q_60b2,
+            self.q_6065,
+            self.q_6085,
+            self.q_605a,
+        ) = [v if hit is not None and isinstance(v := hit[0].value, int) else 0 for hit in hits]
 
     def _steady_demand(self) -> Demand | None:
         """The servo demand if it stays the same over the substeps to come (the OD values
@@ -558,16 +576,25 @@ class Drive:
             sw |= SW_MOTOR_ACTIVE
         if rpm < -1.0:
             sw |= SW_DIRECTION
-        self._set(0x6041, sw)
-        self._set(0x6061, mode)
-        self._set(0x6064, pos)
-        self._set(0x606C, round(rpm))
-        self._set(0x6062, round(self.p_demand))
-        self._set(0x606B, round(self.v_demand_rpm))
-        self._set(0x6077, round(s.iq_ma))
-        self._set(0x6074, round(s.iq_ref_ma))
-        self._set(0x60F4, round(self.p_demand - pos))
-        self._set(0x603F, self.fault_code)
+        values = (
+            sw,
+            mode,
+            pos,
+            round(rpm),
+            round(self.p_demand),
+            round(self.v_demand_rpm),
+            round(s.iq_ma),
+            round(s.iq_ref_ma),
+            round(self.p_demand - pos),
+            self.fault_code,
+        )
+        hits = self._published
+        if hits is None:
+            hits = self._published = tuple(self._entry(i, 0) for i in PUBLISHED)
+        for hit, v in zip(hits, values, strict=True):
+            if hit is not None:
+                e, lo, hi = hit
+                e.value = lo if v < lo else hi if v > hi else v
 
     def _publish_sdo_only(self) -> None:
         """Values no PDO can carry, refreshed when the OD is read (SDO upload, control

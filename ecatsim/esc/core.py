@@ -315,19 +315,25 @@ class Esc:
 
     def set_al_event(self, bits: int) -> None:
         """Raise AL event request bits (the PDI interrupt source). Ref: §5.32 Table 46."""
-        v = self.al_event()
-        _U32.pack_into(self.mem, regs.AL_EVENT_REQUEST, v | bits)
-        self._pdi_irq_update()
+        m = self.mem
+        v = _U32.unpack_from(m, regs.AL_EVENT_REQUEST)[0] | bits
+        _U32.pack_into(m, regs.AL_EVENT_REQUEST, v)
+        self._pdi_irq(v)
 
     def clr_al_event(self, bits: int) -> None:
-        v = self.al_event()
+        m = self.mem
+        v = _U32.unpack_from(m, regs.AL_EVENT_REQUEST)[0]
         if v & bits:
-            _U32.pack_into(self.mem, regs.AL_EVENT_REQUEST, v & ~bits)
-            self._pdi_irq_update()
+            v &= ~bits
+            _U32.pack_into(m, regs.AL_EVENT_REQUEST, v)
+            self._pdi_irq(v)
 
     def _pdi_irq_update(self) -> None:
-        mask = int(_U32.unpack_from(self.mem, regs.AL_EVENT_MASK)[0])
-        if self.al_event() & mask:
+        self._pdi_irq(_U32.unpack_from(self.mem, regs.AL_EVENT_REQUEST)[0])
+
+    def _pdi_irq(self, request: int) -> None:
+        """The PDI interrupt: AL event request AND AL event mask. Ref: §5.32, §5.33."""
+        if request & _U32.unpack_from(self.mem, regs.AL_EVENT_MASK)[0]:
             self.ctx.pending.add(self.position)
         else:
             self.ctx.pending.discard(self.position)
