@@ -12,10 +12,17 @@ Ref: seed 004 §5.1.7-5.1.10, §5.1.14; CiA 402-2 §10-§12.
 from __future__ import annotations
 
 import math
+from types import ModuleType
 from dataclasses import dataclass
 
 TWO_PI = 2.0 * math.pi
 RPM = TWO_PI / 60.0  # rad/s per rpm
+
+_compiled: ModuleType | None
+try:  # the compiled substep loop (optional, decision P2)
+    from ecatsim.device import _servo as _compiled
+except ImportError:  # pragma: no cover - built without a C compiler
+    _compiled = None
 
 # What Servo.run's reference is, and why it stopped early.
 TORQUE, VELOCITY, POSITION = 0, 1, 2
@@ -59,6 +66,7 @@ class Servo:
 
     __slots__ = (
         "angle",
+        "compiled",
         "decay",
         "gains",
         "i_limit_ma",
@@ -90,6 +98,8 @@ class Servo:
         self.decay = math.exp(-params.resistance * params.substep / params.inductance)
         self.i_limit_ma = float(params.max_current_ma)
         self.vel_limit_rpm = 1e9
+        #: use the compiled loop where it was built (tests compare the two)
+        self.compiled = True
 
     # ----------------------------------------------------------------- feedback
     @property
@@ -157,10 +167,44 @@ class Servo:
         (STOP_OVERCURRENT) and, with ``index``, after one that crossed angle 0 mod 2 pi
         (STOP_INDEX): the caller acts, then continues.
         One loop, all state in locals: this is the frame path's largest cost per drive.
-        Ref: seed 004 §5.1.7-5.1.10; decision D15.
+        The compiled copy of this loop (``_servo.c``, the same arithmetic) runs instead
+        where it was built, unless the flux axis carries current.
+        Ref: seed 004 §5.1.7-5.1.10; decisions D15, P2.
         """
         p = self.p
         g = self.gains
+        if _compiled is not None and self.compiled and not (self.id_ref_ma or self.id_ma):
+            done, why, *state = _compiled.run(
+                n,
+                kind,
+                ref,
+                v_ff_rpm,
+                window,
+                i_trip_ma,
+                index,
+                (self.angle, self.omega, self.iq_ma, self.iq_integ, self.integ, self.iq_ref_ma),
+                (
+                    p.substep,
+                    float(p.ppr),
+                    p.kt,
+                    p.load,
+                    p.viscous,
+                    p.coulomb,
+                    p.inertia,
+                    p.supply_voltage,
+                    p.resistance,
+                    self.decay,
+                    self.i_limit_ma,
+                    self.vel_limit_rpm,
+                    g.vel_kp,
+                    g.vel_ki,
+                    g.pos_kp,
+                    g.cur_kp,
+                    g.cur_ki,
+                ),
+            )
+            (self.angle, self.omega, self.iq_ma, self.iq_integ, self.integ, self.iq_ref_ma) = state
+            return done, why
         dt = p.substep
         ppr = p.ppr
         kt = p.kt
