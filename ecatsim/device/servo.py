@@ -12,8 +12,8 @@ Ref: seed 004 §5.1.7-5.1.10, §5.1.14; CiA 402-2 §10-§12.
 from __future__ import annotations
 
 import math
-from types import ModuleType
 from dataclasses import dataclass
+from types import ModuleType
 
 TWO_PI = 2.0 * math.pi
 RPM = TWO_PI / 60.0  # rad/s per rpm
