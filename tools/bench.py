@@ -6,20 +6,21 @@
 
 For each N it starts the daemon (N TMC8670 drives) in a private network namespace, brings
 the segment to OP with pysoem (DC active, SYNC0 every cycle) in another, runs cyclic
-exchange kept mid-way between SYNC0 pulses and records the round trip of each
-send_processdata()/receive_processdata() pair, lost frames, WKC mismatches and the daemon's
-CPU time. Then the daemon is frozen and the floor, a minimal C responder compiled here with
-the system compiler, answers the same master's same frames in the same wake-up mode: the
-ratio of the medians is the figure the targets use. Each run is made unpinned and with
-master, daemon and floor pinned to one CPU (design.md "Measuring speed"). A raw LRW frame
-timed before bring-up (slaves in INIT) is reported too. Results: a table on stdout and JSON
-in bench/results/. Ref: docs/performance.md.
+exchange kept mid-way between SYNC0 pulses with every drive enabled in csp and moving, and
+records the round trip of each send_processdata()/receive_processdata() pair, lost frames,
+WKC mismatches and the daemon's CPU time. Then the daemon is frozen and the floor, a minimal
+C responder compiled here with the system compiler, answers the same master's same frames in
+the same wake-up mode: the ratio of the medians is the figure the targets use. Each run is
+made unpinned and with master, daemon and floor pinned to one CPU (design.md "Measuring
+speed"). A raw LRW frame timed before bring-up (slaves in INIT) is reported too. Results: a
+table on stdout and JSON in bench/results/. Ref: docs/performance.md.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import platform
 import signal
@@ -37,6 +38,12 @@ sys.path.insert(0, str(ROOT))
 
 from ecatsim.wire import datagram as dg  # noqa: E402
 from tests.integration.netns import Daemon, NetnsPair, in_netns  # noqa: E402
+
+CSP = 8
+#: TMC8670 default PDOs (config/tmc8670.yaml): 6040h, 607Ah, 6071h, 60FFh out; 6041h,
+#: 6061h, 6064h, 6077h, 606Ch, 60FDh in
+RX = struct.Struct("<HihI")
+TX = struct.Struct("<HbihiI")
 
 ECHO_C = r"""
 #include <arpa/inet.h>
@@ -126,6 +133,7 @@ def pysoem_master(pair: NetnsPair, n: int, period_us: int) -> Any:
     m.config_dc()
     for s in m.slaves:
         s.dc_sync(True, period_us * 1000)
+        s.sdo_write(0x6060, 0, bytes([CSP]))  # cyclic synchronous position
     m.config_map()
     m.state_check(pysoem.SAFEOP_STATE, 5_000_000)
     m.state = pysoem.OP_STATE
@@ -143,6 +151,37 @@ def pysoem_master(pair: NetnsPair, n: int, period_us: int) -> Any:
     return m
 
 
+class CspMotion:
+    """Every drive enabled in csp and moving, as a master does it: controlword 6, 7, 15, each
+    sent until the statusword shows the state (a DC drive acts only once SYNC0 runs), then a
+    cosine of ``AMPLITUDE`` counts at 0.5 Hz from where the drive stands."""
+
+    AMPLITUDE = 4096
+    #: (controlword, statusword mask, statusword wanted): CiA 402-2 Figure 5
+    STEPS = ((0x06, 0x6F, 0x21), (0x07, 0x6F, 0x23), (0x0F, 0x6F, 0x27))
+
+    def __init__(self, m: Any, period_us: int) -> None:
+        self.m = m
+        self.dt = period_us / 1e6
+        self.step = [0] * len(m.slaves)
+        self.k = [0] * len(m.slaves)
+        self.start = [TX.unpack(bytes(s.input))[2] for s in m.slaves]
+
+    def outputs(self) -> None:
+        for i, s in enumerate(self.m.slaves):
+            sw = TX.unpack(bytes(s.input))[0]
+            st = self.step[i]
+            cw, mask, want = self.STEPS[st]
+            if sw & mask == want and st < len(self.STEPS) - 1:
+                st = self.step[i] = st + 1
+                cw = self.STEPS[st][0]
+            x = 0.0
+            if sw & 0x6F == 0x27:
+                self.k[i] += 1
+                x = self.AMPLITUDE * (1.0 - math.cos(math.pi * self.k[i] * self.dt)) / 2.0
+            s.output = RX.pack(cw, self.start[i] + round(x), 0, 0)
+
+
 def cycles(m: Any, seconds: float, period_us: int, pid: int, lock: bool = True) -> dict[str, Any]:
     """Cyclic exchange for ``seconds``: round trips, lost frames (no reply within two
     periods), WKC mismatches, the daemon's CPU per cycle and in % of one core. With
@@ -154,7 +193,10 @@ def cycles(m: Any, seconds: float, period_us: int, pid: int, lock: bool = True) 
     cpu0, wall0 = cpu_seconds(pid), time.perf_counter()
     t_next = wall0
     n = max(1, int(seconds * 1e6 / period_us))
+    motion = CspMotion(m, period_us) if lock else None
     for _ in range(n):
+        if motion is not None:
+            motion.outputs()
         t = time.perf_counter()
         m.send_processdata()
         w = m.receive_processdata(2 * period_us)
@@ -170,7 +212,9 @@ def cycles(m: Any, seconds: float, period_us: int, pid: int, lock: bool = True) 
         if d > 0:
             time.sleep(d)
     cpu, wall = cpu_seconds(pid) - cpu0, time.perf_counter() - wall0
+    enabled = sum(TX.unpack(bytes(s.input))[0] & 0x6F == 0x27 for s in m.slaves) if lock else 0
     return {"period_us": period_us, "cycles": n, "rtt_us": stats(rtts), "lost": lost,
+            "drives_enabled": enabled,
             "wkc_errors": wkc_err, "cpu_per_cycle_us": round(cpu / n * 1e6, 1),
             "cpu_percent": round(cpu / wall * 100, 1)}  # fmt: skip
 
@@ -301,7 +345,8 @@ def main() -> int:
                       f"floor {run['floor_rtt_us']['median']:7.1f} us "
                       f"(x{run['ratio_median']})  lost {run['lost']} wkc-err "
                       f"{run['wkc_errors']}  daemon {run['cpu_per_cycle_us']} us/cycle "
-                      f"{run['cpu_percent']} %  raw frame x{row['raw_ratio_median']}"
+                      f"{run['cpu_percent']} %  enabled {run['drives_enabled']}/{n}  raw frame "
+                      f"x{row['raw_ratio_median']}"
                       + (f"  max {rate['rate_hz']} Hz" if rate else ""))  # fmt: skip
     out = ROOT / "bench" / "results"
     out.mkdir(parents=True, exist_ok=True)
