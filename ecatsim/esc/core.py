@@ -890,7 +890,8 @@ class Esc:
         """A due SYNC0 pulse: status, and AL event 0x0220.2 if mapped. Ref: §5.32 bit 2."""
         if self.dc.sync0_pulse(now_ns):
             self.set_al_event(regs.EV_SYNC0)
-        self.ctx.timers_dirty = True
+        if self.dc.next_sync0 is None:
+            self.ctx.timers_dirty = True  # single shot: this ESC's SYNC unit is done
 
     def sync1_tick(self) -> None:
         """A due SYNC1 pulse: status, and AL event 0x0220.3 if mapped. Ref: §5.32 bit 3."""

@@ -119,8 +119,9 @@ class DcUnit:
         MOVE_NS (SYNC deadlines cached in host time are then stale).
         Ref: TMC8460 §5.50.2 Tables 95, 98, 101.
         """
+        t = self.arrival_ns(frame_t_ns)
         delay = int(_U32.unpack_from(self.mem, regs.DC_SYSTEM_TIME_DELAY)[0])
-        local = self.system_time(self.arrival_ns(frame_t_ns)) - delay
+        local = self.system_time(t) - delay
         if nbytes < 8:
             diff = ((local - value + (1 << 31)) & 0xFFFFFFFF) - (1 << 31)
         else:
@@ -129,7 +130,6 @@ class DcUnit:
         # speed counter implements, with a bandwidth from 0x0930 (larger = smoother).
         start = int(struct.unpack_from("<H", self.mem, regs.DC_SPEED_COUNTER_START)[0]) & 0x7FFF
         gain = 1.0 / max(2.0, start / 0x400)
-        t = self.arrival_ns(frame_t_ns)
         self._rebase(t)
         if abs(diff) > 1_000_000:
             step = diff  # far off: jump, as after a new offset
