@@ -286,6 +286,7 @@ def main() -> int:
                     default=["unpinned", "same-cpu"],
                     help="same-cpu pins master, daemon and floor to --cpu (default 0)")  # fmt: skip
     ap.add_argument("--cpu", type=int, help="pin the daemon (and the floor) to this CPU")
+    ap.add_argument("--rt-priority", type=int, help="run the daemon SCHED_FIFO at this priority")
     ap.add_argument("--max-rate", action="store_true", help="also search the highest rate")
     ap.add_argument("--hold", type=float, default=60.0, help="seconds a rate must hold")
     ap.add_argument("--rates", type=int, nargs="+", default=[8000, 4000, 2000, 1000, 500])
@@ -312,8 +313,9 @@ def main() -> int:
         for placement in args.placements:
             cpu = args.cpu if placement == "unpinned" else (args.cpu or 0)
             pin = ["taskset", "-c", str(cpu)] if cpu is not None else []
+            rt = ("--rt-priority", str(args.rt_priority)) if args.rt_priority else ()
             extra = (*(("--busy-poll",) if busy else ()),
-                     *(("--cpu", str(cpu)) if cpu is not None else ()))  # fmt: skip
+                     *(("--cpu", str(cpu)) if cpu is not None else ()), *rt)  # fmt: skip
             os.sched_setaffinity(0, {cpu} if placement == "same-cpu" else all_cpus)
             for n in args.slaves:
                 with NetnsPair() as pair:

@@ -33,6 +33,7 @@ class DcUnit:
         "next_sync1",
         "position",
         "rate_ppb",
+        "spd",
         "sync1_countdown",
         "t_ref",
         "turnaround_ns",
@@ -54,6 +55,8 @@ class DcUnit:
         self.hop_ns = hop_ns
         self.turnaround_ns = turnaround_ns
         self.rate_ppb = 0.0
+        #: speed(), kept up to date whenever drift or rate change
+        self.spd = 1.0 + drift_ppm * 1e-6
         self.moved_ns = 0  # corrections since the last "deadlines moved"
         # The local clock is piecewise linear: local_ref at host time t_ref, running at
         # speed() since. Corrections rebase it, so a rate change never jumps the time.
@@ -72,11 +75,15 @@ class DcUnit:
 
     def local_time(self, t_ns: int) -> int:
         """Local clock at host time ``t_ns`` (drift and control-loop correction applied)."""
-        return (self.local_ref + int((t_ns - self.t_ref) * self.speed())) & MASK64
+        return (self.local_ref + int((t_ns - self.t_ref) * self.spd)) & MASK64
 
     def speed(self) -> float:
         """Local clock ticks per host ns: drift plus the control loop's correction."""
-        return 1.0 + self.drift_ppm * 1e-6 + self.rate_ppb * 1e-9
+        return self.spd
+
+    def _set_rate(self, rate_ppb: float) -> None:
+        self.rate_ppb = rate_ppb
+        self.spd = 1.0 + self.drift_ppm * 1e-6 + rate_ppb * 1e-9
 
     def _rebase(self, t_ns: int) -> None:
         self.local_ref = self.local_time(t_ns)
@@ -135,7 +142,7 @@ class DcUnit:
             step = diff  # far off: jump, as after a new offset
         else:
             step = int(diff * gain)
-            self.rate_ppb = max(-1e6, min(1e6, self.rate_ppb - diff * gain * 5.0))
+            self._set_rate(max(-1e6, min(1e6, self.rate_ppb - diff * gain * 5.0)))
         self.local_ref -= step
         mag = min(abs(diff), 0x7FFFFFFF)
         _U32.pack_into(self.mem, regs.DC_SYSTEM_TIME_DIFF, mag | (0x80000000 if diff < 0 else 0))
@@ -150,7 +157,7 @@ class DcUnit:
         local = (system_ns - self.offset() - self.local_ref) & MASK64
         if local >= 1 << 63:
             local -= 1 << 64
-        return self.t_ref + int(local / self.speed())
+        return self.t_ref + int(local / self.spd)
 
     # -- SYNC out unit ---------------------------------------------------------------
 
@@ -212,7 +219,7 @@ class DcUnit:
         self.next_sync0 = None
         self.next_sync1 = None
         self.sync1_countdown = 0
-        self.rate_ppb = 0.0
+        self._set_rate(0.0)
 
     def _schedule_sync1(self, sync0_time: int, cycle0: int) -> None:
         """SYNC1 follows SYNC0: every n-th SYNC0 pulse (n = 0x09A4 // 0x09A0, at least 1)

@@ -217,8 +217,9 @@ class Pdi:
         sm = self._esc.sm[n]
         if not sm.pdi_may_write():
             return False
-        buf = bytes(data[: sm.length]).ljust(sm.length, b"\x00")
-        sm.writer_write(0, buf)
+        if len(data) != sm.length:
+            data = bytes(data[: sm.length]).ljust(sm.length, b"\x00")
+        sm.writer_write(0, data)
         return True
 
     def sm_deactivate(self, n: int, off: bool) -> None:
