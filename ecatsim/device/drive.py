@@ -90,6 +90,7 @@ class Drive:
         self.q_60b1 = self.q_6071 = self.q_60b2 = self.q_6065 = self.q_6085 = 0
         self.q_605a = 0
         self.params = params or MotorParams()
+        self.substep_ns = round(self.params.substep * 1e9)
         self.servo = Servo(self.params)
         self.profile = Profile()
         self.emcy = emcy
@@ -333,7 +334,7 @@ class Drive:
         if self.t_ns is None:
             self.t_ns = now_ns
             return
-        dt_ns = round(self.params.substep * 1e9)
+        dt_ns = self.substep_ns
         n = (now_ns - self.t_ns) // dt_ns
         if n <= 0:
             return

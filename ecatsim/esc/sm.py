@@ -45,6 +45,7 @@ class SyncManager:
         "r_open",
         "start",
         "status",
+        "status_addr",
         "w",
         "w_open",
     )
@@ -52,6 +53,7 @@ class SyncManager:
     def __init__(self, host: SmHost, n: int) -> None:
         self.host = host
         self.n = n
+        self.status_addr = regs.sm_addr(n, 5)
         self.start = 0
         self.length = 0
         self.control = 0
@@ -120,7 +122,7 @@ class SyncManager:
             if self.w_open:
                 st |= regs.SM_ST_WRITE_OPEN
         self.status = st
-        self.host.mem[regs.sm_addr(self.n, 5)] = st
+        self.host.mem[self.status_addr] = st
         self.host.sm_status_changed(self)
 
     def _writer_access(self, first: bool, last: bool) -> None:
