@@ -255,7 +255,8 @@ def with_master(
 
 
 def max_rate(n: int, extra: tuple[str, ...], hold_s: float, rates: list[int],
-             tmp: Path) -> dict[str, Any] | None:  # fmt: skip
+             tmp: Path, echo: Path | None = None,
+             echo_mode: str = "block") -> dict[str, Any] | None:  # fmt: skip
     """The highest of ``rates`` (Hz) that holds 0 lost frames and 0 WKC errors for
     ``hold_s`` seconds, SYNC0 at the same rate; each rate on a fresh daemon and bring-up
     (the issue's 10-minute runs: ``--rates 1000 --hold 600``)."""
@@ -265,12 +266,13 @@ def max_rate(n: int, extra: tuple[str, ...], hold_s: float, rates: list[int],
             d.start(timeout=60)
             try:
                 assert d.pid is not None
-                r = with_master(pair, n, period, None, "", hold_s, [], d.pid)
+                r = with_master(pair, n, period, echo, echo_mode, hold_s, [], d.pid)
             finally:
                 d.stop()
         print(f"      {1e6 / period:6.0f} Hz for {hold_s:g} s: lost {r['lost']} "
               f"wkc-err {r['wkc_errors']} cpu {r['cpu_percent']} % "
-              f"rtt p99.9 {r['rtt_us']['p999']} us")  # fmt: skip
+              f"rtt p99.9 {r['rtt_us']['p999']} us"
+              + (f"; the C floor, same hold: lost {r['floor_lost']}" if echo else ""))  # fmt: skip
         if r["lost"] == 0 and r["wkc_errors"] == 0:
             return {"rate_hz": round(1e6 / period), "hold_s": hold_s, **r}
     return None
@@ -290,6 +292,8 @@ def main() -> int:
     ap.add_argument("--max-rate", action="store_true", help="also search the highest rate")
     ap.add_argument("--hold", type=float, default=60.0, help="seconds a rate must hold")
     ap.add_argument("--rates", type=int, nargs="+", default=[8000, 4000, 2000, 1000, 500])
+    ap.add_argument("--hold-floor", action="store_true",
+                    help="hold each rate against the C floor too: is 0 lost possible?")  # fmt: skip
     args = ap.parse_args()
     if os.geteuid() != 0:
         print("bench: needs root (namespaces, raw sockets)", file=sys.stderr)
@@ -335,7 +339,10 @@ def main() -> int:
                                           args.seconds, pin, d.pid)  # fmt: skip
                     finally:
                         d.stop()
-                rate = max_rate(n, extra, args.hold, args.rates, tmp) if args.max_rate else None
+                rate = None
+                if args.max_rate:
+                    floor_echo = echo if args.hold_floor else None
+                    rate = max_rate(n, extra, args.hold, args.rates, tmp, floor_echo, echo_mode)
                 fl, em = stats(floor_raw), stats(raw)
                 row = {"mode": mode, "placement": placement, "slaves": n, **run,
                        "raw_floor_rtt_us": fl, "raw_rtt_us": em,

@@ -1,4 +1,5 @@
-"""In-process frame-path micro-benchmark: cost per cyclic frame for N slaves.
+"""In-process frame-path micro-benchmark: cost per cyclic frame for N slaves, and per DC
+cycle with N drives in csp.
 
 .venv/bin/python tools/microbench.py            # print
 .venv/bin/python tools/microbench.py --save     # store tests/perf/baseline.json
@@ -14,7 +15,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from tests.perf.hotpath import calibrate, frame_cost  # noqa: E402
+from tests.perf.hotpath import calibrate, csp_cycle_cost, frame_cost  # noqa: E402
 
 
 def main() -> int:
@@ -27,6 +28,10 @@ def main() -> int:
         c = frame_cost(n, iterations=2000 if n < 64 else 500)
         out[f"frame_{n}"] = round(c / unit, 1)
         print(f"{n:3d} slaves: {c * 1e6:8.1f} us/frame  ({c / unit:6.0f} calibration units)")
+    for n in (1, 16):
+        c = csp_cycle_cost(n)
+        out[f"dc_csp_{n}"] = round(c / unit, 1)
+        print(f"{n:3d} drives, DC csp: {c * 1e6:8.1f} us/cycle ({c / unit:6.0f} calibration units)")
     if args.save:
         (ROOT / "tests/perf/baseline.json").write_text(json.dumps(out, indent=2) + "\n")
         print("saved tests/perf/baseline.json")

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.perf.hotpath import calibrate, frame_cost
+from tests.perf.hotpath import calibrate, csp_cycle_cost, frame_cost
 
 BASELINE = json.loads((Path(__file__).parent / "baseline.json").read_text())
 
@@ -24,3 +24,13 @@ def test_frame_path_not_regressed(n_slaves: int) -> None:
     assert ratio <= 3 * base, (
         f"{n_slaves} slaves: {ratio:.0f} calibration units vs baseline {base:.0f}"
     )
+
+
+@pytest.mark.parametrize("drives", [1, 16])
+def test_dc_csp_cycle_not_regressed(drives: int) -> None:
+    """A DC cycle with enabled TMC8670 drives in csp: SYNC0 pulse, firmware, servo loop and
+    the cyclic frame (tools/cycle_profile.py measures the same)."""
+    unit = calibrate()
+    ratio = csp_cycle_cost(drives, cycles=200) / unit
+    base = BASELINE[f"dc_csp_{drives}"]
+    assert ratio <= 3 * base, f"{drives} drives: {ratio:.0f} calibration units vs {base:.0f}"
