@@ -1,8 +1,8 @@
 """The one loop: receive a frame, process it in place, reply, then let the slaves react.
 
 Blocking wake-up by default (select(2) on the link's fd with the next timer as timeout,
-decision P1); ``busy_poll`` spins on a non-blocking receive instead. A failure while processing a frame
-is counted and logged once with the last frames; the loop carries on.
+decision P1); ``busy_poll`` spins on a non-blocking receive instead. A failure while
+processing a frame is counted and logged once with the last frames; the loop carries on.
 Ref: design.md "One frame through the layers", habits 3 and 6.
 """
 
