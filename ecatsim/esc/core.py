@@ -339,31 +339,18 @@ class Esc:
             self.ctx.pending.discard(self.position)
 
     def sm_status_changed(self, sm: SyncManager) -> None:
-        """Mirror an SM's interrupt bits into 0x0210 bit 4+n and 0x0220 bit 8+n.
-
-        The write interrupt goes to the reading side, the read interrupt to the writing
-        side, each if enabled in the SM control register. Ref: §5.49 Tables 88, 89.
+        """Mirror an SM's interrupt bits (``sm.mirror``, bit 0 ECAT, bit 1 PDI) into 0x0210
+        bit 4+n and 0x0220 bit 8+n. The SM calls this only when they change (only SM
+        accesses change these bits). Ref: §5.49 Tables 88, 89.
         """
-        st = sm.status
-        if sm.ecat_side_writes:
-            to_pdi = st & regs.SM_ST_IRQ_WRITE
-            to_ecat = st & regs.SM_ST_IRQ_READ
-        else:
-            to_pdi = st & regs.SM_ST_IRQ_READ
-            to_ecat = st & regs.SM_ST_IRQ_WRITE
-        ecat_on = bool(to_ecat and sm.control & regs.SM_CTRL_ECAT_IRQ)
-        pdi_on = bool(to_pdi and sm.control & regs.SM_CTRL_PDI_IRQ)
-        mirror = ecat_on | (pdi_on << 1)
-        if mirror == sm.mirror:
-            return  # the event registers already say so (only SM accesses change these bits)
-        sm.mirror = mirror
+        mirror = sm.mirror
         ebit = regs.ECAT_EV_SM0 << sm.n
         abit = regs.EV_SM0 << sm.n
-        if ecat_on:
+        if mirror & 1:
             self._set_ecat_event(ebit)
         else:
             self._clr_ecat_event(ebit)
-        if pdi_on:
+        if mirror & 2:
             self.set_al_event(abit)
         else:
             self.clr_al_event(abit)
@@ -855,7 +842,6 @@ class Esc:
             return  # compared only if at least the first byte was written
         if self.dc.system_time_written(self.ctx.t_ns, value, nbytes):
             self.ctx.timers_dirty = True  # the clock jumped: SYNC deadlines moved
-        self.dc.refresh_system_time(self.ctx.t_ns)
 
     def _ew_dc_system_time_offset(self, ra: int, rs: int, old: bytes) -> None:
         """A new offset moves the SYNC deadlines in host time. Ref: TMC8460 §5.50.2 Table 96."""

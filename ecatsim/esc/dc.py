@@ -121,23 +121,28 @@ class DcUnit:
     def system_time_written(self, frame_t_ns: int, value: int, nbytes: int) -> bool:
         """Compare the written system time with the local copy and feed the control loop.
 
-        The difference is filtered into 0x092C (bit 31: local copy smaller). A 32-bit write
-        is compared modulo 2^32. Returns True once the corrections add up to more than
+        The difference is filtered into 0x092C (bit 31: local copy smaller), and 0x0910
+        then holds the corrected local copy. A 32-bit write is compared modulo 2^32.
+        Returns True once the corrections add up to more than
         MOVE_NS (SYNC deadlines cached in host time are then stale).
         Ref: TMC8460 §5.50.2 Tables 95, 98, 101.
         """
         t = self.arrival_ns(frame_t_ns)
-        delay = int(_U32.unpack_from(self.mem, regs.DC_SYSTEM_TIME_DELAY)[0])
-        local = self.system_time(t) - delay
+        m = self.mem
+        delay = int(_U32.unpack_from(m, regs.DC_SYSTEM_TIME_DELAY)[0])
+        offset = int(_U64.unpack_from(m, regs.DC_SYSTEM_TIME_OFFSET)[0])
+        local_now = self.local_time(t)
+        local = ((local_now + offset) & MASK64) - delay
         if nbytes < 8:
             diff = ((local - value + (1 << 31)) & 0xFFFFFFFF) - (1 << 31)
         else:
             diff = ((local - value + (1 << 63)) & MASK64) - (1 << 63)
         # Proportional step on the time and integral action on the rate: the loop the
         # speed counter implements, with a bandwidth from 0x0930 (larger = smoother).
-        start = int(struct.unpack_from("<H", self.mem, regs.DC_SPEED_COUNTER_START)[0]) & 0x7FFF
+        start = int(struct.unpack_from("<H", m, regs.DC_SPEED_COUNTER_START)[0]) & 0x7FFF
         gain = 1.0 / max(2.0, start / 0x400)
-        self._rebase(t)
+        self.local_ref = local_now  # rebase at t
+        self.t_ref = t
         if abs(diff) > 1_000_000:
             step = diff  # far off: jump, as after a new offset
         else:
@@ -145,7 +150,9 @@ class DcUnit:
             self._set_rate(max(-1e6, min(1e6, self.rate_ppb - diff * gain * 5.0)))
         self.local_ref -= step
         mag = min(abs(diff), 0x7FFFFFFF)
-        _U32.pack_into(self.mem, regs.DC_SYSTEM_TIME_DIFF, mag | (0x80000000 if diff < 0 else 0))
+        _U32.pack_into(m, regs.DC_SYSTEM_TIME_DIFF, mag | (0x80000000 if diff < 0 else 0))
+        # 0x0910 reads back the corrected local copy (refresh_system_time at time t)
+        _U64.pack_into(m, regs.DC_SYSTEM_TIME, (self.local_ref + offset) & MASK64)
         self.moved_ns += abs(step)
         if self.moved_ns > MOVE_NS:
             self.moved_ns = 0

@@ -101,14 +101,14 @@ class Pdi:
         """PDI read of ``n`` bytes (SM windows redirected; PDI read side effects run)."""
         esc = self._esc
         end = addr + n
-        for ws, we, sm in esc.sm_windows:
-            if ws <= addr and end <= we:
-                if not sm.pdi_may_read():
-                    return bytes(n)
-                out = bytearray(n)
-                sm.reader_read(addr - ws, memoryview(out))
-                return bytes(out)
-        if addr >= regs.REGISTER_END:
+        if addr >= regs.REGISTER_END:  # SM windows lie in process RAM only (decision E22)
+            for ws, we, sm in esc.sm_windows:
+                if ws <= addr and end <= we:
+                    if not sm.pdi_may_read():
+                        return bytes(n)
+                    out = bytearray(n)
+                    sm.reader_read(addr - ws, memoryview(out))
+                    return bytes(out)
             if not esc.pdram_ok:
                 return bytes(n)
             return bytes(esc.mem[addr:end])

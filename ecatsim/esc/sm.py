@@ -20,7 +20,9 @@ class SmHost(Protocol):
 
     mem: bytearray
 
-    def sm_status_changed(self, sm: SyncManager) -> None: ...
+    def sm_status_changed(self, sm: SyncManager) -> None:
+        """The SM's event bits (``sm.mirror``) changed: update the event registers."""
+        ...
 
     def wd_pd_trigger(self) -> None: ...
 
@@ -34,6 +36,8 @@ class SyncManager:
         "ecat_side_writes",
         "enabled",
         "host",
+        "irq_to_ecat",
+        "irq_to_pdi",
         "l",
         "length",
         "locked",
@@ -70,8 +74,12 @@ class SyncManager:
         self.r_open = False
         self.w_open = False
         self.status = 0
-        #: the event bits last mirrored into 0x0210/0x0220 (-1: mirror on the next change)
+        #: the event bits last mirrored into 0x0210/0x0220 (-1: mirror on the next change):
+        #: bit 0 ECAT event, bit 1 AL event (PDI)
         self.mirror = -1
+        #: the status bit (0x0805+8n) that raises the ECAT / the AL event, 0 if disabled
+        self.irq_to_ecat = 0
+        self.irq_to_pdi = 0
 
     # -- configuration -------------------------------------------------------------
 
@@ -100,6 +108,12 @@ class SyncManager:
         self.w_open = False
         self.status = 0
         self.mirror = -1
+        # The write interrupt goes to the reading side, the read interrupt to the writing
+        # side, each if enabled in the control register. Ref: §5.49 Tables 88, 89.
+        to_ecat = regs.SM_ST_IRQ_READ if self.ecat_side_writes else regs.SM_ST_IRQ_WRITE
+        to_pdi = regs.SM_ST_IRQ_WRITE if self.ecat_side_writes else regs.SM_ST_IRQ_READ
+        self.irq_to_ecat = to_ecat if control & regs.SM_CTRL_ECAT_IRQ else 0
+        self.irq_to_pdi = to_pdi if control & regs.SM_CTRL_PDI_IRQ else 0
         self._sync()
 
     def window(self) -> tuple[int, int] | None:
@@ -122,8 +136,12 @@ class SyncManager:
             if self.w_open:
                 st |= regs.SM_ST_WRITE_OPEN
         self.status = st
-        self.host.mem[self.status_addr] = st
-        self.host.sm_status_changed(self)
+        host = self.host
+        host.mem[self.status_addr] = st
+        mirror = (1 if st & self.irq_to_ecat else 0) | (2 if st & self.irq_to_pdi else 0)
+        if mirror != self.mirror:  # the event registers change only when these bits do
+            self.mirror = mirror
+            host.sm_status_changed(self)
 
     def _writer_access(self, first: bool, last: bool) -> None:
         if self.mailbox:
