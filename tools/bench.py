@@ -256,10 +256,12 @@ def with_master(
 
 def max_rate(n: int, extra: tuple[str, ...], hold_s: float, rates: list[int],
              tmp: Path, echo: Path | None = None,
-             echo_mode: str = "block") -> dict[str, Any] | None:  # fmt: skip
+             echo_mode: str = "block") -> dict[str, Any]:  # fmt: skip
     """The highest of ``rates`` (Hz) that holds 0 lost frames and 0 WKC errors for
     ``hold_s`` seconds, SYNC0 at the same rate; each rate on a fresh daemon and bring-up
-    (the issue's 10-minute runs: ``--rates 1000 --hold 600``)."""
+    (the issue's 10-minute runs: ``--rates 1000 --hold 600``). Every hold tried is kept
+    in ``tried``; ``rate_hz`` is None if none held."""
+    tried: list[dict[str, Any]] = []
     for period in sorted(round(1e6 / r) for r in rates):
         with NetnsPair() as pair:
             d = Daemon(pair, ("--slaves", str(n), *extra), tmp / f"rate{n}-{period}.log")
@@ -273,9 +275,10 @@ def max_rate(n: int, extra: tuple[str, ...], hold_s: float, rates: list[int],
               f"wkc-err {r['wkc_errors']} cpu {r['cpu_percent']} % "
               f"rtt p99.9 {r['rtt_us']['p999']} us"
               + (f"; the C floor, same hold: lost {r['floor_lost']}" if echo else ""))  # fmt: skip
+        tried.append(r)
         if r["lost"] == 0 and r["wkc_errors"] == 0:
-            return {"rate_hz": round(1e6 / period), "hold_s": hold_s, **r}
-    return None
+            return {"rate_hz": round(1e6 / period), "hold_s": hold_s, "tried": tried}
+    return {"rate_hz": None, "hold_s": hold_s, "tried": tried}
 
 
 def main() -> int:
@@ -349,6 +352,9 @@ def main() -> int:
                        "raw_ratio_median": round(em["median"] / fl["median"], 2),
                        "raw_lost": raw_lost + floor_lost, "max_rate": rate}  # fmt: skip
                 results["runs"].append(row)
+                held = ""
+                if rate is not None:
+                    held = f"  held {rate['rate_hz']} Hz" if rate["rate_hz"] else "  no rate held"
                 print(f"{mode:9s} {placement:8s} N={n:3d} pysoem median "
                       f"{run['rtt_us']['median']:7.1f} p99 {run['rtt_us']['p99']:7.1f} us, "
                       f"floor {run['floor_rtt_us']['median']:7.1f} us "
@@ -356,7 +362,7 @@ def main() -> int:
                       f"{run['wkc_errors']}  daemon {run['cpu_per_cycle_us']} us/cycle "
                       f"{run['cpu_percent']} %  enabled {run['drives_enabled']}/{n}  raw frame "
                       f"x{row['raw_ratio_median']}"
-                      + (f"  max {rate['rate_hz']} Hz" if rate else ""))  # fmt: skip
+                      + held)  # fmt: skip
     out = ROOT / "bench" / "results"
     out.mkdir(parents=True, exist_ok=True)
     path = out / f"bench-{time.strftime('%Y%m%d-%H%M%S')}.json"
