@@ -221,7 +221,12 @@ class Daemon:
         return min(ds) if ds else None
 
     def _service_timers(self) -> None:
-        if self.segment.next_deadline() is not None or self.segment.ctx.pending:
+        """Timers that are due (SYNC pulses, watchdogs), firmware work a control command
+        left pending, delayed replies and time-triggered faults."""
+        seg = self.segment
+        ctx = seg.ctx
+        d = seg.next_deadline()
+        if ctx.pending or ctx.flush or (d is not None and d <= seg.clock.now_ns()):
             self._service()
         if self.delayed or self.faults.active:
             now = self.segment.clock.now_ns()

@@ -162,3 +162,33 @@ def test_sm_starting_in_register_space_does_not_hide_registers() -> None:
     assert m.apwr(0, 0x0800, bytes(8)).wkc == 1  # ... and, disabled, clears it
     assert m.aprd(0, 0x0800, 6).data == bytes(6)
     assert m.aprd(0, 0x0130, 2).wkc == 1
+
+
+def test_fmmu_into_an_sm_window_follows_the_sm_being_switched_off_and_on() -> None:
+    """An FMMU whose physical range lies in one SM window is routed straight to that SM
+    (compiled when FMMUs or SMs change); with the SM off it writes plain memory again."""
+    m, pdi = setup()
+    esc = m.seg.escs[0]
+    m.apwr(0, 0x0820, sm_regs(0x1800, 4, 0x64))  # SM4, 3-buffer, ECAT writes
+    m.apwr(0, 0x0600, fmmu_regs(0x10000, 4, 0, 7, 0x1800, 0, 2))
+    assert esc.fmmus[0].sm is esc.sm[4]
+    assert m.lrw(0x10000, b"\x01\x02\x03\x04").wkc == 2
+    assert pdi.sm_read(4) == b"\x01\x02\x03\x04"
+    assert m.aprd(0, 0x0825, 1).data[0] & 0x30 == 0x00  # buffer exchanged: latest is 0
+    m.apwr(0, 0x0826, b"\x00")  # SM4 off: the window is plain memory
+    assert esc.fmmus[0].sm is None
+    assert m.lrw(0x10000, b"\x05\x06\x07\x08").wkc == 2
+    assert bytes(esc.mem[0x1800:0x1804]) == b"\x05\x06\x07\x08"
+    m.apwr(0, 0x0826, b"\x01")
+    assert esc.fmmus[0].sm is esc.sm[4]
+
+
+def test_fmmu_spanning_a_window_and_plain_memory_is_not_routed() -> None:
+    m, _ = setup()
+    esc = m.seg.escs[0]
+    m.apwr(0, 0x0820, sm_regs(0x1800, 2, 0x64))  # 2-byte window, then plain memory
+    m.apwr(0, 0x0600, fmmu_regs(0x10000, 4, 0, 7, 0x1800, 0, 2))
+    assert esc.fmmus[0].sm is None
+    assert m.lrw(0x10000, b"\xaa\xbb\xcc\xdd").wkc == 2
+    assert bytes(esc.mem[0x1802:0x1804]) == b"\xcc\xdd"
+    assert m.aprd(0, 0x1800, 2).data == b"\xaa\xbb"  # through the SM's latest buffer
