@@ -184,7 +184,9 @@ class CspMotion:
 
 def cycles(m: Any, seconds: float, period_us: int, pid: int, lock: bool = True) -> dict[str, Any]:
     """Cyclic exchange for ``seconds``: round trips, lost frames (no reply within two
-    periods), WKC mismatches, the daemon's CPU per cycle and in % of one core. With
+    periods), WKC mismatches, the daemon's CPU per cycle and in % of one core. It stops
+    early, ``fell_behind``, once the cycle runs a whole second late (the rate is not
+    kept: replies come slower than the period). With
     ``lock`` the cycle is kept mid-way between SYNC0 pulses by the DC time of the replies,
     as SOEM's examples do (ec_sync)."""
     rtts, lost, wkc_err = [], 0, 0
@@ -194,7 +196,12 @@ def cycles(m: Any, seconds: float, period_us: int, pid: int, lock: bool = True) 
     t_next = wall0
     n = max(1, int(seconds * 1e6 / period_us))
     motion = CspMotion(m, period_us) if lock else None
+    done, behind = 0, False
     for _ in range(n):
+        if time.perf_counter() - t_next > 1.0:
+            behind = True  # a whole second behind the schedule: this rate is not kept
+            break
+        done += 1
         if motion is not None:
             motion.outputs()
         t = time.perf_counter()
@@ -213,9 +220,9 @@ def cycles(m: Any, seconds: float, period_us: int, pid: int, lock: bool = True) 
             time.sleep(d)
     cpu, wall = cpu_seconds(pid) - cpu0, time.perf_counter() - wall0
     enabled = sum(TX.unpack(bytes(s.input))[0] & 0x6F == 0x27 for s in m.slaves) if lock else 0
-    return {"period_us": period_us, "cycles": n, "rtt_us": stats(rtts), "lost": lost,
-            "drives_enabled": enabled,
-            "wkc_errors": wkc_err, "cpu_per_cycle_us": round(cpu / n * 1e6, 1),
+    return {"period_us": period_us, "cycles": done, "fell_behind": behind,
+            "rtt_us": stats(rtts), "lost": lost, "drives_enabled": enabled,
+            "wkc_errors": wkc_err, "cpu_per_cycle_us": round(cpu / done * 1e6, 1),
             "cpu_percent": round(cpu / wall * 100, 1)}  # fmt: skip
 
 
@@ -274,9 +281,10 @@ def max_rate(n: int, extra: tuple[str, ...], hold_s: float, rates: list[int],
         print(f"      {1e6 / period:6.0f} Hz for {hold_s:g} s: lost {r['lost']} "
               f"wkc-err {r['wkc_errors']} cpu {r['cpu_percent']} % "
               f"rtt p99.9 {r['rtt_us']['p999']} us"
+              + (f"; fell 1 s behind after {r['cycles']} cycles" if r["fell_behind"] else "")
               + (f"; the C floor, same hold: lost {r['floor_lost']}" if echo else ""))  # fmt: skip
         tried.append(r)
-        if r["lost"] == 0 and r["wkc_errors"] == 0:
+        if r["lost"] == 0 and r["wkc_errors"] == 0 and not r["fell_behind"]:
             return {"rate_hz": round(1e6 / period), "hold_s": hold_s, "tried": tried}
     return {"rate_hz": None, "hold_s": hold_s, "tried": tried}
 
