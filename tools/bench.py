@@ -291,7 +291,7 @@ def max_rate(n: int, extra: tuple[str, ...], hold_s: float, rates: list[int],
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--slaves", type=int, nargs="+", default=[1, 4, 16])
+    ap.add_argument("--slaves", type=int, nargs="+", default=[1, 4, 16, 64])
     ap.add_argument("--seconds", type=float, default=5.0, help="cyclic exchange per run")
     ap.add_argument("--period-us", type=int, default=1000)
     ap.add_argument("--modes", nargs="+", choices=["blocking", "busy-poll"], default=["blocking"])
