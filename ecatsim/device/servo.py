@@ -171,61 +171,74 @@ class Servo:
         where it was built, unless the flux axis carries current.
         Ref: seed 004 §5.1.7-5.1.10; decisions D15, P2.
         """
+        state = (self.angle, self.omega, self.iq_ma, self.iq_integ, self.integ, self.iq_ref_ma)
+        args = (n, kind, ref, v_ff_rpm, window, i_trip_ma, index, state, self._loop_params())
+        if _compiled is not None and self.compiled and not (self.id_ref_ma or self.id_ma):
+            done, why, *after = _compiled.run(*args)
+        else:
+            done, why, *after = self._run(*args)
+        (self.angle, self.omega, self.iq_ma, self.iq_integ, self.integ, self.iq_ref_ma) = after
+        return done, why
+
+    def _loop_params(self) -> tuple[float, ...]:
+        """The loop's constants, in the order run() passes them to either loop."""
         p = self.p
         g = self.gains
-        if _compiled is not None and self.compiled and not (self.id_ref_ma or self.id_ma):
-            done, why, *state = _compiled.run(
-                n,
-                kind,
-                ref,
-                v_ff_rpm,
-                window,
-                i_trip_ma,
-                index,
-                (self.angle, self.omega, self.iq_ma, self.iq_integ, self.integ, self.iq_ref_ma),
-                (
-                    p.substep,
-                    float(p.ppr),
-                    p.kt,
-                    p.load,
-                    p.viscous,
-                    p.coulomb,
-                    p.inertia,
-                    p.supply_voltage,
-                    p.resistance,
-                    self.decay,
-                    self.i_limit_ma,
-                    self.vel_limit_rpm,
-                    g.vel_kp,
-                    g.vel_ki,
-                    g.pos_kp,
-                    g.cur_kp,
-                    g.cur_ki,
-                ),
-            )
-            (self.angle, self.omega, self.iq_ma, self.iq_integ, self.integ, self.iq_ref_ma) = state
-            return done, why
-        dt = p.substep
-        ppr = p.ppr
-        kt = p.kt
-        load = p.load
-        viscous = p.viscous
-        coulomb = p.coulomb
-        inertia = p.inertia
-        vmax_v = p.supply_voltage
-        resistance = p.resistance
-        decay = self.decay
-        lim = self.i_limit_ma
-        vlim = self.vel_limit_rpm
-        vel_kp, vel_ki, pos_kp = g.vel_kp, g.vel_ki, g.pos_kp
-        cur_kp, cur_ki = g.cur_kp, g.cur_ki
-        angle = self.angle
-        omega = self.omega
-        iq = self.iq_ma
-        iq_integ = self.iq_integ
-        integ = self.integ
-        iq_ref = self.iq_ref_ma
+        return (
+            p.substep,
+            float(p.ppr),
+            p.kt,
+            p.load,
+            p.viscous,
+            p.coulomb,
+            p.inertia,
+            p.supply_voltage,
+            p.resistance,
+            self.decay,
+            self.i_limit_ma,
+            self.vel_limit_rpm,
+            g.vel_kp,
+            g.vel_ki,
+            g.pos_kp,
+            g.cur_kp,
+            g.cur_ki,
+        )
+
+    def _run(
+        self,
+        n: int,
+        kind: int,
+        ref: float,
+        v_ff_rpm: float,
+        window: float,
+        i_trip_ma: float,
+        index: bool,
+        state: tuple[float, float, float, float, float, float],
+        params: tuple[float, ...],
+    ) -> tuple[int, int, float, float, float, float, float, float]:
+        """The loop of run() in Python, with the compiled loop's arguments and result."""
+        (
+            dt,
+            ppr,
+            kt,
+            load,
+            viscous,
+            coulomb,
+            inertia,
+            vmax_v,
+            resistance,
+            decay,
+            lim,
+            vlim,
+            vel_kp,
+            vel_ki,
+            pos_kp,
+            cur_kp,
+            cur_ki,
+        ) = params
+        angle, omega, iq, iq_integ, integ, iq_ref = state
         flux = bool(self.id_ref_ma or self.id_ma)
+        g = self.gains
         done = 0
         why = STOP_NONE
         while done < n:
@@ -285,13 +298,7 @@ class Servo:
             if index and math.floor(angle / TWO_PI) != rev:
                 why = STOP_INDEX
                 break
-        self.angle = angle
-        self.omega = omega
-        self.iq_ma = iq
-        self.iq_integ = iq_integ
-        self.integ = integ
-        self.iq_ref_ma = iq_ref
-        return done, why
+        return done, why, angle, omega, iq, iq_integ, integ, iq_ref
 
 
 class Profile:
