@@ -55,11 +55,11 @@ class DcUnit:
         self.hop_ns = hop_ns
         self.turnaround_ns = turnaround_ns
         self.rate_ppb = 0.0
-        #: speed(), kept up to date whenever drift or rate change
+        #: local clock ticks per host ns (drift plus the loop's correction), set by _set_rate
         self.spd = 1.0 + drift_ppm * 1e-6
         self.moved_ns = 0  # corrections since the last "deadlines moved"
         # The local clock is piecewise linear: local_ref at host time t_ref, running at
-        # speed() since. Corrections rebase it, so a rate change never jumps the time.
+        # spd since. Corrections rebase it, so a rate change never jumps the time.
         self.t_ref = 0
         self.local_ref = start_ns
         #: system time of the next SYNC0 pulse, or None while the SYNC unit is off
@@ -77,17 +77,9 @@ class DcUnit:
         """Local clock at host time ``t_ns`` (drift and control-loop correction applied)."""
         return (self.local_ref + int((t_ns - self.t_ref) * self.spd)) & MASK64
 
-    def speed(self) -> float:
-        """Local clock ticks per host ns: drift plus the control loop's correction."""
-        return self.spd
-
     def _set_rate(self, rate_ppb: float) -> None:
         self.rate_ppb = rate_ppb
         self.spd = 1.0 + self.drift_ppm * 1e-6 + rate_ppb * 1e-9
-
-    def _rebase(self, t_ns: int) -> None:
-        self.local_ref = self.local_time(t_ns)
-        self.t_ref = t_ns
 
     def offset(self) -> int:
         return int(_U64.unpack_from(self.mem, regs.DC_SYSTEM_TIME_OFFSET)[0])
