@@ -86,6 +86,21 @@ class Pdi:
     def position(self) -> int:
         return self._esc.position
 
+    def compiled_view(self, sm_out: int, sm_in: int) -> tuple[object, ...] | None:
+        """What the compiled DC cycle (ecatsim.slave.cycle, _cycle.c) needs of this ESC:
+        (esc, mem, ctx, ctx.pending, position, SM sm_out, SM sm_in). None if a register it
+        reads has a PDI read side effect other than the one it transcribes (the SYNC0
+        acknowledge, Table 106)."""
+        esc = self._esc
+        t = esc.t
+        hook = t.pdi_r[regs.DC_SYNC0_STATUS]
+        if hook is None or getattr(hook[0], "__name__", "") != "_pr_dc_sync_status":
+            return None
+        if t.pdi_r_hooked[regs.DC_ACTIVATION] or t.pdi_r_hooked[regs.DC_ACTIVATION_STATUS]:
+            return None
+        ctx = esc.ctx
+        return (esc, esc.mem, ctx, ctx.pending, esc.position, esc.sm[sm_out], esc.sm[sm_in])
+
     def latch_input(self, unit: int, level: bool, host_ns: int) -> None:
         """Drive the LATCH ``unit`` input pin (the application's signal, e.g. an encoder
         index pulse) at host time ``host_ns``. Ref: TMC8460 §5.50.5."""

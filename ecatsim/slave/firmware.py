@@ -28,7 +28,7 @@ from ecatsim.esc.pdi import (
     Pdi,
     SmSettings,
 )
-from ecatsim.slave import al
+from ecatsim.slave import al, cycle
 from ecatsim.slave.al import AlState, Transition
 from ecatsim.slave.app import Application
 from ecatsim.slave.coe import CoeProtocol
@@ -55,6 +55,8 @@ CTRL_PD_IN = 0x00  # buffered, ECAT reads
 EV_SM1 = EV_SM0 << 1
 PD_EVENTS = (EV_SM0 << SM_PD_OUT) | (EV_SM0 << SM_PD_IN)  # outputs written, inputs read
 EVENT_MASK = EV_AL_CONTROL | EV_SM_ACTIVATION | EV_WATCHDOG_PD | EV_SYNC0 | (0x0D * EV_SM0)
+#: the event mask while DC pulses drive the process data and no mailbox reply waits
+EVENT_MASK_DC = EVENT_MASK & ~PD_EVENTS
 
 
 @dataclass(frozen=True, slots=True)
@@ -106,6 +108,11 @@ class Firmware:
         #: injected fault: refuse the next state change with this AL status code
         self.refuse_next: int | None = None
         self.bootstrap_supported = bootstrap_supported
+        #: serve SYNC0 events with the compiled DC cycle where it applies (decision P3;
+        #: tests compare it with this class, the reference)
+        self.compiled = True
+        self._cycle: cycle.Cycle | None = None
+        self._cycle_plan: object = None
         self.state = AlState.INIT
         self.error = False
         self.code = al.CODE_NONE
@@ -145,6 +152,13 @@ class Firmware:
 
     def service(self, now_ns: int) -> None:
         """Serve pending PDI events. Called after the reply to a frame has been sent."""
+        if self.compiled and cycle.compiled is not None:
+            plan = getattr(self.app, "plan", None)
+            if plan is not self._cycle_plan:  # built once per process-data plan
+                self._cycle_plan = plan
+                self._cycle = cycle.build(self, EVENT_MASK_DC)
+            if self._cycle is not None and cycle.compiled.run(self._cycle, now_ns):
+                return  # a SYNC0 event with nothing else pending, served compiled
         p = self.pdi
         if not p.operational():
             return

@@ -227,6 +227,10 @@ class PdoImage:
 
     def get_inputs(self, now_ns: int) -> bytes:
         self.device.update_inputs(now_ns)
+        return self.pack_inputs()
+
+    def pack_inputs(self) -> bytes:
+        """The input image from the OD values, as they are now."""
         c = self.plan.tx_codec
         if c is not None:
             try:

@@ -31,13 +31,14 @@ def calibrate(n: int = 200_000) -> float:
     return best / n
 
 
-def configure_to_op(m: TinyMaster, n_slaves: int) -> None:
+def configure_to_op(m: TinyMaster, n_slaves: int, ecat_irq: bool = False) -> None:
     """Bring a segment to OP the way SOEM does: slaves to defaults (loops auto, alias off,
     error counters, EEPROM to EtherCAT), INIT, clear FMMUs/SMs, addresses, mailbox SMs,
-    PREOP, process-data SMs and FMMUs, SAFEOP, OP."""
+    PREOP, process-data SMs and FMMUs, SAFEOP, OP. ``ecat_irq``: the process-data SMs
+    also raise ECAT events, and the ECAT event mask lets every event through."""
     m.bwr(0x0101, b"\x00")  # DL control: auto loop on every port
     m.bwr(0x0103, b"\x00")  # alias off
-    m.bwr(0x0200, b"\x00\x00")  # ECAT event mask
+    m.bwr(0x0200, b"\xff\xff" if ecat_irq else b"\x00\x00")  # ECAT event mask
     m.bwr(0x0300, bytes(8))  # error counters
     m.bwr(0x0981, b"\x00")  # SYNC activation off
     m.bwr(0x0500, b"\x02")  # EEPROM: force EtherCAT ...
@@ -50,8 +51,9 @@ def configure_to_op(m: TinyMaster, n_slaves: int) -> None:
         m.apwr(pos, 0x0800, struct.pack("<HHBBBB", 0x1000, 128, 0x26, 0, 1, 0))
         m.apwr(pos, 0x0808, struct.pack("<HHBBBB", 0x1080, 128, 0x22, 0, 1, 0))
         m.apwr(pos, 0x0120, b"\x02\x00")
-        m.apwr(pos, 0x0810, struct.pack("<HHBBBB", 0x1100, 12, 0x64, 0, 1, 0))
-        m.apwr(pos, 0x0818, struct.pack("<HHBBBB", 0x1200, 17, 0x20, 0, 1, 0))
+        irq = 0x10 if ecat_irq else 0x00
+        m.apwr(pos, 0x0810, struct.pack("<HHBBBB", 0x1100, 12, 0x64 | irq, 0, 1, 0))
+        m.apwr(pos, 0x0818, struct.pack("<HHBBBB", 0x1200, 17, 0x20 | irq, 0, 1, 0))
         out_lad = pos * 12
         in_lad = n_slaves * 12 + pos * 17
         m.apwr(pos, 0x0600, struct.pack("<IHBBHBBB3x", out_lad, 12, 0, 7, 0x1100, 0, 2, 1))
@@ -103,11 +105,20 @@ CSP = 8
 class CspCycle:
     """N drives in OP, enabled in csp, SYNC0 at 1 ms; ``step()`` runs one cycle."""
 
-    def __init__(self, drives: int, device: str = "tmc8670", enable: bool = True) -> None:
+    def __init__(
+        self,
+        drives: int,
+        device: str = "tmc8670",
+        enable: bool = True,
+        compiled: bool = True,
+        ecat_irq: bool = False,
+    ) -> None:
         self.n = drives
         self.seg, self.clock = segment_of(drives, device=device)
-        t = TinyMaster(self.seg)
-        configure_to_op(t, drives)
+        for fw in self.seg.firmware:
+            fw.compiled = compiled  # the compiled DC cycle (decision P3) or the reference
+        t = self.master = TinyMaster(self.seg)
+        configure_to_op(t, drives, ecat_irq)
         self.link = LoopbackLink()
         self.daemon = Daemon(self.link, self.seg)
         self.buf = bytearray(2048)
@@ -128,6 +139,7 @@ class CspCycle:
         self.t = t0
         self.k = 0
         self.target = 0
+        self.amplitude = 20_000  # counts; the target follows a cosine of this amplitude
         self.cw = 0x0F if enable else 0x00
         for cw in (0x06, 0x07, 0x0F, 0x0F, 0x0F) if enable else ():
             self.step(cw)  # shutdown, switch on, enable operation
@@ -141,12 +153,19 @@ class CspCycle:
             ]
         )
 
-    def step(self, cw: int | None = None) -> None:
-        self.clock.t = self.t
+    def step(self, cw: int | None = None) -> bytes:
+        self.pulse()
+        return self.exchange(cw)
+
+    def pulse(self) -> None:
+        """The SYNC0 pulse of this cycle, served by the daemon's timers."""
         self.clock.t = self.t + 20_000  # the timer wakes a little late, as poll(2) does
-        self.daemon._service_timers()  # SYNC0
+        self.daemon._service_timers()
+
+    def exchange(self, cw: int | None = None) -> bytes:
+        """The cyclic frame, mid-cycle; returns the reply."""
         self.clock.t = self.t + MS // 2
-        self.target = int(20_000 * (1 - math.cos(self.k * 2e-3 * math.pi)))
+        self.target = int(self.amplitude * (1 - math.cos(self.k * 2e-3 * math.pi)))
         self.link.master_send(self.frame(self.cw if cw is None else cw))
         self.link.rx_ns = self.clock.t
         self.daemon.handle_one(self.buf)
@@ -154,6 +173,7 @@ class CspCycle:
         assert reply is not None
         self.t += MS
         self.k += 1
+        return bytes(reply)
 
 
 def csp_cycle_cost(drives: int, cycles: int = 300) -> float:

@@ -1,0 +1,589 @@
+/* Compiled DC cycle of one CoE slave's firmware: the PDI-side work of Firmware.service for
+ * a SYNC0 event in DC synchronous mode, when nothing else is pending.
+ *
+ * run(cyc, now_ns) -> bool
+ *   cyc: the tuple ecatsim.slave.cycle.build() makes (stable references only; everything
+ *        else is read live, every call).
+ *   True:  the SYNC0 event was served here, exactly as Firmware.service would have served
+ *          it (SYNC0 acknowledged, SM2 read and the outputs applied in OP, the inputs
+ *          packed and written to SM3, the SM status and event registers updated).
+ *   False: a precondition does not hold; nothing was changed and the caller runs the
+ *          Python firmware (the reference model).
+ *
+ * The device itself (CiA 402 drive, servo) stays in Python: this code calls its
+ * outputs_applied() and update_inputs(), so its logic has one implementation.
+ * Every step below names the Python function it transcribes; tests/unit/slave/
+ * test_cycle_compiled.py runs both and compares memory, OD values and SM state.
+ *
+ * Ref: TMC8460 §5.32 (AL event), §5.49 Tables 88-89 (SM status, 3-buffer exchange),
+ * §5.50.4 Tables 106-109 (SYNC0 status); ETG.1000.6 §5.3 (DC synchronous mode);
+ * docs/decisions.md P3.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <stdint.h>
+#include <string.h>
+
+/* Register addresses and bits (ecatsim/esc/regs.py; the test checks they agree). */
+#define DL_STATUS 0x0110
+#define ECAT_EVENT_MASK 0x0200
+#define AL_EVENT_MASK 0x0204
+#define ECAT_EVENT_REQUEST 0x0210
+#define AL_EVENT_REQUEST 0x0220
+#define DC_ACTIVATION 0x0981
+#define DC_PULSE_LENGTH 0x0982
+#define DC_ACTIVATION_STATUS 0x0984
+#define DC_SYNC0_STATUS 0x098E
+#define EV_AL_CONTROL 0x0001
+#define EV_SYNC0 0x0004
+#define EV_SM_ACTIVATION 0x0010
+#define EV_WATCHDOG_PD 0x0040
+#define EV_SM0 0x0100
+#define ECAT_EV_SM0 0x0010
+#define SM_ST_IRQ_WRITE 0x01
+#define SM_ST_IRQ_READ 0x02
+#define SM_ST_BUF_SHIFT 4
+#define SM_ST_READ_OPEN 0x40
+#define SM_ST_WRITE_OPEN 0x80
+#define MEM_SIZE 0x10000
+
+/* Events the Python firmware serves other than SYNC0 and process data: any of them sends
+ * the call to Python. SM0/SM1 are the mailbox. */
+#define OTHER_EVENTS (EV_AL_CONTROL | EV_SM_ACTIVATION | EV_WATCHDOG_PD | EV_SM0 | (EV_SM0 << 1))
+#define SM_PD_OUT_EVENT (EV_SM0 << 2)
+
+/* cyc tuple layout (ecatsim/slave/cycle.py, build()) */
+enum {
+    C_FW, C_ESC, C_MEM, C_CTX, C_PENDING, C_POSITION, C_SM2, C_SM3, C_RX_ENTRIES,
+    C_RX_LAYOUT, C_TX_ENTRIES, C_TX_LAYOUT, C_RX_SIZE, C_TX_SIZE, C_DEVICE, C_MBX, C_APP,
+    C_OP, C_SAFEOP, C_MASK_DC, C_LEN
+};
+
+static PyObject *s_state, *s_event_mask, *s_pd_masked, *s_out, *s_active, *s_locked,
+    *s_mailbox, *s_ecat_side_writes, *s_start, *s_length, *s_w, *s_l, *s_r, *s_r_open,
+    *s_w_open, *s_status, *s_mirror, *s_irq_to_ecat, *s_irq_to_pdi, *s_status_addr, *s_n,
+    *s_ecat_irq, *s_irq_dirty, *s_value, *s_outputs_applied, *s_update_inputs,
+    *s_pack_inputs, *s_service_mailbox;
+
+static inline uint32_t rd32(const uint8_t *m, int a)
+{
+    return (uint32_t)m[a] | ((uint32_t)m[a + 1] << 8) | ((uint32_t)m[a + 2] << 16) |
+           ((uint32_t)m[a + 3] << 24);
+}
+
+static inline void wr32(uint8_t *m, int a, uint32_t v)
+{
+    m[a] = (uint8_t)v;
+    m[a + 1] = (uint8_t)(v >> 8);
+    m[a + 2] = (uint8_t)(v >> 16);
+    m[a + 3] = (uint8_t)(v >> 24);
+}
+
+static inline unsigned rd16(const uint8_t *m, int a) { return m[a] | (m[a + 1] << 8); }
+
+static inline void wr16(uint8_t *m, int a, unsigned v)
+{
+    m[a] = (uint8_t)v;
+    m[a + 1] = (uint8_t)(v >> 8);
+}
+
+/* An int attribute; -1 with an exception set on failure (attribute values are >= -1). */
+static long get_long(PyObject *o, PyObject *name, int *err)
+{
+    PyObject *v = PyObject_GetAttr(o, name);
+    if (v == NULL) {
+        *err = 1;
+        return 0;
+    }
+    long x = PyLong_AsLong(v);
+    Py_DECREF(v);
+    if (x == -1 && PyErr_Occurred())
+        *err = 1;
+    return x;
+}
+
+static int get_bool(PyObject *o, PyObject *name, int *err)
+{
+    PyObject *v = PyObject_GetAttr(o, name);
+    if (v == NULL) {
+        *err = 1;
+        return 0;
+    }
+    int x = PyObject_IsTrue(v);
+    Py_DECREF(v);
+    if (x < 0)
+        *err = 1;
+    return x;
+}
+
+static int set_long(PyObject *o, PyObject *name, long x)
+{
+    PyObject *v = PyLong_FromLong(x);
+    if (v == NULL)
+        return -1;
+    int rc = PyObject_SetAttr(o, name, v);
+    Py_DECREF(v);
+    return rc;
+}
+
+/* A SyncManager's state, read once per call and written back where it changed. */
+typedef struct {
+    PyObject *obj;
+    int active, locked, mailbox, ecat_side_writes, r_open, w_open;
+    long start, length, w, l, r, status, mirror, irq_to_ecat, irq_to_pdi, status_addr, n;
+} Sm;
+
+static int sm_load(Sm *sm, PyObject *obj)
+{
+    int err = 0;
+    sm->obj = obj;
+    sm->active = get_bool(obj, s_active, &err);
+    sm->locked = get_bool(obj, s_locked, &err);
+    sm->mailbox = get_bool(obj, s_mailbox, &err);
+    sm->ecat_side_writes = get_bool(obj, s_ecat_side_writes, &err);
+    sm->r_open = get_bool(obj, s_r_open, &err);
+    sm->w_open = get_bool(obj, s_w_open, &err);
+    sm->start = get_long(obj, s_start, &err);
+    sm->length = get_long(obj, s_length, &err);
+    sm->w = get_long(obj, s_w, &err);
+    sm->l = get_long(obj, s_l, &err);
+    sm->r = get_long(obj, s_r, &err);
+    sm->status = get_long(obj, s_status, &err);
+    sm->mirror = get_long(obj, s_mirror, &err);
+    sm->irq_to_ecat = get_long(obj, s_irq_to_ecat, &err);
+    sm->irq_to_pdi = get_long(obj, s_irq_to_pdi, &err);
+    sm->status_addr = get_long(obj, s_status_addr, &err);
+    sm->n = get_long(obj, s_n, &err);
+    return err ? -1 : 0;
+}
+
+/* The ESC side of one call: memory, and what the event functions touch. */
+typedef struct {
+    uint8_t *m;
+    PyObject *esc, *ctx, *pending, *position;
+} Esc;
+
+/* Esc._pdi_irq: the PDI interrupt line is AL event request AND AL event mask. */
+static int pdi_irq(Esc *e, uint32_t request)
+{
+    if (request & rd32(e->m, AL_EVENT_MASK))
+        return PySet_Add(e->pending, e->position);
+    return PySet_Discard(e->pending, e->position) < 0 ? -1 : 0;
+}
+
+/* Esc.set_al_event / clr_al_event */
+static int set_al_event(Esc *e, uint32_t bits)
+{
+    uint32_t v = rd32(e->m, AL_EVENT_REQUEST) | bits;
+    wr32(e->m, AL_EVENT_REQUEST, v);
+    return pdi_irq(e, v);
+}
+
+static int clr_al_event(Esc *e, uint32_t bits)
+{
+    uint32_t v = rd32(e->m, AL_EVENT_REQUEST);
+    if (!(v & bits))
+        return 0;
+    v &= ~bits;
+    wr32(e->m, AL_EVENT_REQUEST, v);
+    return pdi_irq(e, v);
+}
+
+/* Esc._irq_update: ECAT event request AND ECAT event mask, into the IRQ field. */
+static int irq_update(Esc *e)
+{
+    long irq = (long)(rd16(e->m, ECAT_EVENT_REQUEST) & rd16(e->m, ECAT_EVENT_MASK));
+    int err = 0;
+    long cur = get_long(e->esc, s_ecat_irq, &err);
+    if (err)
+        return -1;
+    if (irq != cur) {
+        if (set_long(e->esc, s_ecat_irq, irq) < 0)
+            return -1;
+        if (PyObject_SetAttr(e->ctx, s_irq_dirty, Py_True) < 0)
+            return -1;
+    }
+    return 0;
+}
+
+/* Esc._set_ecat_event / _clr_ecat_event */
+static int ecat_event(Esc *e, unsigned bits, int set)
+{
+    unsigned v = rd16(e->m, ECAT_EVENT_REQUEST);
+    unsigned nv = set ? (v | bits) : (v & ~bits);
+    if (nv == v)
+        return 0;
+    wr16(e->m, ECAT_EVENT_REQUEST, nv);
+    return irq_update(e);
+}
+
+/* SyncManager._sync (buffered mode) and Esc.sm_status_changed. */
+static int sm_sync(Esc *e, Sm *sm)
+{
+    long st = sm->status & (SM_ST_IRQ_WRITE | SM_ST_IRQ_READ);
+    st |= (sm->l >= 0 ? sm->l : 3) << SM_ST_BUF_SHIFT;
+    if (sm->r_open)
+        st |= SM_ST_READ_OPEN;
+    if (sm->w_open)
+        st |= SM_ST_WRITE_OPEN;
+    sm->status = st;
+    e->m[sm->status_addr] = (uint8_t)st;
+    long mirror = ((st & sm->irq_to_ecat) ? 1 : 0) | ((st & sm->irq_to_pdi) ? 2 : 0);
+    if (mirror != sm->mirror) {
+        sm->mirror = mirror;
+        if (set_long(sm->obj, s_mirror, mirror) < 0)
+            return -1;
+        if (ecat_event(e, ECAT_EV_SM0 << sm->n, (int)(mirror & 1)) < 0)
+            return -1;
+        uint32_t abit = (uint32_t)EV_SM0 << sm->n;
+        if ((mirror & 2) ? set_al_event(e, abit) : clr_al_event(e, abit))
+            return -1;
+    }
+    return 0;
+}
+
+static int sm_store(Sm *sm)
+{
+    if (set_long(sm->obj, s_w, sm->w) < 0 || set_long(sm->obj, s_l, sm->l) < 0 ||
+        set_long(sm->obj, s_r, sm->r) < 0 || set_long(sm->obj, s_status, sm->status) < 0)
+        return -1;
+    if (PyObject_SetAttr(sm->obj, s_r_open, sm->r_open ? Py_True : Py_False) < 0)
+        return -1;
+    return PyObject_SetAttr(sm->obj, s_w_open, sm->w_open ? Py_True : Py_False);
+}
+
+/* Whole-buffer PDI access of a buffered SM is possible (pdi_may_read / pdi_may_write). */
+static int sm_pdi_ok(const Sm *sm, int reading)
+{
+    return sm->active && !sm->locked && !sm->mailbox &&
+           (reading ? sm->ecat_side_writes : !sm->ecat_side_writes) && sm->length > 0 &&
+           sm->start + 3 * sm->length <= MEM_SIZE;
+}
+
+/* Pdi.sm_read: SyncManager.reader_read(0, whole) -> _reader_open, _reader_access(first,
+ * last). Returns the buffer's base address. */
+static long sm_pdi_read(Esc *e, Sm *sm)
+{
+    if (sm->l >= 0)
+        sm->r = sm->l;
+    else if (sm->r == sm->w)
+        sm->r = (sm->w + 1) % 3;
+    long base = sm->start + sm->r * sm->length; /* read open only during the copy */
+    sm->status &= ~SM_ST_IRQ_WRITE;
+    sm->r_open = 0;
+    sm->status |= SM_ST_IRQ_READ;
+    if (sm_sync(e, sm) < 0 || sm_store(sm) < 0)
+        return -1;
+    return base;
+}
+
+/* Pdi.sm_write: SyncManager.writer_write(0, whole) -> _writer_access(first, last), after
+ * the caller filled the buffer at sm_write_base(). */
+static long sm_write_base(const Sm *sm) { return sm->start + sm->w * sm->length; }
+
+static int sm_pdi_written(Esc *e, Sm *sm)
+{
+    sm->status &= ~SM_ST_IRQ_READ; /* write open only during the copy */
+    sm->w_open = 0;
+    long latest = sm->l = sm->w;
+    if (sm->r_open && sm->r != latest)
+        sm->w = 3 - latest - sm->r;
+    else
+        sm->w = latest == 0 ? 1 : 0;
+    sm->status |= SM_ST_IRQ_WRITE;
+    if (sm_sync(e, sm) < 0)
+        return -1;
+    return sm_store(sm);
+}
+
+/* A process image layout: 3 bytes per mapped entry, offset (LE 16) and a struct code. */
+static int code_size(char c)
+{
+    switch (c) {
+    case 'b': case 'B': return 1;
+    case 'h': case 'H': return 2;
+    case 'i': case 'I': return 4;
+    case 'q': case 'Q': return 8;
+    default: return 0;
+    }
+}
+
+/* PdoImage.set_outputs (the one-struct codec): each entry's value from the image. */
+static int unpack_rx(const uint8_t *buf, PyObject *entries, PyObject *layout)
+{
+    const uint8_t *lay = (const uint8_t *)PyBytes_AS_STRING(layout);
+    Py_ssize_t n = PyTuple_GET_SIZE(entries);
+    for (Py_ssize_t i = 0; i < n; i++) {
+        const uint8_t *p = buf + (lay[3 * i] | (lay[3 * i + 1] << 8));
+        char c = (char)lay[3 * i + 2];
+        uint64_t u = 0;
+        int sz = code_size(c);
+        for (int k = sz - 1; k >= 0; k--)
+            u = (u << 8) | p[k];
+        PyObject *v;
+        switch (c) {
+        case 'b': v = PyLong_FromLong((int8_t)u); break;
+        case 'h': v = PyLong_FromLong((int16_t)u); break;
+        case 'i': v = PyLong_FromLong((int32_t)u); break;
+        case 'q': v = PyLong_FromLongLong((int64_t)u); break;
+        default: v = PyLong_FromUnsignedLongLong(u); break;
+        }
+        if (v == NULL)
+            return -1;
+        int rc = PyObject_SetAttr(PyTuple_GET_ITEM(entries, i), s_value, v);
+        Py_DECREF(v);
+        if (rc < 0)
+            return -1;
+    }
+    return 0;
+}
+
+/* PdoImage.get_inputs' struct.pack: 1 packed, 0 a value is not an int of its type's range
+ * (the caller then lets Python encode it entry by entry), -1 error. */
+static int pack_tx(uint8_t *buf, PyObject *entries, PyObject *layout)
+{
+    const uint8_t *lay = (const uint8_t *)PyBytes_AS_STRING(layout);
+    Py_ssize_t n = PyTuple_GET_SIZE(entries);
+    for (Py_ssize_t i = 0; i < n; i++) {
+        char c = (char)lay[3 * i + 2];
+        PyObject *v = PyObject_GetAttr(PyTuple_GET_ITEM(entries, i), s_value);
+        if (v == NULL)
+            return -1;
+        if (!PyLong_Check(v)) {
+            Py_DECREF(v);
+            return 0;
+        }
+        int over = 0;
+        long long x = PyLong_AsLongLongAndOverflow(v, &over);
+        uint64_t u;
+        int ok;
+        if (c == 'Q') {
+            u = PyLong_AsUnsignedLongLong(v);
+            ok = !(u == (uint64_t)-1 && PyErr_Occurred());
+            PyErr_Clear();
+        } else {
+            u = (uint64_t)x;
+            switch (c) {
+            case 'b': ok = x >= -128 && x <= 127; break;
+            case 'B': ok = x >= 0 && x <= 0xFF; break;
+            case 'h': ok = x >= -32768 && x <= 32767; break;
+            case 'H': ok = x >= 0 && x <= 0xFFFF; break;
+            case 'i': ok = x >= INT32_MIN && x <= INT32_MAX; break;
+            case 'I': ok = x >= 0 && x <= 0xFFFFFFFFLL; break;
+            default: ok = 1; break; /* 'q' */
+            }
+            ok = ok && !over;
+        }
+        Py_DECREF(v);
+        if (!ok)
+            return 0;
+        uint8_t *p = buf + (lay[3 * i] | (lay[3 * i + 1] << 8));
+        for (int k = 0, sz = code_size(c); k < sz; k++, u >>= 8)
+            p[k] = (uint8_t)u;
+    }
+    return 1;
+}
+
+static PyObject *run(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (nargs != 2 || !PyTuple_Check(args[0]) || PyTuple_GET_SIZE(args[0]) != C_LEN) {
+        PyErr_SetString(PyExc_TypeError, "run(cyc, now_ns): cyc from ecatsim.slave.cycle");
+        return NULL;
+    }
+    PyObject *cyc = args[0], *now = args[1];
+#define ITEM(k) PyTuple_GET_ITEM(cyc, k)
+    PyObject *fw = ITEM(C_FW);
+    PyObject *memobj = ITEM(C_MEM);
+    if (!PyByteArray_Check(memobj) || PyByteArray_GET_SIZE(memobj) < MEM_SIZE) {
+        PyErr_SetString(PyExc_TypeError, "cyc: ESC memory must be a 64 KiB bytearray");
+        return NULL;
+    }
+    Esc e = {(uint8_t *)PyByteArray_AS_STRING(memobj), ITEM(C_ESC), ITEM(C_CTX),
+             ITEM(C_PENDING), ITEM(C_POSITION)};
+    uint8_t *m = e.m;
+
+    /* ---- preconditions (Firmware.service's branches); nothing changes before these. */
+    if (!(m[DL_STATUS] & 0x01))
+        Py_RETURN_FALSE; /* PDI not operational */
+    uint32_t ev = rd32(m, AL_EVENT_REQUEST);
+    if (!(ev & EV_SYNC0) || (ev & OTHER_EVENTS))
+        Py_RETURN_FALSE;
+    if ((m[DC_ACTIVATION] & 0x03) != 0x03 || (m[DC_ACTIVATION_STATUS] & 0x01))
+        Py_RETURN_FALSE; /* not DC synchronous with the pulses running */
+    PyObject *state = PyObject_GetAttr(fw, s_state);
+    if (state == NULL)
+        return NULL;
+    int op = state == ITEM(C_OP);
+    int safeop = state == ITEM(C_SAFEOP);
+    Py_DECREF(state);
+    if (!op && !safeop)
+        Py_RETURN_FALSE;
+    int err = 0;
+    long mask = get_long(fw, s_event_mask, &err);
+    int masked = get_bool(fw, s_pd_masked, &err);
+    if (err)
+        return NULL;
+    if (!masked || mask != PyLong_AsLong(ITEM(C_MASK_DC)))
+        Py_RETURN_FALSE; /* service_mailbox would rewrite the event mask */
+    PyObject *mbx = ITEM(C_MBX);
+    if (mbx != Py_None) {
+        int queued = get_bool(mbx, s_out, &err);
+        if (err)
+            return NULL;
+        if (queued)
+            Py_RETURN_FALSE;
+    }
+    Sm sm2, sm3;
+    if (sm_load(&sm2, ITEM(C_SM2)) < 0 || sm_load(&sm3, ITEM(C_SM3)) < 0)
+        return NULL;
+    int read_out = (ev & SM_PD_OUT_EVENT) != 0;
+    long rx_size = PyLong_AsLong(ITEM(C_RX_SIZE)), tx_size = PyLong_AsLong(ITEM(C_TX_SIZE));
+    if (read_out && !(sm_pdi_ok(&sm2, 1) && sm2.length >= rx_size))
+        Py_RETURN_FALSE;
+    if (!sm_pdi_ok(&sm3, 0))
+        Py_RETURN_FALSE;
+
+    /* ---- p.u8(DC_SYNC0_STATUS): Esc._pr_dc_sync_status */
+    if (clr_al_event(&e, EV_SYNC0) < 0)
+        return NULL;
+    if (!(m[DC_PULSE_LENGTH] | m[DC_PULSE_LENGTH + 1]))
+        m[DC_SYNC0_STATUS] &= 0xFE;
+
+    /* ---- SM2 read; in OP the outputs are applied (app.set_outputs) */
+    if (read_out) {
+        long base = sm_pdi_read(&e, &sm2);
+        if (base < 0)
+            return NULL;
+        if (op) {
+            if (unpack_rx(m + base, ITEM(C_RX_ENTRIES), ITEM(C_RX_LAYOUT)) < 0)
+                return NULL;
+            PyObject *r = PyObject_CallMethodOneArg(ITEM(C_DEVICE), s_outputs_applied, now);
+            if (r == NULL)
+                return NULL;
+            Py_DECREF(r);
+        }
+    }
+
+    /* ---- Firmware._write_inputs: app.get_inputs, then Pdi.sm_write(SM3) */
+    PyObject *r = PyObject_CallMethodOneArg(ITEM(C_DEVICE), s_update_inputs, now);
+    if (r == NULL)
+        return NULL;
+    Py_DECREF(r);
+    if (sm_load(&sm3, ITEM(C_SM3)) < 0) /* the device may not touch it; be exact anyway */
+        return NULL;
+    if (!sm_pdi_ok(&sm3, 0)) {
+        /* Pdi.sm_write refuses: nothing is written (as in Python) */
+    } else {
+        uint8_t *buf = m + sm_write_base(&sm3);
+        long n = sm3.length;
+        int packed = tx_size <= n ? pack_tx(buf, ITEM(C_TX_ENTRIES), ITEM(C_TX_LAYOUT)) : 0;
+        if (packed < 0)
+            return NULL;
+        if (packed) {
+            /* struct padding bytes are zero, and so is the rest of the window */
+            const uint8_t *lay = (const uint8_t *)PyBytes_AS_STRING(ITEM(C_TX_LAYOUT));
+            Py_ssize_t ne = PyTuple_GET_SIZE(ITEM(C_TX_ENTRIES));
+            long pos = 0;
+            for (Py_ssize_t i = 0; i < ne; i++) {
+                long off = lay[3 * i] | (lay[3 * i + 1] << 8);
+                if (off > pos)
+                    memset(buf + pos, 0, (size_t)(off - pos));
+                pos = off + code_size((char)lay[3 * i + 2]);
+            }
+            if (n > pos)
+                memset(buf + pos, 0, (size_t)(n - pos));
+        } else {
+            PyObject *data = PyObject_CallMethodNoArgs(ITEM(C_APP), s_pack_inputs);
+            if (data == NULL)
+                return NULL;
+            if (!PyBytes_Check(data)) {
+                Py_DECREF(data);
+                PyErr_SetString(PyExc_TypeError, "pack_inputs() must return bytes");
+                return NULL;
+            }
+            Py_ssize_t dn = PyBytes_GET_SIZE(data);
+            if (dn > n)
+                dn = n;
+            memcpy(buf, PyBytes_AS_STRING(data), (size_t)dn);
+            if (n > dn)
+                memset(buf + dn, 0, (size_t)(n - dn));
+            Py_DECREF(data);
+        }
+        if (sm_pdi_written(&e, &sm3) < 0)
+            return NULL;
+    }
+
+    /* ---- Firmware.service_mailbox: the mask changes only if the device queued a message
+     * (an emergency); Python does that part. */
+    if (mbx != Py_None) {
+        int queued = get_bool(mbx, s_out, &err);
+        if (err)
+            return NULL;
+        if (queued) {
+            PyObject *evo = PyLong_FromUnsignedLong(ev);
+            if (evo == NULL)
+                return NULL;
+            PyObject *rr = PyObject_CallMethodObjArgs(fw, s_service_mailbox, evo, now, NULL);
+            Py_DECREF(evo);
+            if (rr == NULL)
+                return NULL;
+            Py_DECREF(rr);
+        }
+    }
+#undef ITEM
+    Py_RETURN_TRUE;
+}
+
+static PyObject *constants(PyObject *self, PyObject *unused)
+{
+    (void)self;
+    (void)unused;
+    return Py_BuildValue(
+        "{sisisisisisisisisisisisisisisisisisisisisisi}", "DL_STATUS", DL_STATUS,
+        "ECAT_EVENT_MASK", ECAT_EVENT_MASK, "AL_EVENT_MASK", AL_EVENT_MASK,
+        "ECAT_EVENT_REQUEST", ECAT_EVENT_REQUEST, "AL_EVENT_REQUEST", AL_EVENT_REQUEST,
+        "DC_ACTIVATION", DC_ACTIVATION, "DC_PULSE_LENGTH", DC_PULSE_LENGTH,
+        "DC_ACTIVATION_STATUS", DC_ACTIVATION_STATUS, "DC_SYNC0_STATUS", DC_SYNC0_STATUS,
+        "EV_AL_CONTROL", EV_AL_CONTROL, "EV_SYNC0", EV_SYNC0, "EV_SM_ACTIVATION",
+        EV_SM_ACTIVATION, "EV_WATCHDOG_PD", EV_WATCHDOG_PD, "EV_SM0", EV_SM0, "ECAT_EV_SM0",
+        ECAT_EV_SM0, "SM_ST_IRQ_WRITE", SM_ST_IRQ_WRITE, "SM_ST_IRQ_READ", SM_ST_IRQ_READ,
+        "SM_ST_BUF_SHIFT", SM_ST_BUF_SHIFT, "SM_ST_READ_OPEN", SM_ST_READ_OPEN,
+        "SM_ST_WRITE_OPEN", SM_ST_WRITE_OPEN, "MEM_SIZE", MEM_SIZE, "N_ITEMS", C_LEN);
+}
+
+static PyMethodDef methods[] = {
+    {"run", (PyCFunction)(void (*)(void))run, METH_FASTCALL,
+     "run(cyc, now_ns) -> bool: serve a SYNC0 event of one slave, or False to let Python."},
+    {"constants", constants, METH_NOARGS, "The register constants compiled in (for tests)."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {
+    PyModuleDef_HEAD_INIT, "_cycle", "Compiled DC cycle of the slave firmware.", -1, methods,
+};
+
+PyMODINIT_FUNC PyInit__cycle(void)
+{
+    struct {
+        PyObject **slot;
+        const char *name;
+    } names[] = {
+        {&s_state, "state"}, {&s_event_mask, "event_mask"}, {&s_pd_masked, "pd_masked"},
+        {&s_out, "out"}, {&s_active, "active"}, {&s_locked, "locked"},
+        {&s_mailbox, "mailbox"}, {&s_ecat_side_writes, "ecat_side_writes"},
+        {&s_start, "start"}, {&s_length, "length"}, {&s_w, "w"}, {&s_l, "l"}, {&s_r, "r"},
+        {&s_r_open, "r_open"}, {&s_w_open, "w_open"}, {&s_status, "status"},
+        {&s_mirror, "mirror"}, {&s_irq_to_ecat, "irq_to_ecat"},
+        {&s_irq_to_pdi, "irq_to_pdi"}, {&s_status_addr, "status_addr"}, {&s_n, "n"},
+        {&s_ecat_irq, "ecat_irq"}, {&s_irq_dirty, "irq_dirty"}, {&s_value, "value"},
+        {&s_outputs_applied, "outputs_applied"}, {&s_update_inputs, "update_inputs"},
+        {&s_pack_inputs, "pack_inputs"}, {&s_service_mailbox, "service_mailbox"},
+    };
+    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) {
+        *names[i].slot = PyUnicode_InternFromString(names[i].name);
+        if (*names[i].slot == NULL)
+            return NULL;
+    }
+    return PyModule_Create(&module);
+}

@@ -1,0 +1,242 @@
+"""The compiled DC cycle (_cycle.c) against the Python firmware, its reference: two
+identical segments, one serving SYNC0 events compiled and one in Python, run the same
+frames and must agree on every byte of ESC memory, every SM and event state, every OD
+value, the drive's state and every reply, through enable, motion, mode changes, a fault
+with its emergency, SAFEOP and back.
+Ref: ecatsim/slave/cycle.py; ecatsim/slave/firmware.py Firmware.service; decision P3."""
+
+from __future__ import annotations
+
+import os
+import struct
+from collections.abc import Callable, Iterator
+from dataclasses import replace
+from typing import Any
+
+import pytest
+
+from ecatsim.esc import regs
+from ecatsim.slave import cycle
+from ecatsim.slave.pdo import Codec, Field, codec
+from ecatsim.wire import datagram as dg
+from tests.perf.hotpath import CSP, CspCycle
+
+CSV = 9
+
+
+@pytest.fixture(autouse=True)
+def _require_compiled() -> None:
+    if cycle.compiled is None:
+        msg = "ecatsim.slave._cycle was not built (pip install -e . with a C compiler)"
+        if os.environ.get("CI"):
+            pytest.fail(msg, pytrace=False)  # CI builds it: a missing build is a failure
+        pytest.skip(msg)
+
+
+@pytest.fixture
+def served(monkeypatch: pytest.MonkeyPatch) -> Iterator[list[bool]]:
+    """Every result of _cycle.run (True: served compiled)."""
+    results: list[bool] = []
+    real = cycle.compiled
+    assert real is not None
+
+    class Counting:
+        @staticmethod
+        def run(cyc: cycle.Cycle, now_ns: int) -> bool:
+            r: bool = real.run(cyc, now_ns)
+            results.append(r)
+            return r
+
+    monkeypatch.setattr(cycle, "compiled", Counting)
+    yield results
+
+
+def snapshot(c: CspCycle) -> dict[str, Any]:
+    """Everything the SYNC0 work can change."""
+    out: dict[str, Any] = {"pending": sorted(c.seg.ctx.pending)}
+    for esc in c.seg.escs:
+        p = esc.position
+        out[f"mem{p}"] = bytes(esc.mem)
+        out[f"ecat_irq{p}"] = esc.ecat_irq
+        out[f"sm{p}"] = [
+            (s.w, s.l, s.r, s.r_open, s.w_open, s.status, s.mirror, s.mbx_full) for s in esc.sm
+        ]
+    for fw in c.seg.firmware:
+        p = fw.pdi.position
+        out[f"fw{p}"] = (fw.state, fw.error, fw.code, fw.event_mask, fw.pd_masked)
+        out[f"mbx{p}"] = list(fw.mbx.out) if fw.mbx is not None else None
+        od = fw.od
+        assert od is not None
+        out[f"od{p}"] = [
+            (o.index, sub, e.value) for o in od.objects.values() for sub, e in o.entries.items()
+        ]
+        d = fw.device
+        plain = (int, float, str, bool, type(None), frozenset, set)
+        out[f"drive{p}"] = {k: v for k, v in vars(d).items() if isinstance(v, plain)}
+        out[f"servo{p}"] = {
+            k: getattr(d.servo, k)  # type: ignore[attr-defined]
+            for k in ("angle", "omega", "iq_ma", "iq_integ", "integ", "iq_ref_ma")
+        }
+    return out
+
+
+def lockstep(n: int, ecat_irq: bool = False) -> tuple[CspCycle, CspCycle]:
+    return (
+        CspCycle(n, compiled=True, ecat_irq=ecat_irq),
+        CspCycle(n, compiled=False, ecat_irq=ecat_irq),
+    )
+
+
+def agree(a: CspCycle, b: CspCycle) -> None:
+    sa, sb = snapshot(a), snapshot(b)
+    for key in sa:
+        assert sa[key] == sb[key], key
+
+
+def same(a: CspCycle, b: CspCycle, action: Callable[[CspCycle], bytes | None]) -> None:
+    ra, rb = action(a), action(b)
+    assert ra == rb
+    agree(a, b)
+
+
+def both(a: CspCycle, b: CspCycle, cw: int | None = None) -> None:
+    a.pulse()
+    b.pulse()
+    agree(a, b)
+    same(a, b, lambda c: c.exchange(cw))
+
+
+def al_request(state: int) -> Callable[[CspCycle], bytes | None]:
+    def go(c: CspCycle) -> bytes | None:
+        for pos in range(c.n):
+            c.master.apwr(pos, regs.AL_CONTROL, struct.pack("<H", state))
+        return None
+
+    return go
+
+
+def test_compiled_cycle_matches_python_firmware(served: list[bool]) -> None:
+    a, b = lockstep(2)
+    same(a, b, lambda c: None)  # enabled by the constructors
+    for _ in range(40):  # csp motion
+        both(a, b)
+    assert served and all(served[-40:]), "the compiled cycle served the steady state"
+
+    def mode(m: int) -> Callable[[CspCycle], None]:
+        def go(c: CspCycle) -> None:
+            for fw in c.seg.firmware:
+                assert fw.od is not None
+                fw.od.set(0x6060, 0, m)
+
+        return go
+
+    same(a, b, mode(CSV))
+    for _ in range(6):
+        both(a, b)
+    same(a, b, mode(CSP))
+    for cw in (0x07, 0x07, 0x0F, 0x0F, 0x02, 0x02, 0x06, 0x07, 0x0F, 0x0F):
+        both(a, b, cw)
+
+    def fault(active: bool) -> Callable[[CspCycle], None]:
+        def go(c: CspCycle) -> None:
+            c.seg.firmware[0].device.inject("following_error", active)  # type: ignore[attr-defined]
+
+        return go
+
+    same(a, b, fault(True))  # an emergency is queued: the mailbox part runs in Python
+    for _ in range(6):
+        both(a, b)
+    same(a, b, fault(False))
+    for cw in (0x80, 0x00, 0x06, 0x07, 0x0F, 0x0F):
+        both(a, b, cw)
+    same(a, b, al_request(0x04))  # SAFEOP: inputs only
+    for _ in range(5):
+        both(a, b)
+    same(a, b, al_request(0x08))
+    for cw in (0x06, 0x07, 0x0F, 0x0F, 0x0F, 0x0F):
+        both(a, b, cw)
+
+    def acknowledge_mode(c: CspCycle) -> None:
+        for esc in c.seg.escs:  # pulse length 0: the PDI read acknowledges SYNC0 (Table 106)
+            esc.mem[regs.DC_PULSE_LENGTH : regs.DC_PULSE_LENGTH + 2] = b"\x00\x00"
+
+    same(a, b, acknowledge_mode)
+    for _ in range(3):
+        both(a, b)
+
+    def negative(c: CspCycle) -> None:
+        c.amplitude = -20_000  # targets below zero: signed unpacking
+
+    same(a, b, negative)
+    for _ in range(10):
+        both(a, b)
+
+    def read_open(c: CspCycle) -> None:
+        # the master reads SM3's first byte only: its buffer stays open for reading when
+        # the firmware writes the next one (the third buffer is used)
+        c.master.one(dg.build(dg.Cmd.APRD, 0, 0x1200, bytes(1)), service=False)
+
+    same(a, b, read_open)
+    both(a, b)
+    both(a, b)
+    assert served.count(True) >= 2 * 60
+    assert served.count(False) >= 2, "the fallback paths ran too"
+
+
+def test_compiled_cycle_with_ecat_events_and_padding(served: list[bool]) -> None:
+    """SM events routed to the ECAT side as well (0x0210 and the IRQ field), and an input
+    image with a padding byte, which must be written as 0."""
+    a, b = lockstep(1, ecat_irq=True)
+    both(a, b)
+
+    def pad(c: CspCycle) -> None:
+        app = c.seg.firmware[0].app
+        plan = app.plan  # type: ignore[attr-defined]
+        tx = list(plan.tx)
+        tx[1] = Field(tx[1].offset, tx[1].size, None)  # 6061h display -> padding
+        app.plan = replace(plan, tx=tuple(tx), tx_codec=codec(tuple(tx), plan.tx_size))  # type: ignore[attr-defined]
+        c.seg.escs[0].mem[0x1200 : 0x1200 + 3 * 17] = b"\xff" * (3 * 17)
+
+    same(a, b, pad)
+    for _ in range(8):
+        both(a, b)
+    assert a.seg.escs[0].ecat_irq != 0
+    assert served[-8:] == [True] * 8
+
+
+def test_compiled_cycle_leaves_other_events_to_python(served: list[bool]) -> None:
+    """An AL control request pending with SYNC0: the C code changes nothing, Python serves."""
+    a, b = lockstep(1)
+    for _ in range(3):
+        both(a, b)
+
+    def request(c: CspCycle) -> None:
+        c.master.one(dg.build(dg.Cmd.APWR, 0, regs.AL_CONTROL, b"\x04\x00"), service=False)
+
+    before = len(served)
+    same(a, b, request)
+    both(a, b)
+    assert False in served[before:]
+    assert a.seg.firmware[0].state.name == "SAFEOP"
+
+
+def test_constants_agree_with_the_register_map() -> None:
+    assert cycle.compiled is not None
+    k = cycle.compiled.constants()
+    for name, value in k.items():
+        if name in ("MEM_SIZE", "N_ITEMS"):
+            continue
+        assert getattr(regs, name) == value, name
+    assert k["MEM_SIZE"] == 0x10000
+
+
+def test_layout_follows_the_struct_format() -> None:
+    from ecatsim.slave.od import Entry
+
+    e8, e16 = Entry(1, "a", "INTEGER8"), Entry(2, "b", "UNSIGNED16")
+    e32 = Entry(3, "c", "INTEGER32")
+    fields = (Field(0, 1, e8), Field(1, 1, None), Field(2, 2, e16), Field(6, 4, e32))
+    c = codec(fields, 12)
+    assert isinstance(c, Codec)
+    assert c.st.format == "<b1xH2xi2x"
+    assert cycle.layout(c) == b"\x00\x00b\x02\x00H\x06\x00i"
