@@ -48,8 +48,10 @@
 #define MEM_SIZE 0x10000
 
 /* Events the Python firmware serves other than SYNC0 and process data: any of them sends
- * the call to Python. SM0/SM1 are the mailbox. */
-#define OTHER_EVENTS (EV_AL_CONTROL | EV_SM_ACTIVATION | EV_WATCHDOG_PD | EV_SM0 | (EV_SM0 << 1))
+ * the call to Python. SM0 is a mailbox request. SM1 (the master took a reply) is not
+ * here: with no reply queued, MailboxEngine.flush() has nothing to do, and the event
+ * stays raised until the next reply is written. */
+#define OTHER_EVENTS (EV_AL_CONTROL | EV_SM_ACTIVATION | EV_WATCHDOG_PD | EV_SM0)
 #define SM_PD_OUT_EVENT (EV_SM0 << 2)
 
 /* cyc tuple layout (ecatsim/slave/cycle.py, build()) */

@@ -146,6 +146,16 @@ def test_compiled_cycle_matches_python_firmware(served: list[bool]) -> None:
     same(a, b, fault(True))  # an emergency is queued: the mailbox part runs in Python
     for _ in range(6):
         both(a, b)
+
+    def take_reply(c: CspCycle) -> None:  # the master reads the emergency from SM1
+        c.master.one(dg.build(dg.Cmd.APRD, 0, 0x1080, bytes(128)))
+
+    same(a, b, take_reply)
+    assert a.seg.escs[0].al_event() & (regs.EV_SM0 << 1), "SM1 event raised, stays raised"
+    before = len(served)
+    for _ in range(3):
+        both(a, b)
+    assert served[before:] == [True] * 6, "served compiled with the SM1 event up"
     same(a, b, fault(False))
     for cw in (0x80, 0x00, 0x06, 0x07, 0x0F, 0x0F):
         both(a, b, cw)
