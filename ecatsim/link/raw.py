@@ -25,8 +25,15 @@ import socket
 import struct
 import subprocess
 import time
+from types import ModuleType
 
 from ecatsim.link.errors import LinkError
+
+_rawio: ModuleType | None
+try:  # the compiled receive (optional, decision P4)
+    from ecatsim.link import _rawio
+except ImportError:  # pragma: no cover - built without a C compiler
+    _rawio = None
 
 ETH_P_ECAT = 0x88A4
 ETH_P_8021Q = 0x8100
@@ -136,6 +143,17 @@ def ensure_up(iface: str) -> None:
             ) from exc
 
 
+def _monotonic(stamp_ns: int) -> int:
+    """A receive time stamp (CLOCK_REALTIME ns) on the monotonic clock: now minus how long
+    ago it was; 0 (use now) without a stamp or if the wall clock was stepped."""
+    if not stamp_ns:
+        return 0
+    age = time.time_ns() - stamp_ns
+    if 0 <= age < MAX_RX_AGE_NS:
+        return time.monotonic_ns() - age
+    return 0
+
+
 class RawLink:
     """AF_PACKET/SOCK_RAW on one interface; only EtherType 0x88A4 frames are delivered.
 
@@ -145,6 +163,8 @@ class RawLink:
 
     ethernet = True
     rx_ns = 0
+    #: receive with the compiled recvmsg (_rawio.c) where it was built; tests run both
+    compiled = True
 
     def __init__(self, iface: str, *, qdisc_bypass: bool = True, bring_up: bool = True) -> None:
         if not iface or len(iface) > 15:
@@ -186,6 +206,7 @@ class RawLink:
             raise LinkError(f"cannot bind a raw socket to {iface}: {exc.strerror}") from exc
         sock.setblocking(False)
         self.sock = sock
+        self._fd = sock.fileno()
         self._anc_size = _ANC_SIZE
         self.rx_ns = 0
         if bring_up:
@@ -200,6 +221,15 @@ class RawLink:
 
     def recv_into(self, buf: bytearray) -> int:
         """One frame into ``buf``; 0 if none was waiting (or it was our own outgoing one)."""
+        if _rawio is not None and self.compiled:
+            n, stamp = _rawio.recv(self._fd, buf)
+            if n:
+                self.rx_ns = _monotonic(stamp)
+            return int(n)
+        return self._recv_py(buf)
+
+    def _recv_py(self, buf: bytearray) -> int:
+        """recv_into through Python's socket module (the reference for _rawio.c)."""
         while True:
             try:
                 n, anc, _flags, addr = self.sock.recvmsg_into([buf], self._anc_size)
@@ -215,10 +245,7 @@ class RawLink:
             for level, typ, data in anc:
                 if level == socket.SOL_SOCKET and typ == SO_TIMESTAMPNS:
                     sec, nsec = TIMESPEC.unpack_from(data)
-                    # realtime stamp -> monotonic: subtract how long ago it was
-                    age = time.time_ns() - (sec * 1_000_000_000 + nsec)
-                    if 0 <= age < MAX_RX_AGE_NS:  # else the wall clock was stepped: use now
-                        self.rx_ns = time.monotonic_ns() - age
+                    self.rx_ns = _monotonic(sec * 1_000_000_000 + nsec)
                 elif level == SOL_PACKET and typ == PACKET_AUXDATA and len(data) >= AUXDATA.size:
                     status, _l, _s, _m, _n, tci, tpid = AUXDATA.unpack_from(data)
                     if status & TP_STATUS_VLAN_VALID and n >= 12 and n + 4 <= len(buf):

@@ -7,6 +7,7 @@ Ref: packet(7), tuntap; ETG.1000.4 (EtherType 0x88A4, UDP port 0x88A4); IEEE 802
 
 from __future__ import annotations
 
+import os
 import select
 import socket
 import struct
@@ -17,6 +18,7 @@ from pathlib import Path
 
 import pytest
 
+from ecatsim.link import raw
 from ecatsim.link.errors import LinkError
 from ecatsim.link.loopback import LoopbackLink, Manipulator
 from ecatsim.link.pcap import MAGIC_NSEC, MAGIC_USEC, PcapWriter
@@ -71,11 +73,20 @@ def pair() -> Iterator[NetnsPair]:
         yield p
 
 
-@pytest.fixture
-def raw_pair(pair: NetnsPair) -> Iterator[tuple[RawLink, socket.socket, NetnsPair]]:
-    """RawLink on the slave end; a plain ETH_P_ALL socket on the master end."""
+@pytest.fixture(params=[True, False], ids=["compiled", "python"])
+def raw_pair(
+    pair: NetnsPair, request: pytest.FixtureRequest
+) -> Iterator[tuple[RawLink, socket.socket, NetnsPair]]:
+    """RawLink on the slave end (receiving through _rawio.c, and through Python's socket
+    module, decision P4); a plain ETH_P_ALL socket on the master end."""
+    if request.param and raw._rawio is None:
+        msg = "ecatsim.link._rawio was not built (pip install -e . with a C compiler)"
+        if os.environ.get("CI"):
+            pytest.fail(msg, pytrace=False)
+        pytest.skip(msg)
     with in_netns(pair.slave_ns):
         link = RawLink(pair.slave_if)
+    link.compiled = request.param
     with in_netns(pair.master_ns):
         master = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(ETH_P_ALL))
         master.bind((pair.master_if, 0))
@@ -146,6 +157,8 @@ def test_raw_keeps_vlan_tag(raw_pair: tuple[RawLink, socket.socket, NetnsPair]) 
     master.send(frame)
     n = wait_recv(link, buf)
     assert bytes(buf[:n]) == frame  # the tag the kernel moved into metadata is back
+    # the receive time stamp is on the monotonic clock, a moment ago
+    assert 0 < time.monotonic_ns() - link.rx_ns < 1_000_000_000
 
 
 def test_raw_brings_interface_up(pair: NetnsPair) -> None:

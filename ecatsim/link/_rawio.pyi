@@ -1,0 +1,3 @@
+"""Type stub of the compiled raw-link receive (ecatsim/link/_rawio.c)."""
+
+def recv(fd: int, buf: bytearray) -> tuple[int, int]: ...
