@@ -16,12 +16,7 @@
 #include <Python.h>
 #include <math.h>
 
-enum { TORQUE = 0, VELOCITY = 1, POSITION = 2 };
-enum { STOP_NONE = 0, STOP_FOLLOWING = 1, STOP_OVERCURRENT = 2, STOP_INDEX = 3 };
-#define N_STATE 6
-#define N_PARAMS 17
-
-static const double TWO_PI = 6.283185307179586;  /* 2.0 * math.pi */
+#include "_servo_loop.h"
 
 static int floats(PyObject *tuple, double *out, Py_ssize_t n, const char *what)
 {
@@ -35,11 +30,6 @@ static int floats(PyObject *tuple, double *out, Py_ssize_t n, const char *what)
             return -1;
     }
     return 0;
-}
-
-static inline double clamp(double x, double lo, double hi)
-{
-    return x < lo ? lo : x > hi ? hi : x;
 }
 
 static PyObject *run(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
@@ -61,73 +51,9 @@ static PyObject *run(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     double s[N_STATE], p[N_PARAMS];
     if (floats(args[7], s, N_STATE, "state") < 0 || floats(args[8], p, N_PARAMS, "params") < 0)
         return NULL;
-    double angle = s[0], omega = s[1], iq = s[2], iq_integ = s[3], integ = s[4], iq_ref = s[5];
-    const double dt = p[0], ppr = p[1], kt = p[2], load = p[3], viscous = p[4];
-    const double coulomb = p[5], inertia = p[6], vmax_v = p[7], resistance = p[8];
-    const double decay = p[9], lim = p[10], vlim = p[11], vel_kp = p[12], vel_ki = p[13];
-    const double pos_kp = p[14], cur_kp = p[15], cur_ki = p[16];
-    const double rpm = TWO_PI / 60.0;
-    long done = 0;
     int why = STOP_NONE;
-    while (done < n) {
-        double out;
-        if (kind == TORQUE) {
-            out = ref;
-        } else {
-            double v_ref;
-            if (kind == POSITION) {
-                double err_p = ref - angle / TWO_PI * ppr;
-                if (window != 0.0 && fabs(err_p) > window) {
-                    why = STOP_FOLLOWING;
-                    break;
-                }
-                v_ref = pos_kp * err_p + v_ff;
-            } else {
-                v_ref = ref;
-            }
-            v_ref = clamp(v_ref, -vlim, vlim);
-            double err = v_ref - omega / rpm;
-            out = vel_kp * err + integ;
-            if (-lim < out && out < lim)
-                integ += vel_ki * err * dt;
-        }
-        iq_ref = clamp(out, -lim, lim);
-        double emf = kt * omega;
-        double err_a = (iq_ref - iq) / 1000.0;
-        double v = cur_kp * err_a + iq_integ + emf;
-        if (-vmax_v < v && v < vmax_v)
-            iq_integ += cur_ki * err_a * dt;
-        v = clamp(v, -vmax_v, vmax_v);
-        iq = (iq / 1000.0 * decay + (1.0 - decay) * (v - emf) / resistance) * 1000.0;
-        if (iq_ref == 0.0 && omega == 0.0 && fabs(iq) < 1e-3)
-            iq = iq_integ = 0.0;
-        double torque = kt * iq / 1000.0;
-        double drive = torque - load - viscous * omega;
-        if (omega > 1e-9)
-            drive -= coulomb;
-        else if (omega < -1e-9)
-            drive += coulomb;
-        else if (fabs(drive) <= coulomb)
-            drive = 0.0;
-        else
-            drive -= copysign(coulomb, drive);
-        double next = omega + drive / inertia * dt;
-        if (omega != 0.0 && ((next > 0) != (omega > 0)) && fabs(torque - load) <= coulomb)
-            next = 0.0;
-        double rev = index ? floor(angle / TWO_PI) : 0.0;
-        omega = next;
-        angle += omega * dt;
-        done++;
-        if (fabs(iq) > i_trip) {
-            why = STOP_OVERCURRENT;
-            break;
-        }
-        if (index && floor(angle / TWO_PI) != rev) {
-            why = STOP_INDEX;
-            break;
-        }
-    }
-    return Py_BuildValue("(lidddddd)", done, why, angle, omega, iq, iq_integ, integ, iq_ref);
+    long done = servo_loop(n, kind, ref, v_ff, window, i_trip, index, s, p, &why);
+    return Py_BuildValue("(lidddddd)", done, why, s[0], s[1], s[2], s[3], s[4], s[5]);
 }
 
 static PyMethodDef methods[] = {

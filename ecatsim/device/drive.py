@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from types import ModuleType
 
 import structlog
 
@@ -31,6 +32,12 @@ from ecatsim.slave.al import AlState
 from ecatsim.slave.od import Entry, ObjectDictionary
 
 log = structlog.get_logger("ecatsim.drive")
+
+_compiled: ModuleType | None
+try:  # the compiled steady cycle (optional, decision P5)
+    from ecatsim.device import _drive as _compiled
+except ImportError:  # pragma: no cover - built without a C compiler
+    _compiled = None
 
 # Modes of operation (6060h). Ref: CiA 402-2 Table 35; seed 004 §6.1.1.
 PP, PV, HM, CSP, CSV, CST = 1, 3, 6, 8, 9, 10
@@ -117,6 +124,9 @@ class Drive:
         self.index_output: Callable[[bool, int], None] | None = None
         #: called with (time, trace_row()) after every input update when tracing
         self.tracer: Callable[[int, tuple[int | str, ...]], None] | None = None
+        #: let the compiled steady cycle (_drive.c) serve where it applies; tests compare
+        self.compiled = True
+        self._fast: tuple[object, ...] | None = None
         self._init_od()
         od.refresh = self._publish_sdo_only
 
@@ -214,6 +224,33 @@ class Drive:
         self._publish()
         if self.tracer is not None:
             self.tracer(now_ns, self.trace_row())
+
+    def compiled_step(self) -> tuple[Callable[..., bool], tuple[object, ...]] | None:
+        """(step, fast) for the firmware's compiled DC cycle: ``step(fast, now_ns, outputs)``
+        does outputs_applied(now_ns) (if ``outputs``) and update_inputs(now_ns) in the
+        steady csp/csv/cst case and returns True, else changes nothing and returns False.
+        None where the extension was not built or is switched off. Ref: decision P5."""
+        if _compiled is None or not self.compiled:
+            return None
+        if self._fast is None:
+            self._fast = (
+                self,
+                self.servo,
+                self._hit(0x6040),
+                self._hit(0x6060),
+                self._hit(0x607A),
+                tuple(self._hit(i) for i in SNAPSHOT),
+                tuple(self._entry(i, 0) for i in PUBLISHED),
+                PdsState.OPERATION_ENABLED,
+                AlState.OP,
+                self.substep_ns,
+                self.params.ppr,
+            )
+        return _compiled.step, self._fast
+
+    def _hit(self, index: int) -> Entry | None:
+        hit = self._entry(index, 0)
+        return None if hit is None else hit[0]
 
     def trace_row(self) -> tuple[int | str, ...]:
         """Set points and actual values for the trace. Ref: issue "trace and plot"."""

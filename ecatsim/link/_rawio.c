@@ -106,6 +106,7 @@ static PyMethodDef methods[] = {
 
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT, "_rawio", "Compiled receive of the raw link.", -1, methods,
+    NULL, NULL, NULL, NULL,
 };
 
 PyMODINIT_FUNC PyInit__rawio(void) { return PyModule_Create(&module); }

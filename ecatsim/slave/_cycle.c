@@ -57,7 +57,8 @@
 /* cyc tuple layout (ecatsim/slave/cycle.py, build()) */
 enum {
     C_FW, C_ESC, C_MEM, C_CTX, C_PENDING, C_POSITION, C_SM2, C_SM3, C_RX_ENTRIES,
-    C_RX_LAYOUT, C_TX_ENTRIES, C_TX_LAYOUT, C_RX_SIZE, C_TX_SIZE, C_DEVICE, C_MBX, C_APP,
+    C_RX_LAYOUT, C_TX_ENTRIES, C_TX_LAYOUT, C_RX_SIZE, C_TX_SIZE, C_DEVICE, C_DEVICE_STEP,
+    C_MBX, C_APP,
     C_OP, C_SAFEOP, C_MASK_DC, C_LEN
 };
 
@@ -452,7 +453,8 @@ static PyObject *run(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     if (!(m[DC_PULSE_LENGTH] | m[DC_PULSE_LENGTH + 1]))
         m[DC_SYNC0_STATUS] &= 0xFE;
 
-    /* ---- SM2 read; in OP the outputs are applied (app.set_outputs) */
+    /* ---- SM2 read; in OP the outputs are written into the OD (app.set_outputs) */
+    int applied = 0;
     if (read_out) {
         long base = sm_pdi_read(&e, &sm2);
         if (base < 0)
@@ -460,18 +462,36 @@ static PyObject *run(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         if (op) {
             if (unpack_rx(m + base, ITEM(C_RX_ENTRIES), ITEM(C_RX_LAYOUT)) < 0)
                 return NULL;
+            applied = 1;
+        }
+    }
+
+    /* ---- the device: outputs_applied (if applied), then update_inputs (app.get_inputs);
+     * through its compiled steady cycle where it has one and it applies */
+    int done = 0;
+    PyObject *ds = ITEM(C_DEVICE_STEP);
+    if (ds != Py_None) {
+        PyObject *fargs[3] = {PyTuple_GET_ITEM(ds, 1), now, applied ? Py_True : Py_False};
+        PyObject *r = PyObject_Vectorcall(PyTuple_GET_ITEM(ds, 0), fargs, 3, NULL);
+        if (r == NULL)
+            return NULL;
+        done = r == Py_True;
+        Py_DECREF(r);
+    }
+    if (!done) {
+        if (applied) {
             PyObject *r = PyObject_CallMethodOneArg(ITEM(C_DEVICE), s_outputs_applied, now);
             if (r == NULL)
                 return NULL;
             Py_DECREF(r);
         }
+        PyObject *r = PyObject_CallMethodOneArg(ITEM(C_DEVICE), s_update_inputs, now);
+        if (r == NULL)
+            return NULL;
+        Py_DECREF(r);
     }
 
-    /* ---- Firmware._write_inputs: app.get_inputs, then Pdi.sm_write(SM3) */
-    PyObject *r = PyObject_CallMethodOneArg(ITEM(C_DEVICE), s_update_inputs, now);
-    if (r == NULL)
-        return NULL;
-    Py_DECREF(r);
+    /* ---- Firmware._write_inputs: Pdi.sm_write(SM3) */
     if (sm_load(&sm3, ITEM(C_SM3)) < 0) /* the device may not touch it; be exact anyway */
         return NULL;
     if (!sm_pdi_ok(&sm3, 0)) {
@@ -563,6 +583,7 @@ static PyMethodDef methods[] = {
 
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT, "_cycle", "Compiled DC cycle of the slave firmware.", -1, methods,
+    NULL, NULL, NULL, NULL,
 };
 
 PyMODINIT_FUNC PyInit__cycle(void)

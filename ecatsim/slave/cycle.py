@@ -58,6 +58,13 @@ def layout(c: Codec) -> bytes:
     return bytes(out)
 
 
+def _device_step(device: object) -> object:
+    """The device's compiled steady cycle, (step, fast), or None: then the C code calls
+    its Python methods outputs_applied() and update_inputs()."""
+    fn = getattr(device, "compiled_step", None)
+    return fn() if fn is not None else None
+
+
 def build(fw: Firmware, mask_dc: int) -> Cycle | None:
     """The tuple ``_cycle.run`` works on, or None where the compiled cycle does not apply
     (no extension, an application other than a CoE process image, an image without a
@@ -84,6 +91,7 @@ def build(fw: Firmware, mask_dc: int) -> Cycle | None:
         rx.st.size,
         tx.st.size,
         app.device,
+        _device_step(app.device),
         fw.mbx,
         app,
         AlState.OP,

@@ -15,13 +15,16 @@ from typing import Any
 
 import pytest
 
+from ecatsim.device import drive as drive_mod
 from ecatsim.esc import regs
 from ecatsim.slave import cycle
 from ecatsim.slave.pdo import Codec, Field, codec
 from ecatsim.wire import datagram as dg
 from tests.perf.hotpath import CSP, CspCycle
 
-CSV = 9
+CSV, CST = 9, 10
+#: the drive's caches and the switch of its compiled path (not state of the model)
+LOCAL = {"compiled", "_fast", "_snapshot_hits", "_published"}
 
 
 @pytest.fixture(autouse=True)
@@ -51,6 +54,25 @@ def served(monkeypatch: pytest.MonkeyPatch) -> Iterator[list[bool]]:
     yield results
 
 
+@pytest.fixture
+def stepped(monkeypatch: pytest.MonkeyPatch) -> Iterator[list[bool]]:
+    """Every result of the drive's compiled steady cycle (_drive.step)."""
+    results: list[bool] = []
+    real = drive_mod._compiled
+    if real is None:
+        pytest.fail("ecatsim.device._drive was not built", pytrace=False)
+
+    class Counting:
+        @staticmethod
+        def step(fast: tuple[object, ...], now_ns: int, outputs: bool) -> bool:
+            r: bool = real.step(fast, now_ns, outputs)
+            results.append(r)
+            return r
+
+    monkeypatch.setattr(drive_mod, "_compiled", Counting)
+    yield results
+
+
 def snapshot(c: CspCycle) -> dict[str, Any]:
     """Everything the SYNC0 work can change."""
     out: dict[str, Any] = {"pending": sorted(c.seg.ctx.pending)}
@@ -72,7 +94,9 @@ def snapshot(c: CspCycle) -> dict[str, Any]:
         ]
         d = fw.device
         plain = (int, float, str, bool, type(None), frozenset, set)
-        out[f"drive{p}"] = {k: v for k, v in vars(d).items() if isinstance(v, plain)}
+        out[f"drive{p}"] = {
+            k: v for k, v in vars(d).items() if isinstance(v, plain) and k not in LOCAL
+        }
         out[f"servo{p}"] = {
             k: getattr(d.servo, k)  # type: ignore[attr-defined]
             for k in ("angle", "omega", "iq_ma", "iq_integ", "integ", "iq_ref_ma")
@@ -115,26 +139,55 @@ def al_request(state: int) -> Callable[[CspCycle], bytes | None]:
     return go
 
 
-def test_compiled_cycle_matches_python_firmware(served: list[bool]) -> None:
+def test_compiled_cycle_matches_python_firmware(served: list[bool], stepped: list[bool]) -> None:
     a, b = lockstep(2)
     same(a, b, lambda c: None)  # enabled by the constructors
     for _ in range(40):  # csp motion
         both(a, b)
     assert served and all(served[-40:]), "the compiled cycle served the steady state"
+    assert stepped and all(stepped[-40:]), "and the drive's compiled steady cycle with it"
 
-    def mode(m: int) -> Callable[[CspCycle], None]:
+    def od(*values: tuple[int, int]) -> Callable[[CspCycle], None]:
+        """OD writes on every drive, as an SDO download would make them."""
+
         def go(c: CspCycle) -> None:
             for fw in c.seg.firmware:
                 assert fw.od is not None
-                fw.od.set(0x6060, 0, m)
+                for index, value in values:
+                    fw.od.set(index, 0, value)
 
         return go
 
-    same(a, b, mode(CSV))
-    for _ in range(6):
+    # csv: a slow reverse target plus an offset (the actual speed settles near -1 rpm)
+    same(a, b, od((0x60FF, -2), (0x60B1, 1), (0x6060, CSV)))
+    for _ in range(60):
         both(a, b)
-    same(a, b, mode(CSP))
-    for cw in (0x07, 0x07, 0x0F, 0x0F, 0x02, 0x02, 0x06, 0x07, 0x0F, 0x0F):
+    same(a, b, od((0x60FF, 0), (0x60B1, 0), (0x6060, CSP)))
+    # 0x8F: a fault reset edge, nothing to reset while enabled
+    for cw in (0x8F, 0x8F, 0x0F, 0x07, 0x07, 0x0F, 0x0F, 0x02, 0x02, 0x06, 0x07, 0x0F, 0x0F):
+        both(a, b, cw)
+
+    def far(by: float) -> Callable[[CspCycle], None]:
+        def go(c: CspCycle) -> None:
+            for fw in c.seg.firmware:
+                fw.device.servo.angle += by  # type: ignore[attr-defined]
+
+        return go
+
+    for cw in (0x00, 0x06, 0x07, 0x0F):  # from wherever the quick stop left it: enabled
+        both(a, b, cw)
+    same(a, b, od((0x6071, 0), (0x6060, CST)))
+    both(a, b)  # the mode changes with this cycle's outputs
+    assert a.seg.firmware[0].device.state.name == "OPERATION_ENABLED"  # type: ignore[attr-defined]
+    same(a, b, far(-1.0e7))  # a position beyond the 32-bit objects: clamped
+    before = len(stepped)
+    for _ in range(3):
+        both(a, b)
+    assert stepped[before:] == [True] * 6, "clamped values published compiled"
+    assert a.seg.firmware[0].od.value(0x6064) == -(1 << 31)  # type: ignore[union-attr]
+    same(a, b, far(1.0e7))
+    same(a, b, od((0x6060, CSP)))
+    for cw in (0x06, 0x07, 0x0F, 0x0F):
         both(a, b, cw)
 
     def fault(active: bool) -> Callable[[CspCycle], None]:
@@ -189,8 +242,17 @@ def test_compiled_cycle_matches_python_firmware(served: list[bool]) -> None:
     same(a, b, read_open)
     both(a, b)
     both(a, b)
+    # a following error window the motion exceeds: the servo run stops, Python faults it
+    same(a, b, od((0x6065, 5)))
+    for _ in range(4):
+        both(a, b)
+    assert a.seg.firmware[0].device.state.name.startswith("FAULT")  # type: ignore[attr-defined]
+    same(a, b, od((0x6065, 0xFFFFFFFF)))
+    for cw in (0x80, 0x00, 0x06, 0x07, 0x0F, 0x0F):
+        both(a, b, cw)
     assert served.count(True) >= 2 * 60
     assert served.count(False) >= 2, "the fallback paths ran too"
+    assert stepped.count(False) >= 10, "the drive's Python path ran in the transitions"
 
 
 def test_compiled_cycle_with_ecat_events_and_padding(served: list[bool]) -> None:
