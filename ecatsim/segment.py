@@ -10,12 +10,19 @@ TMC8460 §5.35 (processing unit error counter).
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from types import ModuleType
 from typing import Protocol
 
 from ecatsim.clock import Clock
 from ecatsim.esc import regs
 from ecatsim.esc.core import Esc, FrameContext
 from ecatsim.wire.datagram import CIRCULATING, LEN_MASK, MORE_FOLLOWS
+
+_logical: ModuleType | None
+try:  # the compiled logical datagram (optional, decision P6)
+    from ecatsim.esc import _logical
+except ImportError:  # pragma: no cover - built without a C compiler
+    _logical = None
 
 #: overdue SYNC0 pulses fired one by one before the rest are skipped (a stall this long,
 #: or a forward jump of the system time, is not caught up). Decision DC2.
@@ -58,6 +65,8 @@ class Segment:
         self.reach = len(self.escs)
         self.addr_map: dict[int, tuple[int, ...]] = {}
         self.logical: list[Esc] = []
+        #: LRD/LWR/LRW through the compiled walk where it applies; tests compare
+        self.compiled = True
         self.irq = 0
         #: a reachable ESC has its port-0 loop forced closed (circulating-frame handling)
         self.port0_closed = False
@@ -192,6 +201,9 @@ class Segment:
         mv = memoryview(buf)
         ctx = self.ctx
         escs = self.escs
+        walk = _logical.run if _logical is not None and self.compiled else None
+        if type(buf) is not bytearray:
+            walk = None
         while True:
             if ctx.topology_dirty or ctx.addr_dirty or ctx.logical_dirty or ctx.irq_dirty:
                 self._refresh()
@@ -207,8 +219,12 @@ class Segment:
             ado = buf[p + 4] | (buf[p + 5] << 8)
             if cmd in (LRW, LRD, LWR):
                 lad = adp | (ado << 16)
-                for esc in self.logical:
-                    inc += esc.ecat_logical(cmd, lad, data)
+                done = walk(self.logical, cmd, lad, buf, d0, dlen) if walk is not None else -1
+                if done >= 0:
+                    inc = done  # compiled: every FMMU met goes to one SM (decision P6)
+                else:
+                    for esc in self.logical:
+                        inc += esc.ecat_logical(cmd, lad, data)
             elif cmd in (FPRD, FPWR, FPRW):
                 for i in self.addr_map.get(adp, ()):
                     inc += _physical(escs[i], cmd - FPRD, ado, data)

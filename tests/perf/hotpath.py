@@ -115,6 +115,7 @@ class CspCycle:
     ) -> None:
         self.n = drives
         self.seg, self.clock = segment_of(drives, device=device)
+        self.seg.compiled = compiled  # the compiled logical walk (decision P6)
         for fw in self.seg.firmware:
             fw.compiled = compiled  # the compiled DC cycle (decision P3) or the reference
         t = self.master = TinyMaster(self.seg)

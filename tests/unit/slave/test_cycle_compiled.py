@@ -15,6 +15,7 @@ from typing import Any
 
 import pytest
 
+from ecatsim import segment as segment_mod
 from ecatsim.device import drive as drive_mod
 from ecatsim.esc import regs
 from ecatsim.slave import cycle
@@ -70,6 +71,25 @@ def stepped(monkeypatch: pytest.MonkeyPatch) -> Iterator[list[bool]]:
             return r
 
     monkeypatch.setattr(drive_mod, "_compiled", Counting)
+    yield results
+
+
+@pytest.fixture
+def walked(monkeypatch: pytest.MonkeyPatch) -> Iterator[list[int]]:
+    """Every result of the compiled logical datagram (_logical.run; -1: not handled)."""
+    results: list[int] = []
+    real = segment_mod._logical
+    if real is None:
+        pytest.fail("ecatsim.esc._logical was not built", pytrace=False)
+
+    class Counting:
+        @staticmethod
+        def run(escs: list[Any], cmd: int, lad: int, buf: bytearray, d0: int, n: int) -> int:
+            r: int = real.run(escs, cmd, lad, buf, d0, n)
+            results.append(r)
+            return r
+
+    monkeypatch.setattr(segment_mod, "_logical", Counting)
     yield results
 
 
@@ -139,13 +159,16 @@ def al_request(state: int) -> Callable[[CspCycle], bytes | None]:
     return go
 
 
-def test_compiled_cycle_matches_python_firmware(served: list[bool], stepped: list[bool]) -> None:
+def test_compiled_cycle_matches_python_firmware(
+    served: list[bool], stepped: list[bool], walked: list[int]
+) -> None:
     a, b = lockstep(2)
     same(a, b, lambda c: None)  # enabled by the constructors
     for _ in range(40):  # csp motion
         both(a, b)
     assert served and all(served[-40:]), "the compiled cycle served the steady state"
     assert stepped and all(stepped[-40:]), "and the drive's compiled steady cycle with it"
+    assert walked[-40:] == [6] * 40, "the LRW went through the compiled walk (WKC 2 x 3)"
 
     def od(*values: tuple[int, int]) -> Callable[[CspCycle], None]:
         """OD writes on every drive, as an SDO download would make them."""
@@ -312,3 +335,53 @@ def test_layout_follows_the_struct_format() -> None:
     assert isinstance(c, Codec)
     assert c.st.format == "<b1xH2xi2x"
     assert cycle.layout(c) == b"\x00\x00b\x02\x00H\x06\x00i"
+
+
+def test_compiled_walk_matches_python_on_other_maps(walked: list[int]) -> None:
+    """FMMUs beyond the usual pair: a read/write map over SM2 (the master reads its outputs
+    back), partial accesses that leave a buffer open across a pulse, a bit-wise map and a
+    map onto plain memory (both left to Python)."""
+    a, b = lockstep(1)
+    for _ in range(3):
+        both(a, b)
+
+    def fmmu(n: int, lad: int, length: int, phys: int, typ: int, lsb: int = 0) -> bytes:
+        lstop = 7 if lsb == 0 else 6
+        return struct.pack("<IHBBHBBB3x", lad, length, lsb, lstop, phys, lsb, typ, 1)
+
+    def frame(*datagrams: bytes) -> Callable[[CspCycle], bytes | None]:
+        def go(c: CspCycle) -> bytes | None:
+            r = c.master.frame(list(datagrams))
+            assert r is not None
+            return b"".join(d.data + struct.pack("<H", d.wkc) for d in r)
+
+        return go
+
+    def program(n: int, raw: bytes) -> Callable[[CspCycle], None]:
+        def go(c: CspCycle) -> None:
+            c.master.apwr(0, 0x0600 + 16 * n, raw)
+
+        return go
+
+    # FMMU2: read/write over SM2 at logical 0x8000: a read returns the latest outputs
+    same(a, b, program(2, fmmu(2, 0x8000, 12, 0x1100, 3)))
+    same(a, b, frame(dg.build_logical(dg.Cmd.LRD, 0x8000, bytes(12))))
+    same(a, b, frame(dg.build_logical(dg.Cmd.LWR, 0x8000, bytes(range(4)))))  # opens SM2
+    both(a, b)
+    same(a, b, frame(dg.build_logical(dg.Cmd.LRW, 0x8004, bytes(range(8)))))  # closes it
+    same(a, b, frame(dg.build_logical(dg.Cmd.LRD, 0x8000, bytes(12))))
+    # SM3 read in two parts with a pulse between: the firmware writes the third buffer
+    same(a, b, frame(dg.build_logical(dg.Cmd.LRD, 12, bytes(1))))
+    both(a, b)
+    same(a, b, frame(dg.build_logical(dg.Cmd.LRD, 13, bytes(16))))
+    assert all(r >= 0 for r in walked[-6:])
+    # a bit-wise map and one onto plain memory: Python
+    before = len(walked)
+    same(a, b, program(3, fmmu(3, 0x9000, 1, 0x1100, 1, lsb=1)))
+    same(a, b, frame(dg.build_logical(dg.Cmd.LRD, 0x9000, bytes(1))))
+    same(a, b, program(3, fmmu(3, 0x9000, 4, 0x1800, 3)))
+    same(a, b, frame(dg.build_logical(dg.Cmd.LRW, 0x9000, b"\x01\x02\x03\x04")))
+    same(a, b, frame(dg.build_logical(dg.Cmd.LRD, 0x9000, bytes(4))))
+    assert walked[before:] == [-1, -1, -1]
+    for _ in range(3):
+        both(a, b)

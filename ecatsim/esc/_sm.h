@@ -1,0 +1,251 @@
+/* SyncManager state and the event registers, shared by the compiled paths
+ * (ecatsim/esc/_logical.c: the ECAT side; ecatsim/slave/_cycle.c: the PDI side).
+ * Each function transcribes the Python method it names; the Python classes
+ * (ecatsim/esc/sm.py SyncManager, ecatsim/esc/core.py Esc) are the reference.
+ * An SM's state lives in its Python object: sm_load() reads it, sm_store() and
+ * sm_sync() write it back. Ref: TMC8460 §5.29-5.33 (events), §5.49 Tables 85-91.
+ */
+#ifndef ECATSIM_SM_H
+#define ECATSIM_SM_H
+#include <Python.h>
+#include <stdint.h>
+#include <string.h>
+
+/* Register addresses and bits (ecatsim/esc/regs.py; the test checks they agree). */
+#define DL_STATUS 0x0110
+#define ECAT_EVENT_MASK 0x0200
+#define AL_EVENT_MASK 0x0204
+#define ECAT_EVENT_REQUEST 0x0210
+#define AL_EVENT_REQUEST 0x0220
+#define DC_ACTIVATION 0x0981
+#define DC_PULSE_LENGTH 0x0982
+#define DC_ACTIVATION_STATUS 0x0984
+#define DC_SYNC0_STATUS 0x098E
+#define EV_AL_CONTROL 0x0001
+#define EV_SYNC0 0x0004
+#define EV_SM_ACTIVATION 0x0010
+#define EV_WATCHDOG_PD 0x0040
+#define EV_SM0 0x0100
+#define ECAT_EV_SM0 0x0010
+#define SM_ST_IRQ_WRITE 0x01
+#define SM_ST_IRQ_READ 0x02
+#define SM_ST_BUF_SHIFT 4
+#define SM_ST_READ_OPEN 0x40
+#define SM_ST_WRITE_OPEN 0x80
+#define MEM_SIZE 0x10000
+
+static PyObject *s_active, *s_locked, *s_mailbox, *s_ecat_side_writes, *s_start, *s_length,
+    *s_w, *s_l, *s_r, *s_r_open, *s_w_open, *s_status, *s_mirror, *s_irq_to_ecat,
+    *s_irq_to_pdi, *s_status_addr, *s_n, *s_ecat_irq, *s_irq_dirty, *s_control, *s_mbx_full;
+
+/* Intern the attribute names above (module init); -1 on failure. */
+static int sm_names_init(void)
+{
+    struct {
+        PyObject **slot;
+        const char *name;
+    } names[] = {
+        {&s_active, "active"}, {&s_locked, "locked"}, {&s_mailbox, "mailbox"},
+        {&s_ecat_side_writes, "ecat_side_writes"}, {&s_start, "start"},
+        {&s_length, "length"}, {&s_w, "w"}, {&s_l, "l"}, {&s_r, "r"}, {&s_r_open, "r_open"},
+        {&s_w_open, "w_open"}, {&s_status, "status"}, {&s_mirror, "mirror"},
+        {&s_irq_to_ecat, "irq_to_ecat"}, {&s_irq_to_pdi, "irq_to_pdi"},
+        {&s_status_addr, "status_addr"}, {&s_n, "n"}, {&s_ecat_irq, "ecat_irq"},
+        {&s_irq_dirty, "irq_dirty"}, {&s_control, "control"}, {&s_mbx_full, "mbx_full"},
+    };
+    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) {
+        *names[i].slot = PyUnicode_InternFromString(names[i].name);
+        if (*names[i].slot == NULL)
+            return -1;
+    }
+    return 0;
+}
+
+static inline uint32_t rd32(const uint8_t *m, int a)
+{
+    return (uint32_t)m[a] | ((uint32_t)m[a + 1] << 8) | ((uint32_t)m[a + 2] << 16) |
+           ((uint32_t)m[a + 3] << 24);
+}
+
+static inline void wr32(uint8_t *m, int a, uint32_t v)
+{
+    m[a] = (uint8_t)v;
+    m[a + 1] = (uint8_t)(v >> 8);
+    m[a + 2] = (uint8_t)(v >> 16);
+    m[a + 3] = (uint8_t)(v >> 24);
+}
+
+static inline unsigned rd16(const uint8_t *m, int a) { return m[a] | (m[a + 1] << 8); }
+
+static inline void wr16(uint8_t *m, int a, unsigned v)
+{
+    m[a] = (uint8_t)v;
+    m[a + 1] = (uint8_t)(v >> 8);
+}
+
+/* An int attribute; -1 with an exception set on failure (attribute values are >= -1). */
+static long get_long(PyObject *o, PyObject *name, int *err)
+{
+    PyObject *v = PyObject_GetAttr(o, name);
+    if (v == NULL) {
+        *err = 1;
+        return 0;
+    }
+    long x = PyLong_AsLong(v);
+    Py_DECREF(v);
+    if (x == -1 && PyErr_Occurred())
+        *err = 1;
+    return x;
+}
+
+static int get_bool(PyObject *o, PyObject *name, int *err)
+{
+    PyObject *v = PyObject_GetAttr(o, name);
+    if (v == NULL) {
+        *err = 1;
+        return 0;
+    }
+    int x = PyObject_IsTrue(v);
+    Py_DECREF(v);
+    if (x < 0)
+        *err = 1;
+    return x;
+}
+
+static int set_long(PyObject *o, PyObject *name, long x)
+{
+    PyObject *v = PyLong_FromLong(x);
+    if (v == NULL)
+        return -1;
+    int rc = PyObject_SetAttr(o, name, v);
+    Py_DECREF(v);
+    return rc;
+}
+
+/* A SyncManager's state, read once per call and written back where it changed. */
+typedef struct {
+    PyObject *obj;
+    int active, locked, mailbox, ecat_side_writes, r_open, w_open;
+    long start, length, w, l, r, status, mirror, irq_to_ecat, irq_to_pdi, status_addr, n;
+} Sm;
+
+static int sm_load(Sm *sm, PyObject *obj)
+{
+    int err = 0;
+    sm->obj = obj;
+    sm->active = get_bool(obj, s_active, &err);
+    sm->locked = get_bool(obj, s_locked, &err);
+    sm->mailbox = get_bool(obj, s_mailbox, &err);
+    sm->ecat_side_writes = get_bool(obj, s_ecat_side_writes, &err);
+    sm->r_open = get_bool(obj, s_r_open, &err);
+    sm->w_open = get_bool(obj, s_w_open, &err);
+    sm->start = get_long(obj, s_start, &err);
+    sm->length = get_long(obj, s_length, &err);
+    sm->w = get_long(obj, s_w, &err);
+    sm->l = get_long(obj, s_l, &err);
+    sm->r = get_long(obj, s_r, &err);
+    sm->status = get_long(obj, s_status, &err);
+    sm->mirror = get_long(obj, s_mirror, &err);
+    sm->irq_to_ecat = get_long(obj, s_irq_to_ecat, &err);
+    sm->irq_to_pdi = get_long(obj, s_irq_to_pdi, &err);
+    sm->status_addr = get_long(obj, s_status_addr, &err);
+    sm->n = get_long(obj, s_n, &err);
+    return err ? -1 : 0;
+}
+
+/* The ESC side of one call: memory, and what the event functions touch. */
+typedef struct {
+    uint8_t *m;
+    PyObject *esc, *ctx, *pending, *position;
+} Esc;
+
+/* Esc._pdi_irq: the PDI interrupt line is AL event request AND AL event mask. */
+static int pdi_irq(Esc *e, uint32_t request)
+{
+    if (request & rd32(e->m, AL_EVENT_MASK))
+        return PySet_Add(e->pending, e->position);
+    return PySet_Discard(e->pending, e->position) < 0 ? -1 : 0;
+}
+
+/* Esc.set_al_event / clr_al_event */
+static int set_al_event(Esc *e, uint32_t bits)
+{
+    uint32_t v = rd32(e->m, AL_EVENT_REQUEST) | bits;
+    wr32(e->m, AL_EVENT_REQUEST, v);
+    return pdi_irq(e, v);
+}
+
+static int clr_al_event(Esc *e, uint32_t bits)
+{
+    uint32_t v = rd32(e->m, AL_EVENT_REQUEST);
+    if (!(v & bits))
+        return 0;
+    v &= ~bits;
+    wr32(e->m, AL_EVENT_REQUEST, v);
+    return pdi_irq(e, v);
+}
+
+/* Esc._irq_update: ECAT event request AND ECAT event mask, into the IRQ field. */
+static int irq_update(Esc *e)
+{
+    long irq = (long)(rd16(e->m, ECAT_EVENT_REQUEST) & rd16(e->m, ECAT_EVENT_MASK));
+    int err = 0;
+    long cur = get_long(e->esc, s_ecat_irq, &err);
+    if (err)
+        return -1;
+    if (irq != cur) {
+        if (set_long(e->esc, s_ecat_irq, irq) < 0)
+            return -1;
+        if (PyObject_SetAttr(e->ctx, s_irq_dirty, Py_True) < 0)
+            return -1;
+    }
+    return 0;
+}
+
+/* Esc._set_ecat_event / _clr_ecat_event */
+static int ecat_event(Esc *e, unsigned bits, int set)
+{
+    unsigned v = rd16(e->m, ECAT_EVENT_REQUEST);
+    unsigned nv = set ? (v | bits) : (v & ~bits);
+    if (nv == v)
+        return 0;
+    wr16(e->m, ECAT_EVENT_REQUEST, nv);
+    return irq_update(e);
+}
+
+/* SyncManager._sync (buffered mode) and Esc.sm_status_changed. */
+static int sm_sync(Esc *e, Sm *sm)
+{
+    long st = sm->status & (SM_ST_IRQ_WRITE | SM_ST_IRQ_READ);
+    st |= (sm->l >= 0 ? sm->l : 3) << SM_ST_BUF_SHIFT;
+    if (sm->r_open)
+        st |= SM_ST_READ_OPEN;
+    if (sm->w_open)
+        st |= SM_ST_WRITE_OPEN;
+    sm->status = st;
+    e->m[sm->status_addr] = (uint8_t)st;
+    long mirror = ((st & sm->irq_to_ecat) ? 1 : 0) | ((st & sm->irq_to_pdi) ? 2 : 0);
+    if (mirror != sm->mirror) {
+        sm->mirror = mirror;
+        if (set_long(sm->obj, s_mirror, mirror) < 0)
+            return -1;
+        if (ecat_event(e, ECAT_EV_SM0 << sm->n, (int)(mirror & 1)) < 0)
+            return -1;
+        uint32_t abit = (uint32_t)EV_SM0 << sm->n;
+        if ((mirror & 2) ? set_al_event(e, abit) : clr_al_event(e, abit))
+            return -1;
+    }
+    return 0;
+}
+
+static int sm_store(Sm *sm)
+{
+    if (set_long(sm->obj, s_w, sm->w) < 0 || set_long(sm->obj, s_l, sm->l) < 0 ||
+        set_long(sm->obj, s_r, sm->r) < 0 || set_long(sm->obj, s_status, sm->status) < 0)
+        return -1;
+    if (PyObject_SetAttr(sm->obj, s_r_open, sm->r_open ? Py_True : Py_False) < 0)
+        return -1;
+    return PyObject_SetAttr(sm->obj, s_w_open, sm->w_open ? Py_True : Py_False);
+}
+
+#endif
