@@ -65,6 +65,7 @@ class Daemon:
         self.ctl = ctl
         self.link = link
         self.segment = segment
+        segment.reply_first = True  # handle_one calls after_reply() once the reply is out
         #: injected faults (segment YAML, control socket); idle unless something is armed
         self.faults = faults if faults is not None else FaultEngine(segment)
         #: replies held back by a delay fault: (due time ns, frame), in due order
@@ -134,6 +135,10 @@ class Daemon:
             os.sched_yield()
             if self.trace_frames:
                 log.debug("frame_out", data=bytes(buf[:n]).hex())
+        try:
+            seg.after_reply()  # e.g. the DC time loops of this frame's FRMW (decision P7)
+        except Exception as exc:
+            self._failure("process", exc)
         self._service(t_rx)
         if faults.active:
             try:

@@ -67,6 +67,10 @@ class Segment:
         self.logical: list[Esc] = []
         #: LRD/LWR/LRW through the compiled walk where it applies; tests compare
         self.compiled = True
+        #: the caller sends the reply before it calls after_reply() (the daemon does):
+        #: the DC time loops of an FRMW of 0x0910 may wait until then (decision P7)
+        self.reply_first = False
+        self._deferred: tuple[bytes, bytes, int, int] | None = None
         self.irq = 0
         #: a reachable ESC has its port-0 loop forced closed (circulating-frame handling)
         self.port0_closed = False
@@ -146,6 +150,8 @@ class Segment:
         is destroyed (malformed: the master sees it as lost).
         Ref: ETG.1000.4 §5.3 (EtherCAT header: length, type), §5.4.
         """
+        if self._deferred is not None:
+            self.after_reply()  # the caller did not: the previous frame's work comes first
         ctx = self.ctx
         ctx.frame_no += 1
         ctx.t_ns = t_ns or self.clock.now_ns()
@@ -182,6 +188,43 @@ class Segment:
             return False
         self._walk(buf, off + 2)
         return True
+
+    def _frmw_system_time(
+        self,
+        buf: bytearray,
+        d0: int,
+        w: int,
+        data: memoryview,
+        readers: Sequence[int],
+        reach: int,
+    ) -> int:
+        """The DC time distribution (FRMW of 0x0910, the frame's last datagram) with the
+        writers' time loops after the reply (decision P7): the reference's read is all the
+        reply needs, and a register write always counts (+1 per writer). The writes run
+        in :meth:`after_reply` with this frame's time stamp, so their results are the
+        same as inline; no later datagram of this frame can see the difference.
+        Ref: ETG.1000.4 Table 12 (FRMW); TMC8460 §5.50.2 Table 95."""
+        reader = readers[0] if readers else reach
+        before = bytes(buf[d0:w]) if reader > 0 else b""
+        inc = 0
+        if reader < reach:
+            inc += self.escs[reader].ecat_read(regs.DC_SYSTEM_TIME, data)
+        after = bytes(buf[d0:w]) if reader + 1 < reach else b""
+        self._deferred = (before, after, reader, reach)
+        return inc + reach - (1 if reader < reach else 0)
+
+    def after_reply(self) -> None:
+        """Work a frame left for after its reply: the writers' DC time loops (P7)."""
+        d = self._deferred
+        if d is None:
+            return
+        self._deferred = None
+        before, after, reader, reach = d
+        for i in range(reach):
+            if i != reader:
+                self.escs[i].ecat_write(
+                    regs.DC_SYSTEM_TIME, memoryview(before if i < reader else after)
+                )
 
     def _circulate(self, buf: bytearray, p: int) -> bool:
         """A frame passing an ESC whose port 0 is closed gets the circulating bit; one that
@@ -267,11 +310,20 @@ class Segment:
                 buf[p + 3] = adp >> 8
             elif cmd == FRMW:
                 readers = self.addr_map.get(adp, ())
-                for i in range(reach):
-                    if i in readers:
-                        inc += escs[i].ecat_read(ado, data)
-                    else:
-                        inc += escs[i].ecat_write(ado, data)
+                if (
+                    self.reply_first
+                    and ado == regs.DC_SYSTEM_TIME
+                    and not lf & MORE_FOLLOWS
+                    and len(readers) <= 1
+                    and ado + dlen <= regs.REGISTER_END
+                ):
+                    inc += self._frmw_system_time(buf, d0, w, data, readers, reach)
+                else:
+                    for i in range(reach):
+                        if i in readers:
+                            inc += escs[i].ecat_read(ado, data)
+                        else:
+                            inc += escs[i].ecat_write(ado, data)
             # NOP and unknown commands: no slave acts on them.
             if cmd:
                 irq = self.irq
@@ -292,6 +344,8 @@ class Segment:
         """Run timers and the firmware of every slave with a raised PDI interrupt, fire the
         SYNC0 pulses due by ``now_ns``, then persist EEPROM images that changed. Never
         called between receive and reply."""
+        if self._deferred is not None:
+            self.after_reply()
         t = self.clock.now_ns() if now_ns is None else now_ns
         self.pulses_due(t)  # first: each pulse is handled at its own, earlier, time
         for esc in self.escs:

@@ -122,6 +122,7 @@ class CspCycle:
         configure_to_op(t, drives, ecat_irq)
         self.link = LoopbackLink()
         self.daemon = Daemon(self.link, self.seg)
+        self.seg.reply_first = compiled  # the reference runs the DC time loops inline
         self.buf = bytearray(2048)
         for fw in self.seg.firmware:
             coe = getattr(fw, "coe", None)

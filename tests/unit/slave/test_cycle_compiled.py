@@ -21,7 +21,8 @@ from ecatsim.esc import regs
 from ecatsim.slave import cycle
 from ecatsim.slave.pdo import Codec, Field, codec
 from ecatsim.wire import datagram as dg
-from tests.perf.hotpath import CSP, CspCycle
+from ecatsim.wire.frame import ecat_offset
+from tests.perf.hotpath import CSP, MS, CspCycle
 
 CSV, CST = 9, 10
 #: the drive's caches and the switch of its compiled path (not state of the model)
@@ -385,3 +386,26 @@ def test_compiled_walk_matches_python_on_other_maps(walked: list[int]) -> None:
     assert walked[before:] == [-1, -1, -1]
     for _ in range(3):
         both(a, b)
+
+
+def test_dc_time_loops_wait_for_the_reply() -> None:
+    """The FRMW of 0x0910 (the frame's last datagram): the reply carries the reference's
+    time and WKC = number of slaves at once; the other slaves' time loops run in
+    after_reply(), with the same results as inline (the lockstep test compares those)."""
+    a, _b = lockstep(3)
+    a.pulse()
+    a.clock.t = a.t + MS // 2
+    raw = bytearray(a.frame(0x0F))
+    off = ecat_offset(raw, len(raw), True)
+    rebased = [e.dc.t_ref for e in a.seg.escs]  # each time loop rebases its clock
+    assert a.seg.process(raw, off, len(raw), a.clock.t)
+    assert a.seg._deferred is not None
+    assert [e.dc.t_ref for e in a.seg.escs] == rebased  # not yet
+    p = off + 2 + 10 + 3 * (12 + 17) + 2  # behind the LRW (header, images, WKC)
+    assert raw[p] == dg.Cmd.FRMW
+    assert struct.unpack_from("<H", raw, p + 10 + 8)[0] == 3
+    a.seg.after_reply()
+    assert a.seg._deferred is None
+    after = [e.dc.t_ref for e in a.seg.escs]
+    assert after[0] == rebased[0]  # the reference does not correct itself
+    assert all(t != r for t, r in zip(after[1:], rebased[1:], strict=True))
