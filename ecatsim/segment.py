@@ -14,6 +14,7 @@ from types import ModuleType
 from typing import Protocol
 
 from ecatsim.clock import Clock
+from ecatsim.compiled import available
 from ecatsim.esc import regs
 from ecatsim.esc.core import Esc, FrameContext
 from ecatsim.wire.datagram import CIRCULATING, LEN_MASK, MORE_FOLLOWS
@@ -23,6 +24,7 @@ try:  # the compiled logical datagram (optional, decision P6)
     from ecatsim.esc import _logical
 except ImportError:  # pragma: no cover - built without a C compiler
     _logical = None
+_logical = available(_logical)  # ECATSIM_PURE_PYTHON=1: the reference only
 
 #: overdue SYNC0 pulses fired one by one before the rest are skipped (a stall this long,
 #: or a forward jump of the system time, is not caught up). Decision DC2.

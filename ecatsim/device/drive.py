@@ -13,6 +13,7 @@ from types import ModuleType
 
 import structlog
 
+from ecatsim.compiled import available
 from ecatsim.device import cia402
 from ecatsim.device.cia402 import Command, PdsState
 from ecatsim.device.servo import (
@@ -38,6 +39,7 @@ try:  # the compiled steady cycle (optional, decision P5)
     from ecatsim.device import _drive as _compiled
 except ImportError:  # pragma: no cover - built without a C compiler
     _compiled = None
+_compiled = available(_compiled)  # ECATSIM_PURE_PYTHON=1: the reference only
 
 # Modes of operation (6060h). Ref: CiA 402-2 Table 35; seed 004 §6.1.1.
 PP, PV, HM, CSP, CSV, CST = 1, 3, 6, 8, 9, 10

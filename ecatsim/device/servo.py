@@ -15,6 +15,8 @@ import math
 from dataclasses import dataclass
 from types import ModuleType
 
+from ecatsim.compiled import available
+
 TWO_PI = 2.0 * math.pi
 RPM = TWO_PI / 60.0  # rad/s per rpm
 
@@ -23,6 +25,7 @@ try:  # the compiled substep loop (optional, decision P2)
     from ecatsim.device import _servo as _compiled
 except ImportError:  # pragma: no cover - built without a C compiler
     _compiled = None
+_compiled = available(_compiled)  # ECATSIM_PURE_PYTHON=1: the reference only
 
 # What Servo.run's reference is, and why it stopped early.
 TORQUE, VELOCITY, POSITION = 0, 1, 2

@@ -27,6 +27,7 @@ import subprocess
 import time
 from types import ModuleType
 
+from ecatsim.compiled import available
 from ecatsim.link.errors import LinkError
 
 _rawio: ModuleType | None
@@ -34,6 +35,7 @@ try:  # the compiled receive (optional, decision P4)
     from ecatsim.link import _rawio
 except ImportError:  # pragma: no cover - built without a C compiler
     _rawio = None
+_rawio = available(_rawio)  # ECATSIM_PURE_PYTHON=1: the reference only
 
 ETH_P_ECAT = 0x88A4
 ETH_P_8021Q = 0x8100

@@ -19,6 +19,7 @@ import struct
 from types import ModuleType
 from typing import TYPE_CHECKING
 
+from ecatsim.compiled import available
 from ecatsim.slave.al import AlState
 from ecatsim.slave.pdo import Codec, PdoImage
 
@@ -30,6 +31,7 @@ try:  # the compiled DC cycle (optional, decision P3)
     from ecatsim.slave import _cycle as compiled
 except ImportError:  # pragma: no cover - built without a C compiler: Python serves
     compiled = None
+compiled = available(compiled)  # ECATSIM_PURE_PYTHON=1: the reference only
 
 #: one DC cycle's tuple for _cycle.run (layout: the enum in _cycle.c)
 Cycle = tuple[object, ...]

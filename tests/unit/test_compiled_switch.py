@@ -1,0 +1,41 @@
+"""ECATSIM_PURE_PYTHON=1 switches every compiled path off (decisions P2-P6), so the daemon
+runs the Python reference only; without it, every extension is in use where it was built.
+Ref: ecatsim/compiled.py."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+PROBE = """
+import ecatsim.device.servo as servo, ecatsim.device.drive as drive
+import ecatsim.slave.cycle as cycle, ecatsim.link.raw as raw, ecatsim.segment as segment
+print(*(m is not None for m in (servo._compiled, drive._compiled, cycle.compiled,
+                                raw._rawio, segment._logical)))
+"""
+
+
+def probe(**env: str) -> str:
+    full = {k: v for k, v in os.environ.items() if k != "ECATSIM_PURE_PYTHON"}
+    full.update(env)
+    out = subprocess.run(
+        [sys.executable, "-c", PROBE], env=full, capture_output=True, text=True, check=True
+    )
+    return out.stdout.strip()
+
+
+def test_pure_python_switches_every_compiled_path_off() -> None:
+    assert probe(ECATSIM_PURE_PYTHON="1") == "False False False False False"
+
+
+def test_compiled_paths_are_used_where_built() -> None:
+    got = probe()
+    if got != "True True True True True":
+        msg = f"not every extension was built (servo, drive, cycle, rawio, logical: {got})"
+        if os.environ.get("CI"):
+            pytest.fail(msg, pytrace=False)
+        pytest.skip(msg)
+    assert probe(ECATSIM_PURE_PYTHON="0") == got
