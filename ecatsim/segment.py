@@ -72,7 +72,14 @@ class Segment:
         #: the caller sends the reply before it calls after_reply() (the daemon does):
         #: the DC time loops of an FRMW of 0x0910 may wait until then (decision P7)
         self.reply_first = False
-        self._deferred: tuple[bytes, bytes, int, int] | None = None
+        #: an FRMW of 0x0910 whose time loops wait for after_reply(): its data length (0:
+        #: none), the reference's position, the reach, and the data the slaves before and
+        #: behind the reference saw (no object is made per frame)
+        self._dc_pending = 0
+        self._dc_reader = 0
+        self._dc_reach = 0
+        self._dc_before = bytearray(8)
+        self._dc_after = bytearray(8)
         self.irq = 0
         #: a reachable ESC has its port-0 loop forced closed (circulating-frame handling)
         self.port0_closed = False
@@ -152,7 +159,7 @@ class Segment:
         is destroyed (malformed: the master sees it as lost).
         Ref: ETG.1000.4 §5.3 (EtherCAT header: length, type), §5.4.
         """
-        if self._deferred is not None:
+        if self._dc_pending:
             self.after_reply()  # the caller did not: the previous frame's work comes first
         ctx = self.ctx
         ctx.frame_no += 1
@@ -191,42 +198,41 @@ class Segment:
         self._walk(buf, off + 2)
         return True
 
-    def _frmw_system_time(
-        self,
-        buf: bytearray,
-        d0: int,
-        w: int,
-        data: memoryview,
-        readers: Sequence[int],
-        reach: int,
-    ) -> int:
+    def _frmw_system_time(self, data: memoryview, readers: Sequence[int], reach: int) -> int:
         """The DC time distribution (FRMW of 0x0910, the frame's last datagram) with the
         writers' time loops after the reply (decision P7): the reference's read is all the
         reply needs, and a register write always counts (+1 per writer). The writes run
         in :meth:`after_reply` with this frame's time stamp, so their results are the
-        same as inline; no later datagram of this frame can see the difference.
-        Ref: ETG.1000.4 Table 12 (FRMW); TMC8460 §5.50.2 Table 95."""
+        same as inline; no later datagram of this frame can see the difference. The data
+        the writers before and behind the reference see is kept in two preallocated
+        buffers. Ref: ETG.1000.4 Table 12 (FRMW); TMC8460 §5.50.2 Table 95."""
         reader = readers[0] if readers else reach
-        before = bytes(buf[d0:w]) if reader > 0 else b""
+        n = len(data)
+        if reader > 0:
+            self._dc_before[:n] = data
         inc = 0
         if reader < reach:
             inc += self.escs[reader].ecat_read(regs.DC_SYSTEM_TIME, data)
-        after = bytes(buf[d0:w]) if reader + 1 < reach else b""
-        self._deferred = (before, after, reader, reach)
+        if reader + 1 < reach:
+            self._dc_after[:n] = data
+        self._dc_pending = n
+        self._dc_reader = reader
+        self._dc_reach = reach
         return inc + reach - (1 if reader < reach else 0)
 
     def after_reply(self) -> None:
         """Work a frame left for after its reply: the writers' DC time loops (P7)."""
-        d = self._deferred
-        if d is None:
+        n = self._dc_pending
+        if not n:
             return
-        self._deferred = None
-        before, after, reader, reach = d
+        self._dc_pending = 0
+        reader = self._dc_reader
+        reach = self._dc_reach
+        before = memoryview(self._dc_before)[:n]
+        after = memoryview(self._dc_after)[:n]
         for i in range(reach):
             if i != reader:
-                self.escs[i].ecat_write(
-                    regs.DC_SYSTEM_TIME, memoryview(before if i < reader else after)
-                )
+                self.escs[i].ecat_write(regs.DC_SYSTEM_TIME, before if i < reader else after)
 
     def _circulate(self, buf: bytearray, p: int) -> bool:
         """A frame passing an ESC whose port 0 is closed gets the circulating bit; one that
@@ -317,9 +323,9 @@ class Segment:
                     and ado == regs.DC_SYSTEM_TIME
                     and not lf & MORE_FOLLOWS
                     and len(readers) <= 1
-                    and ado + dlen <= regs.REGISTER_END
+                    and dlen in (4, 8)
                 ):
-                    inc += self._frmw_system_time(buf, d0, w, data, readers, reach)
+                    inc += self._frmw_system_time(data, readers, reach)
                 else:
                     for i in range(reach):
                         if i in readers:
@@ -346,7 +352,7 @@ class Segment:
         """Run timers and the firmware of every slave with a raised PDI interrupt, fire the
         SYNC0 pulses due by ``now_ns``, then persist EEPROM images that changed. Never
         called between receive and reply."""
-        if self._deferred is not None:
+        if self._dc_pending:
             self.after_reply()
         t = self.clock.now_ns() if now_ns is None else now_ns
         self.pulses_due(t)  # first: each pulse is handled at its own, earlier, time

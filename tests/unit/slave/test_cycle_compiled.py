@@ -401,13 +401,13 @@ def test_dc_time_loops_wait_for_the_reply() -> None:
     off = ecat_offset(raw, len(raw), True)
     rebased = [e.dc.t_ref for e in a.seg.escs]  # each time loop rebases its clock
     assert a.seg.process(raw, off, len(raw), a.clock.t)
-    assert a.seg._deferred is not None
+    assert a.seg._dc_pending == 8  # waiting: 8 bytes of time
     assert [e.dc.t_ref for e in a.seg.escs] == rebased  # not yet
     p = off + 2 + 10 + 3 * (12 + 17) + 2  # behind the LRW (header, images, WKC)
     assert raw[p] == dg.Cmd.FRMW
     assert struct.unpack_from("<H", raw, p + 10 + 8)[0] == 3
     a.seg.after_reply()
-    assert a.seg._deferred is None
+    assert a.seg._dc_pending == 0
     after = [e.dc.t_ref for e in a.seg.escs]
     assert after[0] == rebased[0]  # the reference does not correct itself
     assert all(t != r for t, r in zip(after[1:], rebased[1:], strict=True))
