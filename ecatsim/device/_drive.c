@@ -25,6 +25,7 @@
 #include <Python.h>
 #include <math.h>
 
+#include "../_attr.h"
 #include "_servo_loop.h"
 
 /* Modes of operation (6060h) and the MODES tuple of drive.py. */
@@ -459,10 +460,7 @@ static struct PyModuleDef module = {
 
 PyMODINIT_FUNC PyInit__drive(void)
 {
-    struct {
-        PyObject **slot;
-        const char *name;
-    } names[] = {
+    static const Name names[] = {
         {&s_tracer, "tracer"}, {&s_index_output, "index_output"}, {&s_state, "state"},
         {&s_al_state, "al_state"}, {&s_mode, "mode"}, {&s_t_ns, "t_ns"},
         {&s_active_faults, "active_faults"}, {&s_compiled, "compiled"},
@@ -475,11 +473,8 @@ PyMODINIT_FUNC PyInit__drive(void)
         {&s_last_t_ns, "last_t_ns"}, {&s_i_limit_ma, "i_limit_ma"},
         {&s_fault_code, "fault_code"},
     };
-    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) {
-        *names[i].slot = PyUnicode_InternFromString(names[i].name);
-        if (*names[i].slot == NULL)
-            return NULL;
-    }
+    if (intern_names(names, sizeof names / sizeof names[0]) < 0)
+        return NULL;
     for (int i = 0; i < N_SNAPSHOT; i++) {
         s_q[i] = PyUnicode_InternFromString(Q_NAMES[i]);
         if (s_q[i] == NULL)

@@ -41,26 +41,6 @@ typedef struct {
     int read, write;
 } Map;
 
-static int attr_long(PyObject *o, PyObject *name, long *out)
-{
-    PyObject *v = PyObject_GetAttr(o, name);
-    if (v == NULL)
-        return -1;
-    *out = PyLong_AsLong(v);
-    Py_DECREF(v);
-    return (*out == -1 && PyErr_Occurred()) ? -1 : 0;
-}
-
-static int attr_bool(PyObject *o, PyObject *name, int *out)
-{
-    PyObject *v = PyObject_GetAttr(o, name);
-    if (v == NULL)
-        return -1;
-    *out = PyObject_IsTrue(v);
-    Py_DECREF(v);
-    return *out < 0 ? -1 : 0;
-}
-
 /* The event side of one ESC (Esc struct of _sm.h): new references in *e. */
 static int esc_open(Esc *e, PyObject *esc, PyObject **mem)
 {
@@ -122,8 +102,9 @@ static int sm_ecat_write(Esc *e, PyObject *smobj, long off, const uint8_t *data,
         return -1;
     if (sm_store(&sm) < 0)
         return -1;
-    long control;
-    if (attr_long(smobj, s_control, &control) < 0)
+    int err = 0;
+    long control = get_long(smobj, s_control, &err);
+    if (err)
         return -1;
     if (control & SM_CTRL_WATCHDOG) {
         PyObject *r = PyObject_CallMethodNoArgs(e->esc, s_wd_pd_trigger);
@@ -211,10 +192,10 @@ static PyObject *run(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         }
         for (Py_ssize_t i = 0; i < PyTuple_GET_SIZE(fmmus); i++) {
             PyObject *f = PyTuple_GET_ITEM(fmmus, i);
-            long lbit, lend;
-            int rd, wr, aligned;
-            if (attr_long(f, s_lbit, &lbit) < 0 || attr_long(f, s_lend, &lend) < 0 ||
-                attr_bool(f, s_read, &rd) < 0 || attr_bool(f, s_write, &wr) < 0) {
+            int err = 0;
+            long lbit = get_long(f, s_lbit, &err), lend = get_long(f, s_lend, &err);
+            int rd = get_bool(f, s_read, &err), wr = get_bool(f, s_write, &err);
+            if (err) {
                 Py_DECREF(fmmus);
                 return NULL;
             }
@@ -224,7 +205,8 @@ static PyObject *run(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             if (!takes_part)
                 continue;
             Map *mp = &maps[nmaps];
-            if (nmaps >= MAX_MAPS || attr_bool(f, s_aligned, &aligned) < 0) {
+            int aligned = get_bool(f, s_aligned, &err);
+            if (nmaps >= MAX_MAPS || err) {
                 Py_DECREF(fmmus);
                 if (PyErr_Occurred())
                     return NULL;
@@ -235,11 +217,14 @@ static PyObject *run(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
                 Py_DECREF(fmmus);
                 return NULL;
             }
-            int mbx = 0;
-            int ok = aligned && sm != Py_None && attr_bool(sm, s_mailbox, &mbx) == 0 && !mbx;
+            int ok = aligned && sm != Py_None && !get_bool(sm, s_mailbox, &err) && !err;
             Py_DECREF(sm); /* the FmmuMap keeps it */
-            if (!ok || attr_long(f, s_lstart, &mp->lstart) < 0 ||
-                attr_long(f, s_lstop, &mp->lstop) < 0 || attr_long(f, s_pstart, &mp->pstart) < 0) {
+            if (ok) {
+                mp->lstart = get_long(f, s_lstart, &err);
+                mp->lstop = get_long(f, s_lstop, &err);
+                mp->pstart = get_long(f, s_pstart, &err);
+            }
+            if (!ok || err) {
                 Py_DECREF(fmmus);
                 if (PyErr_Occurred())
                     return NULL;
@@ -282,8 +267,9 @@ static PyObject *run(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
                 if (hi <= lo)
                     continue;
                 long phys = mp->pstart + (long)(lo - mp->lstart);
-                long start;
-                if (attr_long(mp->sm, s_start, &start) < 0) {
+                int err = 0;
+                long start = get_long(mp->sm, s_start, &err);
+                if (err) {
                     esc_close(&e, mem);
                     return NULL;
                 }
@@ -326,21 +312,15 @@ static struct PyModuleDef module = {
 
 PyMODINIT_FUNC PyInit__logical(void)
 {
-    struct {
-        PyObject **slot;
-        const char *name;
-    } names[] = {
+    static const Name names[] = {
         {&s_fmmus, "fmmus"}, {&s_lbit, "lbit"}, {&s_lend, "lend"}, {&s_lstart, "lstart"},
         {&s_lstop, "lstop"}, {&s_pstart, "pstart"}, {&s_read, "read"}, {&s_write, "write"},
         {&s_aligned, "aligned"}, {&s_sm, "sm"}, {&s_mem, "mem"}, {&s_ctx, "ctx"},
         {&s_pending, "pending"}, {&s_position, "position"},
         {&s_wd_pd_trigger, "wd_pd_trigger"},
     };
-    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) {
-        *names[i].slot = PyUnicode_InternFromString(names[i].name);
-        if (*names[i].slot == NULL)
-            return NULL;
-    }
+    if (intern_names(names, sizeof names / sizeof names[0]) < 0)
+        return NULL;
     if (sm_names_init() < 0)
         return NULL;
     return PyModule_Create(&module);

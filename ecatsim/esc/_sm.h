@@ -11,6 +11,8 @@
 #include <stdint.h>
 #include <string.h>
 
+#include "../_attr.h"
+
 /* Register addresses and bits (ecatsim/esc/regs.py; the test checks they agree). */
 #define DL_STATUS 0x0110
 #define ECAT_EVENT_MASK 0x0200
@@ -41,10 +43,7 @@ static PyObject *s_active, *s_locked, *s_mailbox, *s_ecat_side_writes, *s_start,
 /* Intern the attribute names above (module init); -1 on failure. */
 static int sm_names_init(void)
 {
-    struct {
-        PyObject **slot;
-        const char *name;
-    } names[] = {
+    static const Name names[] = {
         {&s_active, "active"}, {&s_locked, "locked"}, {&s_mailbox, "mailbox"},
         {&s_ecat_side_writes, "ecat_side_writes"}, {&s_start, "start"},
         {&s_length, "length"}, {&s_w, "w"}, {&s_l, "l"}, {&s_r, "r"}, {&s_r_open, "r_open"},
@@ -53,12 +52,7 @@ static int sm_names_init(void)
         {&s_status_addr, "status_addr"}, {&s_n, "n"}, {&s_ecat_irq, "ecat_irq"},
         {&s_irq_dirty, "irq_dirty"}, {&s_control, "control"}, {&s_mbx_full, "mbx_full"},
     };
-    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) {
-        *names[i].slot = PyUnicode_InternFromString(names[i].name);
-        if (*names[i].slot == NULL)
-            return -1;
-    }
-    return 0;
+    return intern_names(names, sizeof names / sizeof names[0]);
 }
 
 static inline uint32_t rd32(const uint8_t *m, int a)
@@ -81,45 +75,6 @@ static inline void wr16(uint8_t *m, int a, unsigned v)
 {
     m[a] = (uint8_t)v;
     m[a + 1] = (uint8_t)(v >> 8);
-}
-
-/* An int attribute; -1 with an exception set on failure (attribute values are >= -1). */
-static long get_long(PyObject *o, PyObject *name, int *err)
-{
-    PyObject *v = PyObject_GetAttr(o, name);
-    if (v == NULL) {
-        *err = 1;
-        return 0;
-    }
-    long x = PyLong_AsLong(v);
-    Py_DECREF(v);
-    if (x == -1 && PyErr_Occurred())
-        *err = 1;
-    return x;
-}
-
-static int get_bool(PyObject *o, PyObject *name, int *err)
-{
-    PyObject *v = PyObject_GetAttr(o, name);
-    if (v == NULL) {
-        *err = 1;
-        return 0;
-    }
-    int x = PyObject_IsTrue(v);
-    Py_DECREF(v);
-    if (x < 0)
-        *err = 1;
-    return x;
-}
-
-static int set_long(PyObject *o, PyObject *name, long x)
-{
-    PyObject *v = PyLong_FromLong(x);
-    if (v == NULL)
-        return -1;
-    int rc = PyObject_SetAttr(o, name, v);
-    Py_DECREF(v);
-    return rc;
 }
 
 /* A SyncManager's state, read once per call and written back where it changed. */

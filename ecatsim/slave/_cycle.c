@@ -377,20 +377,14 @@ static struct PyModuleDef module = {
 
 PyMODINIT_FUNC PyInit__cycle(void)
 {
-    struct {
-        PyObject **slot;
-        const char *name;
-    } names[] = {
+    static const Name names[] = {
         {&s_state, "state"}, {&s_event_mask, "event_mask"}, {&s_pd_masked, "pd_masked"},
         {&s_out, "out"}, {&s_value, "value"},
         {&s_outputs_applied, "outputs_applied"}, {&s_update_inputs, "update_inputs"},
         {&s_pack_inputs, "pack_inputs"}, {&s_service_mailbox, "service_mailbox"},
     };
-    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) {
-        *names[i].slot = PyUnicode_InternFromString(names[i].name);
-        if (*names[i].slot == NULL)
-            return NULL;
-    }
+    if (intern_names(names, sizeof names / sizeof names[0]) < 0)
+        return NULL;
     if (sm_names_init() < 0)
         return NULL;
     return PyModule_Create(&module);

@@ -5,7 +5,6 @@ Ref: ecatsim/device/servo.py Servo.run; decision P2."""
 from __future__ import annotations
 
 import math
-import os
 import random
 
 import pytest
@@ -22,17 +21,14 @@ from ecatsim.device.servo import (
     MotorParams,
     Servo,
 )
+from tests.support.compiled import require_built
 
 STATE = ("angle", "omega", "iq_ma", "iq_integ", "integ", "iq_ref_ma")
 
 
 @pytest.fixture(autouse=True)
 def _require_compiled() -> None:
-    if servo._compiled is None:
-        msg = "ecatsim.device._servo was not built (pip install -e . with a C compiler)"
-        if os.environ.get("CI"):
-            pytest.fail(msg, pytrace=False)  # CI builds it: a missing build is a failure
-        pytest.skip(msg)
+    require_built(servo._compiled, "ecatsim.device._servo")
 
 
 def pair(rng: random.Random) -> tuple[Servo, Servo]:

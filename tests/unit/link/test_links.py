@@ -7,7 +7,6 @@ Ref: packet(7), tuntap; ETG.1000.4 (EtherType 0x88A4, UDP port 0x88A4); IEEE 802
 
 from __future__ import annotations
 
-import os
 import select
 import socket
 import struct
@@ -25,6 +24,7 @@ from ecatsim.link.pcap import MAGIC_NSEC, MAGIC_USEC, PcapWriter
 from ecatsim.link.raw import RawLink, iface_ipv4_addresses
 from ecatsim.link.udp import UDP_PORT, UdpLink
 from tests.integration.netns import NetnsPair, in_netns, require_root
+from tests.support.compiled import require_built
 
 ETH_P_ALL = 0x0003
 DST = b"\xff" * 6
@@ -79,11 +79,8 @@ def raw_pair(
 ) -> Iterator[tuple[RawLink, socket.socket, NetnsPair]]:
     """RawLink on the slave end (receiving through _rawio.c, and through Python's socket
     module, decision P4); a plain ETH_P_ALL socket on the master end."""
-    if request.param and raw._rawio is None:
-        msg = "ecatsim.link._rawio was not built (pip install -e . with a C compiler)"
-        if os.environ.get("CI"):
-            pytest.fail(msg, pytrace=False)
-        pytest.skip(msg)
+    if request.param:
+        require_built(raw._rawio, "ecatsim.link._rawio")
     with in_netns(pair.slave_ns):
         link = RawLink(pair.slave_if)
     link.compiled = request.param

@@ -7,10 +7,9 @@ Ref: ecatsim/slave/cycle.py; ecatsim/slave/firmware.py Firmware.service; decisio
 
 from __future__ import annotations
 
-import os
 import random
 import struct
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
@@ -24,6 +23,7 @@ from ecatsim.slave.pdo import Codec, Field, codec
 from ecatsim.wire import datagram as dg
 from ecatsim.wire.frame import ecat_offset
 from tests.perf.hotpath import CSP, MS, CspCycle
+from tests.support.compiled import record_results, require_built
 from tests.support.fuzz import mutate
 
 CSV, CST = 9, 10
@@ -33,67 +33,25 @@ LOCAL = {"compiled", "_fast", "_snapshot_hits", "_published"}
 
 @pytest.fixture(autouse=True)
 def _require_compiled() -> None:
-    if cycle.compiled is None:
-        msg = "ecatsim.slave._cycle was not built (pip install -e . with a C compiler)"
-        if os.environ.get("CI"):
-            pytest.fail(msg, pytrace=False)  # CI builds it: a missing build is a failure
-        pytest.skip(msg)
+    require_built(cycle.compiled, "ecatsim.slave._cycle")
 
 
 @pytest.fixture
-def served(monkeypatch: pytest.MonkeyPatch) -> Iterator[list[bool]]:
+def served(monkeypatch: pytest.MonkeyPatch) -> list[bool]:
     """Every result of _cycle.run (True: served compiled)."""
-    results: list[bool] = []
-    real = cycle.compiled
-    assert real is not None
-
-    class Counting:
-        @staticmethod
-        def run(cyc: cycle.Cycle, now_ns: int) -> bool:
-            r: bool = real.run(cyc, now_ns)
-            results.append(r)
-            return r
-
-    monkeypatch.setattr(cycle, "compiled", Counting)
-    yield results
+    return record_results(monkeypatch, cycle, "compiled", "run")
 
 
 @pytest.fixture
-def stepped(monkeypatch: pytest.MonkeyPatch) -> Iterator[list[bool]]:
+def stepped(monkeypatch: pytest.MonkeyPatch) -> list[bool]:
     """Every result of the drive's compiled steady cycle (_drive.step)."""
-    results: list[bool] = []
-    real = drive_mod._compiled
-    if real is None:
-        pytest.fail("ecatsim.device._drive was not built", pytrace=False)
-
-    class Counting:
-        @staticmethod
-        def step(fast: tuple[object, ...], now_ns: int, outputs: bool) -> bool:
-            r: bool = real.step(fast, now_ns, outputs)
-            results.append(r)
-            return r
-
-    monkeypatch.setattr(drive_mod, "_compiled", Counting)
-    yield results
+    return record_results(monkeypatch, drive_mod, "_compiled", "step")
 
 
 @pytest.fixture
-def walked(monkeypatch: pytest.MonkeyPatch) -> Iterator[list[int]]:
+def walked(monkeypatch: pytest.MonkeyPatch) -> list[int]:
     """Every result of the compiled logical datagram (_logical.run; -1: not handled)."""
-    results: list[int] = []
-    real = segment_mod._logical
-    if real is None:
-        pytest.fail("ecatsim.esc._logical was not built", pytrace=False)
-
-    class Counting:
-        @staticmethod
-        def run(escs: list[Any], cmd: int, lad: int, buf: bytearray, d0: int, n: int) -> int:
-            r: int = real.run(escs, cmd, lad, buf, d0, n)
-            results.append(r)
-            return r
-
-    monkeypatch.setattr(segment_mod, "_logical", Counting)
-    yield results
+    return record_results(monkeypatch, segment_mod, "_logical", "run")
 
 
 def snapshot(c: CspCycle) -> dict[str, Any]:

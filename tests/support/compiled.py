@@ -1,0 +1,38 @@
+"""Test helpers for the optional compiled paths (decisions P2-P8)."""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import pytest
+
+
+def require_built(module: object, name: str) -> None:
+    """Skip a test of extension ``name`` where it was not built; fail under CI, which
+    builds every extension (a missing build there is a failure, not a skip)."""
+    if module is not None:
+        return
+    msg = f"{name} was not built (pip install -e . with a C compiler)"
+    if os.environ.get("CI"):
+        pytest.fail(msg, pytrace=False)
+    pytest.skip(msg)
+
+
+def record_results(
+    monkeypatch: pytest.MonkeyPatch, owner: object, attr: str, function: str
+) -> list[Any]:
+    """Replace the extension module ``owner.attr`` for this test by one whose
+    ``function`` calls the real one and records every result, in order."""
+    real = getattr(owner, attr)
+    require_built(real, f"{getattr(owner, '__name__', owner)}.{attr}")
+    results: list[Any] = []
+    fn = getattr(real, function)
+
+    def recording(*args: Any) -> Any:
+        r = fn(*args)
+        results.append(r)
+        return r
+
+    monkeypatch.setattr(owner, attr, type("Recording", (), {function: staticmethod(recording)}))
+    return results
