@@ -50,9 +50,9 @@ static inline int get_bool(PyObject *o, PyObject *name, int *err)
     return x;
 }
 
-static inline int set_long(PyObject *o, PyObject *name, long x)
+static inline int set_long(PyObject *o, PyObject *name, long long x)
 {
-    PyObject *v = PyLong_FromLong(x);
+    PyObject *v = PyLong_FromLongLong(x);
     if (v == NULL)
         return -1;
     int rc = PyObject_SetAttr(o, name, v);

@@ -120,16 +120,6 @@ static int set_double(PyObject *o, PyObject *name, double x)
     return rc;
 }
 
-static int set_ll(PyObject *o, PyObject *name, long long x)
-{
-    PyObject *v = PyLong_FromLongLong(x);
-    if (v == NULL)
-        return -1;
-    int rc = PyObject_SetAttr(o, name, v);
-    Py_DECREF(v);
-    return rc;
-}
-
 /* cia402.decode */
 static int decode(long long cw, long long prev)
 {
@@ -394,9 +384,9 @@ static PyObject *step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             return NULL;
     if (n > 0) {
         for (int i = 0; i < N_SNAPSHOT; i++)
-            if (set_ll(drive, s_q[i], q[i]) < 0)
+            if (set_long(drive, s_q[i], q[i]) < 0)
                 return NULL;
-        if (set_ll(drive, s_t_ns, t_ns) < 0)
+        if (set_long(drive, s_t_ns, t_ns) < 0)
             return NULL;
         if (mode == CSV && set_double(drive, s_v_demand_rpm, v_demand) < 0)
             return NULL;
@@ -410,7 +400,7 @@ static PyObject *step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             PyObject_SetAttr(drive, s_last_t_ns, now_obj) < 0)
             return NULL;
     }
-    if (outputs && set_ll(drive, s_prev_cw, cw) < 0)
+    if (outputs && set_long(drive, s_prev_cw, cw) < 0)
         return NULL;
     PyObject *pub = ITEM(F_PUBLISHED);
     for (int i = 0; i < N_PUBLISHED; i++) {
@@ -427,7 +417,7 @@ static PyObject *step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             v = lo;
         else if (!ohi && v > hi)
             v = hi;
-        if (set_ll(PyTuple_GET_ITEM(hit, 0), s_value, v) < 0)
+        if (set_long(PyTuple_GET_ITEM(hit, 0), s_value, v) < 0)
             return NULL;
     }
 #undef ITEM

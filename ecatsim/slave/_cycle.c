@@ -281,49 +281,45 @@ static PyObject *run(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     }
 
     /* ---- Firmware._write_inputs: Pdi.sm_write(SM3) */
-    if (sm_load(&sm3, ITEM(C_SM3)) < 0) /* the device may not touch it; be exact anyway */
+    /* SM3 was checked writable above (Pdi.sm_write would otherwise refuse); the device
+     * does not touch the SMs, so the state loaded then is still the state now. */
+    uint8_t *buf = m + sm_write_base(&sm3);
+    long n = sm3.length;
+    int packed = tx_size <= n ? pack_tx(buf, ITEM(C_TX_ENTRIES), ITEM(C_TX_LAYOUT)) : 0;
+    if (packed < 0)
         return NULL;
-    if (!sm_pdi_ok(&sm3, 0)) {
-        /* Pdi.sm_write refuses: nothing is written (as in Python) */
-    } else {
-        uint8_t *buf = m + sm_write_base(&sm3);
-        long n = sm3.length;
-        int packed = tx_size <= n ? pack_tx(buf, ITEM(C_TX_ENTRIES), ITEM(C_TX_LAYOUT)) : 0;
-        if (packed < 0)
-            return NULL;
-        if (packed) {
-            /* struct padding bytes are zero, and so is the rest of the window */
-            const uint8_t *lay = (const uint8_t *)PyBytes_AS_STRING(ITEM(C_TX_LAYOUT));
-            Py_ssize_t ne = PyTuple_GET_SIZE(ITEM(C_TX_ENTRIES));
-            long pos = 0;
-            for (Py_ssize_t i = 0; i < ne; i++) {
-                long off = lay[3 * i] | (lay[3 * i + 1] << 8);
-                if (off > pos)
-                    memset(buf + pos, 0, (size_t)(off - pos));
-                pos = off + code_size((char)lay[3 * i + 2]);
-            }
-            if (n > pos)
-                memset(buf + pos, 0, (size_t)(n - pos));
-        } else {
-            PyObject *data = PyObject_CallMethodNoArgs(ITEM(C_APP), s_pack_inputs);
-            if (data == NULL)
-                return NULL;
-            if (!PyBytes_Check(data)) {
-                Py_DECREF(data);
-                PyErr_SetString(PyExc_TypeError, "pack_inputs() must return bytes");
-                return NULL;
-            }
-            Py_ssize_t dn = PyBytes_GET_SIZE(data);
-            if (dn > n)
-                dn = n;
-            memcpy(buf, PyBytes_AS_STRING(data), (size_t)dn);
-            if (n > dn)
-                memset(buf + dn, 0, (size_t)(n - dn));
-            Py_DECREF(data);
+    if (packed) {
+        /* struct padding bytes are zero, and so is the rest of the window */
+        const uint8_t *lay = (const uint8_t *)PyBytes_AS_STRING(ITEM(C_TX_LAYOUT));
+        Py_ssize_t ne = PyTuple_GET_SIZE(ITEM(C_TX_ENTRIES));
+        long pos = 0;
+        for (Py_ssize_t i = 0; i < ne; i++) {
+            long off = lay[3 * i] | (lay[3 * i + 1] << 8);
+            if (off > pos)
+                memset(buf + pos, 0, (size_t)(off - pos));
+            pos = off + code_size((char)lay[3 * i + 2]);
         }
-        if (sm_pdi_written(&e, &sm3) < 0)
+        if (n > pos)
+            memset(buf + pos, 0, (size_t)(n - pos));
+    } else {
+        PyObject *data = PyObject_CallMethodNoArgs(ITEM(C_APP), s_pack_inputs);
+        if (data == NULL)
             return NULL;
+        if (!PyBytes_Check(data)) {
+            Py_DECREF(data);
+            PyErr_SetString(PyExc_TypeError, "pack_inputs() must return bytes");
+            return NULL;
+        }
+        Py_ssize_t dn = PyBytes_GET_SIZE(data);
+        if (dn > n)
+            dn = n;
+        memcpy(buf, PyBytes_AS_STRING(data), (size_t)dn);
+        if (n > dn)
+            memset(buf + dn, 0, (size_t)(n - dn));
+        Py_DECREF(data);
     }
+    if (sm_pdi_written(&e, &sm3) < 0)
+        return NULL;
 
     /* ---- Firmware.service_mailbox: the mask changes only if the device queued a message
      * (an emergency); Python does that part. */
