@@ -1,8 +1,11 @@
 """The one loop: receive a frame, process it in place, reply, then let the slaves react.
 
 Blocking wake-up by default (select(2) on the link's fd with the next timer as timeout,
-decision P1); ``busy_poll`` spins on a non-blocking receive instead. A failure while
-processing a frame is counted and logged once with the last frames; the loop carries on.
+decision P1); ``busy_poll`` spins on a non-blocking receive instead. On a raw link the
+compiled responder (``_serve.c``, decision P9) waits, receives and answers the cyclic
+frames itself and hands every other frame to :meth:`Daemon.handle_frame`, the reference.
+A failure while processing a frame is counted and logged once with the last frames; the
+loop carries on.
 Ref: design.md "One frame through the layers", habits 3 and 6.
 """
 
@@ -12,21 +15,31 @@ import ctypes
 import os
 import select
 import signal
-from types import FrameType
+from types import FrameType, ModuleType
 from typing import Protocol
 
 import structlog
 
+from ecatsim.clock import MonotonicClock
+from ecatsim.compiled import available
 from ecatsim.faults.engine import FaultEngine
 from ecatsim.link.base import Link
 from ecatsim.recorder import FrameRecorder
 from ecatsim.segment import Segment
 from ecatsim.wire.frame import ecat_offset, mark_processed
 
+_serve: ModuleType | None
+try:  # the compiled responder (optional, decision P9)
+    from ecatsim import _serve
+except ImportError:  # pragma: no cover - built without a C compiler
+    _serve = None
+_serve = available(_serve)  # ECATSIM_PURE_PYTHON=1: the reference only
+
 log = structlog.get_logger("ecatsim.daemon")
 
 MAX_FRAME = 2048
 IDLE_TIMEOUT_S = 0.2
+IDLE_TIMEOUT_NS = 200_000_000
 #: prctl(2) option: the slack the kernel may add to this thread's timer expiries
 PR_SET_TIMERSLACK = 29
 
@@ -73,13 +86,24 @@ class Daemon:
         self.busy_poll = busy_poll
         self.trace_frames = trace_frames
         self.recorder = FrameRecorder()
+        #: serve with the compiled responder where it applies (a raw link, the OS clock);
+        #: tests compare it with the Python path
+        self.compiled = True
+        #: the frame as received, kept by the compiled responder for the recorder
+        self._rx_copy = bytearray(MAX_FRAME)
         self.failures = 0
         self.replies = 0
+        #: replies the compiled responder sent (served whole in C)
+        self.compiled_replies = 0
         self._failure_logged: set[str] = set()
         self._stop = False
         self._wake_r, self._wake_w = os.pipe()
         os.set_blocking(self._wake_r, False)
         os.set_blocking(self._wake_w, False)
+        self._fd = link.fileno()
+        #: the descriptors besides the link's that end a wait: wake-up pipe, control socket
+        ctl_fd = ctl.fileno() if ctl is not None else -1
+        self._watch = tuple(f for f in (self._wake_r, ctl_fd) if f >= 0)
 
     def stop(self) -> None:
         """Ask the loop to return (safe from a signal handler)."""
@@ -100,24 +124,35 @@ class Daemon:
 
     def handle_one(self, buf: bytearray) -> bool:
         """Receive and answer one frame if one is waiting; False if none was."""
-        link = self.link
-        n = link.recv_into(buf)
+        n = self.link.recv_into(buf)
         if n <= 0:
             return False
+        self.handle_frame(buf, n, self.link.rx_ns)
+        return True
+
+    def handle_frame(self, buf: bytearray, n: int, rx_ns: int) -> None:
+        """Answer the frame in ``buf[:n]``, received at host time ``rx_ns`` (0: unknown,
+        now): process it, send the reply, then the work after the reply."""
+        link = self.link
         off = ecat_offset(buf, n, link.ethernet)
         if off < 0:
-            return True
+            return
         self.recorder.record(buf, n)
         if self.trace_frames:
             log.debug("frame_in", data=bytes(buf[:n]).hex())
         seg = self.segment
-        t_rx = link.rx_ns or seg.clock.now_ns()
+        t_rx = rx_ns or seg.clock.now_ns()
         try:
             seg.pulses_due(t_rx)  # pulses due before this frame arrived come first
             reply = seg.process(buf, off, n, t_rx)
         except Exception as exc:  # the loop never dies on a frame
             self._failure("process", exc)
-            return True
+            return
+        self._answer(buf, off, n, reply, t_rx)
+
+    def _answer(self, buf: bytearray, off: int, n: int, reply: bool, t_rx: int) -> None:
+        """Send the processed frame (unless it is destroyed), then the work after it."""
+        link = self.link
         faults = self.faults
         if reply:
             if link.ethernet:
@@ -135,17 +170,23 @@ class Daemon:
             os.sched_yield()
             if self.trace_frames:
                 log.debug("frame_out", data=bytes(buf[:n]).hex())
+        self._after(t_rx)
+
+    def _after(self, t_rx: int) -> None:
+        """The work after a frame's reply: its DC time loops (decision P7), the firmware
+        and the timers due by its arrival, time-triggered faults."""
+        seg = self.segment
         try:
-            seg.after_reply()  # e.g. the DC time loops of this frame's FRMW (decision P7)
+            seg.after_reply()
         except Exception as exc:
             self._failure("process", exc)
         self._service(t_rx)
+        faults = self.faults
         if faults.active:
             try:
-                faults.after_frame(self.segment.clock.now_ns())
+                faults.after_frame(seg.clock.now_ns())
             except Exception as exc:
                 self._failure("faults", exc)
-        return True
 
     def _hold(self, frame: bytes, copies: int, delay_ns: int) -> None:
         """A delay fault: send ``frame`` later (``copies`` times)."""
@@ -183,11 +224,26 @@ class Daemon:
     def run(self) -> None:
         """Serve until stop() is called."""
         buf = bytearray(MAX_FRAME)
-        fd = self.link.fileno()
-        ctl_fd = self.ctl.fileno() if self.ctl is not None else -1
-        watch = [f for f in (fd, self._wake_r, ctl_fd) if f >= 0]
-        clock = self.segment.clock
         fine_timer_slack()
+        if self.responder_applies():
+            self._run_compiled(buf)
+        else:
+            self._run_select(buf)
+
+    def responder_applies(self) -> bool:
+        """The compiled responder can serve this link: it was built, the link is a raw
+        socket (one frame per receive and per send) and the segment runs on the OS
+        monotonic clock the receive time stamps are converted to."""
+        return (
+            _serve is not None
+            and self.compiled
+            and getattr(self.link, "raw_socket", False)
+            and isinstance(self.segment.clock, MonotonicClock)
+        )
+
+    def _run_select(self, buf: bytearray) -> None:
+        watch = [f for f in (self._fd, *self._watch) if f >= 0]
+        clock = self.segment.clock
         while not self._stop:
             if self.busy_poll:
                 if not self.handle_one(buf):
@@ -200,22 +256,92 @@ class Daemon:
             # select(2), not poll(2): poll's timeout is in whole milliseconds, which would
             # wake the loop up to 1 ms after a SYNC0 deadline (decision P1)
             ready, _, _ = select.select(watch, (), (), timeout)
-            for efd in ready:
-                if efd == self._wake_r:
-                    try:
-                        os.read(self._wake_r, 64)
-                    except OSError:
-                        pass
-                elif efd == ctl_fd and self.ctl is not None:
-                    try:
-                        self.ctl.serve()
-                    except Exception as exc:
-                        self._failure("ctl", exc)
+            self._serve_others(ready)
             # frames first (one that came in since poll returned is older than "now"), then
             # the timers: every frame is served before the pulses that come after it
             while self.handle_one(buf):
                 pass
             self._service_timers()
+
+    def _run_compiled(self, buf: bytearray) -> None:
+        """The loop with the compiled responder (decision P9)."""
+        clock = self.segment.clock
+        while not self._stop:
+            now = clock.now_ns()
+            deadline = self._deadline()
+            if deadline is None or deadline - now > IDLE_TIMEOUT_NS:
+                deadline = now + IDLE_TIMEOUT_NS
+            self.serve_once(buf, deadline)
+
+    def serve_once(self, buf: bytearray, deadline_ns: int, t_rx_ns: int = 0) -> int:
+        """One call of the compiled responder: wait until a frame arrives, ``deadline_ns``
+        (host monotonic) passes or another descriptor is readable, and serve what came. A
+        frame waiting is always served before the timers, as in :meth:`_run_select`.
+        ``t_rx_ns``: the frame's arrival time (0: the kernel's receive time stamp).
+        Returns the responder's code (``_serve.REPLIED`` ...)."""
+        srv = _serve
+        assert srv is not None
+        rx_copy = self._rx_copy
+        seg = self.segment if self._fast_ok() else None
+        try:
+            code, n, t_rx, p = srv.serve(
+                self._fd, self._watch, buf, rx_copy, deadline_ns, self.busy_poll, seg, t_rx_ns
+            )
+        except OSError:
+            raise  # the socket failed: as from link.recv_into
+        except Exception as exc:  # the loop never dies on a frame
+            self._failure("process", exc)
+            return int(srv.FRAME)  # handled: counted as a failure
+        if code == srv.REPLIED:
+            self.recorder.record(rx_copy, n)
+            self.replies += 1
+            self.compiled_replies += 1
+            self._after(t_rx)
+        elif code == srv.FRAME:
+            self.handle_frame(buf, n, t_rx)
+        elif code == srv.RESUME:
+            self._resume(buf, n, t_rx, p)
+        else:  # TIMEOUT, WAKE: no frame is waiting
+            if code == srv.WAKE:
+                ready, _, _ = select.select(self._watch, (), (), 0)
+                self._serve_others(ready)
+            self._service_timers()
+        return int(code)
+
+    def _fast_ok(self) -> bool:
+        """The compiled responder may process frames: nothing that watches or alters them
+        (frame trace, injected faults) is on, and the segment walks compiled."""
+        return (
+            self.segment.compiled
+            and self.segment.reply_first
+            and not self.trace_frames
+            and not self.faults.active
+            and not self.faults.wire_live
+        )
+
+    def _resume(self, buf: bytearray, n: int, t_rx: int, p: int) -> None:
+        """A frame the compiled responder began: the rest of its walk, then the reply."""
+        self.recorder.record(self._rx_copy, n)
+        try:
+            reply = self.segment.resume(buf, p)
+        except Exception as exc:
+            self._failure("process", exc)
+            return
+        self._answer(buf, ecat_offset(buf, n, self.link.ethernet), n, reply, t_rx)
+
+    def _serve_others(self, ready: list[int]) -> None:
+        """The wake-up pipe and the control socket, when readable."""
+        for efd in ready:
+            if efd == self._wake_r:
+                try:
+                    os.read(self._wake_r, 64)
+                except OSError:
+                    pass
+            elif self.ctl is not None and efd == self.ctl.fileno():
+                try:
+                    self.ctl.serve()
+                except Exception as exc:
+                    self._failure("ctl", exc)
 
     def _deadline(self) -> int | None:
         ds = [

@@ -170,6 +170,7 @@ def run_daemon(opts: RunOptions) -> None:
             "stopped",
             frames=segment.frames,
             replies=daemon.replies,
+            compiled_replies=daemon.compiled_replies,
             bad_frames=segment.bad_frames,
             sync0_pulses=segment.sync0_ticks,
             sync0_max_late_us=segment.sync0_late_ns // 1000,

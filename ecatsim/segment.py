@@ -198,6 +198,13 @@ class Segment:
         self._walk(buf, off + 2)
         return True
 
+    def resume(self, buf: bytearray, p: int) -> bool:
+        """Walk the rest of a frame the compiled responder began: the datagrams from offset
+        ``p`` on (those before it are done, with process()'s checks and bookkeeping).
+        Returns True: the frame is to be sent back. Decision P9."""
+        self._walk(buf, p)
+        return True
+
     def _frmw_system_time(self, data: memoryview, readers: Sequence[int], reach: int) -> int:
         """The DC time distribution (FRMW of 0x0910, the frame's last datagram) with the
         writers' time loops after the reply (decision P7): the reference's read is all the

@@ -3,7 +3,7 @@
  * is byte-aligned and routed to one buffered SyncManager (FmmuMap.sm), as process data
  * mapped by every master is. Otherwise nothing is changed and the Python walk runs.
  *
- * run(escs, cmd, lad, buf, d0, dlen) -> int
+ * run(escs, cmd, lad, buf, d0, dlen) -> int (the work is in _logical.h)
  *   escs: Segment.logical (ESCs with active FMMUs, in the frame's order);
  *   buf:  the frame (bytearray); the datagram's data is buf[d0 : d0 + dlen].
  *   Returns the WKC increment, or -1: not handled, nothing changed.
@@ -19,142 +19,8 @@
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
-#include <stdint.h>
-#include <string.h>
 
-#include "_sm.h"
-
-#define LRD 0x0A
-#define LWR 0x0B
-#define LRW 0x0C
-#define SM_CTRL_WATCHDOG 0x40
-#define MAX_MAPS 1024
-
-static PyObject *s_fmmus, *s_lbit, *s_lend, *s_lstart, *s_lstop, *s_pstart, *s_read,
-    *s_write, *s_aligned, *s_sm, *s_mem, *s_ctx, *s_pending, *s_position, *s_wd_pd_trigger;
-
-/* One FMMU the datagram meets, resolved in the first pass. */
-typedef struct {
-    Py_ssize_t esc;  /* index in escs */
-    PyObject *sm;    /* borrowed: FmmuMap.sm (kept alive by the FmmuMap) */
-    long lstart, lstop, pstart;
-    int read, write;
-} Map;
-
-/* The event side of one ESC (Esc struct of _sm.h): new references in *e. */
-static int esc_open(Esc *e, PyObject *esc, PyObject **mem)
-{
-    *mem = PyObject_GetAttr(esc, s_mem);
-    if (*mem == NULL)
-        return -1;
-    if (!PyByteArray_Check(*mem) || PyByteArray_GET_SIZE(*mem) < MEM_SIZE) {
-        PyErr_SetString(PyExc_TypeError, "Esc.mem must be a 64 KiB bytearray");
-        return -1;
-    }
-    e->m = (uint8_t *)PyByteArray_AS_STRING(*mem);
-    e->esc = esc;
-    e->ctx = PyObject_GetAttr(esc, s_ctx);
-    if (e->ctx == NULL)
-        return -1;
-    e->pending = PyObject_GetAttr(e->ctx, s_pending);
-    if (e->pending == NULL)
-        return -1;
-    e->position = PyObject_GetAttr(esc, s_position);
-    return e->position == NULL ? -1 : 0;
-}
-
-static void esc_close(Esc *e, PyObject *mem)
-{
-    Py_XDECREF(mem);
-    Py_XDECREF(e->ctx);
-    Py_XDECREF(e->pending);
-    Py_XDECREF(e->position);
-}
-
-/* SyncManager.ecat_write (writer_write + _writer_access, buffered) after ecat_may_write;
- * 1 written, 0 refused. */
-static int sm_ecat_write(Esc *e, PyObject *smobj, long off, const uint8_t *data, long n)
-{
-    Sm sm;
-    if (sm_load(&sm, smobj) < 0)
-        return -1;
-    if (!(sm.ecat_side_writes && sm.active && !sm.locked))
-        return 0;
-    int first = off == 0, last = off + n >= sm.length;
-    long base = sm.start + sm.w * sm.length;
-    if (base + off + n > MEM_SIZE)
-        return 0; /* cannot happen for a routed FMMU; never write outside memory */
-    memcpy(e->m + base + off, data, (size_t)n);
-    if (first) {
-        sm.w_open = 1;
-        sm.status &= ~SM_ST_IRQ_READ;
-    }
-    if (last) {
-        sm.w_open = 0;
-        long latest = sm.l = sm.w;
-        if (sm.r_open && sm.r != latest)
-            sm.w = 3 - latest - sm.r;
-        else
-            sm.w = latest == 0 ? 1 : 0;
-        sm.status |= SM_ST_IRQ_WRITE;
-    }
-    if ((first || last) && sm_sync(e, &sm) < 0)
-        return -1;
-    if (sm_store(&sm) < 0)
-        return -1;
-    int err = 0;
-    long control = get_long(smobj, s_control, &err);
-    if (err)
-        return -1;
-    if (control & SM_CTRL_WATCHDOG) {
-        PyObject *r = PyObject_CallMethodNoArgs(e->esc, s_wd_pd_trigger);
-        if (r == NULL)
-            return -1;
-        Py_DECREF(r);
-    }
-    return 1;
-}
-
-/* SyncManager.ecat_read after ecat_may_read: peek (ECAT writes this SM) or reader_read
- * (_reader_open, _reader_access); 1 read, 0 refused. */
-static int sm_ecat_read(Esc *e, PyObject *smobj, long off, uint8_t *out, long n)
-{
-    Sm sm;
-    if (sm_load(&sm, smobj) < 0)
-        return -1;
-    if (!(sm.active && !sm.locked))
-        return 0;
-    if (sm.ecat_side_writes) {
-        long b = sm.r_open ? sm.r : (sm.l >= 0 ? sm.l : sm.r);
-        long base = sm.start + b * sm.length;
-        if (base + off + n > MEM_SIZE)
-            return 0;
-        memcpy(out, e->m + base + off, (size_t)n);
-        return 1;
-    }
-    int first = off == 0, last = off + n >= sm.length;
-    if (first) {
-        if (sm.l >= 0)
-            sm.r = sm.l;
-        else if (sm.r == sm.w)
-            sm.r = (sm.w + 1) % 3;
-        sm.r_open = 1;
-    }
-    long b = sm.r_open ? sm.r : (sm.l >= 0 ? sm.l : sm.r);
-    long base = sm.start + b * sm.length;
-    if (base + off + n > MEM_SIZE)
-        return 0;
-    memcpy(out, e->m + base + off, (size_t)n);
-    if (first)
-        sm.status &= ~SM_ST_IRQ_WRITE;
-    if (last) {
-        sm.r_open = 0;
-        sm.status |= SM_ST_IRQ_READ;
-    }
-    if ((first || last) && sm_sync(e, &sm) < 0)
-        return -1;
-    return sm_store(&sm) < 0 ? -1 : 1;
-}
+#include "_logical.h"
 
 static PyObject *run(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
@@ -163,140 +29,18 @@ static PyObject *run(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         PyErr_SetString(PyExc_TypeError, "run(escs: list, cmd, lad, buf: bytearray, d0, dlen)");
         return NULL;
     }
-    PyObject *escs = args[0];
     long cmd = PyLong_AsLong(args[1]);
     long long lad = PyLong_AsLongLong(args[2]);
     Py_ssize_t d0 = PyLong_AsSsize_t(args[4]), dlen = PyLong_AsSsize_t(args[5]);
     if (PyErr_Occurred())
         return NULL;
-    uint8_t *data = (uint8_t *)PyByteArray_AS_STRING(args[3]) + d0;
     if (d0 < 0 || dlen < 0 || d0 + dlen > PyByteArray_GET_SIZE(args[3])) {
         PyErr_SetString(PyExc_ValueError, "datagram outside the frame");
         return NULL;
     }
-    if (cmd != LRD && cmd != LWR && cmd != LRW)
-        return PyLong_FromLong(-1);
-    long long lo_bit = lad * 8, hi_bit = (lad + dlen) * 8;
-
-    /* ---- pass 1: every FMMU the datagram meets, resolved; none eligible -> Python */
-    static Map maps[MAX_MAPS];
-    int nmaps = 0;
-    Py_ssize_t n_escs = PyList_GET_SIZE(escs);
-    for (Py_ssize_t k = 0; k < n_escs; k++) {
-        PyObject *fmmus = PyObject_GetAttr(PyList_GET_ITEM(escs, k), s_fmmus);
-        if (fmmus == NULL)
-            return NULL;
-        if (!PyTuple_Check(fmmus)) {
-            Py_DECREF(fmmus);
-            return PyLong_FromLong(-1);
-        }
-        for (Py_ssize_t i = 0; i < PyTuple_GET_SIZE(fmmus); i++) {
-            PyObject *f = PyTuple_GET_ITEM(fmmus, i);
-            int err = 0;
-            long lbit = get_long(f, s_lbit, &err), lend = get_long(f, s_lend, &err);
-            int rd = get_bool(f, s_read, &err), wr = get_bool(f, s_write, &err);
-            if (err) {
-                Py_DECREF(fmmus);
-                return NULL;
-            }
-            if (!(lbit < hi_bit && lo_bit < lend))
-                continue;
-            int takes_part = (wr && cmd != LRD) || (rd && cmd != LWR);
-            if (!takes_part)
-                continue;
-            Map *mp = &maps[nmaps];
-            int aligned = get_bool(f, s_aligned, &err);
-            if (nmaps >= MAX_MAPS || err) {
-                Py_DECREF(fmmus);
-                if (PyErr_Occurred())
-                    return NULL;
-                return PyLong_FromLong(-1);
-            }
-            PyObject *sm = PyObject_GetAttr(f, s_sm);
-            if (sm == NULL) {
-                Py_DECREF(fmmus);
-                return NULL;
-            }
-            int ok = aligned && sm != Py_None && !get_bool(sm, s_mailbox, &err) && !err;
-            Py_DECREF(sm); /* the FmmuMap keeps it */
-            if (ok) {
-                mp->lstart = get_long(f, s_lstart, &err);
-                mp->lstop = get_long(f, s_lstop, &err);
-                mp->pstart = get_long(f, s_pstart, &err);
-            }
-            if (!ok || err) {
-                Py_DECREF(fmmus);
-                if (PyErr_Occurred())
-                    return NULL;
-                return PyLong_FromLong(-1); /* a bit-wise map, or one not in one SM window */
-            }
-            mp->esc = k;
-            mp->sm = sm;
-            mp->read = rd;
-            mp->write = wr;
-            nmaps++;
-        }
-        Py_DECREF(fmmus);
-    }
-
-    /* ---- pass 2: per ESC, the writes, then the reads (Esc.ecat_logical, _fmmu_xfer) */
-    long inc = 0;
-    int m = 0;
-    while (m < nmaps) {
-        Py_ssize_t k = maps[m].esc;
-        int end = m;
-        while (end < nmaps && maps[end].esc == k)
-            end++;
-        Esc e = {0};
-        PyObject *mem = NULL;
-        if (esc_open(&e, PyList_GET_ITEM(escs, k), &mem) < 0) {
-            esc_close(&e, mem);
-            return NULL;
-        }
-        int wr_ok = 0, rd_ok = 0;
-        for (int pass = 0; pass < 2; pass++) {
-            int writing = pass == 0;
-            if (writing ? cmd == LRD : cmd == LWR)
-                continue;
-            for (int j = m; j < end; j++) {
-                Map *mp = &maps[j];
-                if (writing ? !mp->write : !mp->read)
-                    continue;
-                long long lo = lad > mp->lstart ? lad : mp->lstart;
-                long long hi = lad + dlen < mp->lstop ? lad + dlen : mp->lstop;
-                if (hi <= lo)
-                    continue;
-                long phys = mp->pstart + (long)(lo - mp->lstart);
-                int err = 0;
-                long start = get_long(mp->sm, s_start, &err);
-                if (err) {
-                    esc_close(&e, mem);
-                    return NULL;
-                }
-                int rc = writing ? sm_ecat_write(&e, mp->sm, phys - start, data + (lo - lad),
-                                                 (long)(hi - lo))
-                                 : sm_ecat_read(&e, mp->sm, phys - start, data + (lo - lad),
-                                                (long)(hi - lo));
-                if (rc < 0) {
-                    esc_close(&e, mem);
-                    return NULL;
-                }
-                if (rc) {
-                    if (writing)
-                        wr_ok = 1;
-                    else
-                        rd_ok = 1;
-                }
-            }
-        }
-        esc_close(&e, mem);
-        if (cmd == LRW)
-            inc += (rd_ok ? 1 : 0) + (wr_ok ? 2 : 0);
-        else
-            inc += (rd_ok || wr_ok) ? 1 : 0;
-        m = end;
-    }
-    return PyLong_FromLong(inc);
+    uint8_t *data = (uint8_t *)PyByteArray_AS_STRING(args[3]) + d0;
+    long inc = logical_run(args[0], cmd, lad, data, dlen);
+    return inc == LOGICAL_ERROR ? NULL : PyLong_FromLong(inc);
 }
 
 static PyMethodDef methods[] = {
@@ -312,16 +56,7 @@ static struct PyModuleDef module = {
 
 PyMODINIT_FUNC PyInit__logical(void)
 {
-    static const Name names[] = {
-        {&s_fmmus, "fmmus"}, {&s_lbit, "lbit"}, {&s_lend, "lend"}, {&s_lstart, "lstart"},
-        {&s_lstop, "lstop"}, {&s_pstart, "pstart"}, {&s_read, "read"}, {&s_write, "write"},
-        {&s_aligned, "aligned"}, {&s_sm, "sm"}, {&s_mem, "mem"}, {&s_ctx, "ctx"},
-        {&s_pending, "pending"}, {&s_position, "position"},
-        {&s_wd_pd_trigger, "wd_pd_trigger"},
-    };
-    if (intern_names(names, sizeof names / sizeof names[0]) < 0)
-        return NULL;
-    if (sm_names_init() < 0)
+    if (logical_init() < 0)
         return NULL;
     return PyModule_Create(&module);
 }

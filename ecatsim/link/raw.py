@@ -165,6 +165,9 @@ class RawLink:
 
     ethernet = True
     rx_ns = 0
+    #: fileno() is a packet socket: one recvmsg(2) is one frame, one send(2) one reply, so
+    #: the daemon's compiled responder (decision P9) may use it directly
+    raw_socket = True
     #: receive with the compiled recvmsg (_rawio.c) where it was built; tests run both
     compiled = True
 

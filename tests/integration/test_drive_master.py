@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import gc
 import itertools
+import json
 import os
 import struct
 import time
@@ -15,7 +16,9 @@ from typing import Any
 import pysoem
 import pytest
 
+from ecatsim import daemon as daemon_mod
 from tests.integration.test_esc_master import RX_TIMEOUT_US, to_op
+from tests.support.compiled import require_built
 
 pytestmark = pytest.mark.integration
 
@@ -147,7 +150,7 @@ def test_csp_sine_with_dc_sync0(master_factory: Any, daemon_factory: Any, tmp_pa
 
     cfg = tmp_path / "seg.yaml"
     cfg.write_text("slaves:\n  - device: tmc8670\n  - device: tmc8670\n    dc_drift_ppm: 25\n")
-    daemon_factory("--config", str(cfg), "--rt-priority", "40")
+    d = daemon_factory("--config", str(cfg), "--rt-priority", "40")
     m = master_factory()
     assert m.config_init() == 2
     for s in m.slaves:
@@ -246,6 +249,11 @@ def test_csp_sine_with_dc_sync0(master_factory: Any, daemon_factory: Any, tmp_pa
     assert not over, (len(judged), over[:10])
     diff = struct.unpack("<I", m.slaves[1]._fprd(0x092C, 4))[0] & 0x7FFFFFFF
     assert diff < 1000  # ns
+    # the cyclic frames were answered by the compiled responder (decision P9), if built
+    assert d.stop() == 0
+    stopped = [json.loads(ln) for ln in d.log.read_text().splitlines() if '"stopped"' in ln]
+    require_built(daemon_mod._serve, "ecatsim._serve")
+    assert stopped[-1]["compiled_replies"] >= k, stopped[-1]
 
 
 def test_overcurrent_emcy_quick_stop_and_fault_reset(

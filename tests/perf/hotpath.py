@@ -14,6 +14,7 @@ from ecatsim.daemon import Daemon
 from ecatsim.link.loopback import LoopbackLink
 from ecatsim.wire import datagram as dg
 from ecatsim.wire.frame import ecat_offset, mark_processed
+from tests.support.socketlink import SocketLink
 from tests.support.tinymaster import TinyMaster, segment_of
 
 
@@ -112,15 +113,18 @@ class CspCycle:
         enable: bool = True,
         compiled: bool = True,
         ecat_irq: bool = False,
+        responder: bool = False,
     ) -> None:
         self.n = drives
+        #: frames go through the compiled responder (decision P9) over a socket pair
+        self.responder = responder
         self.seg, self.clock = segment_of(drives, device=device)
         self.seg.compiled = compiled  # the compiled logical walk (decision P6)
         for fw in self.seg.firmware:
             fw.compiled = compiled  # the compiled DC cycle (decision P3) or the reference
         t = self.master = TinyMaster(self.seg)
         configure_to_op(t, drives, ecat_irq)
-        self.link = LoopbackLink()
+        self.link: LoopbackLink | SocketLink = SocketLink() if responder else LoopbackLink()
         self.daemon = Daemon(self.link, self.seg)
         self.seg.reply_first = compiled  # the reference runs the DC time loops inline
         self.buf = bytearray(2048)
@@ -168,14 +172,22 @@ class CspCycle:
         """The cyclic frame, mid-cycle; returns the reply."""
         self.clock.t = self.t + MS // 2
         self.target = int(self.amplitude * (1 - math.cos(self.k * 2e-3 * math.pi)))
-        self.link.master_send(self.frame(self.cw if cw is None else cw))
-        self.link.rx_ns = self.clock.t
-        self.daemon.handle_one(self.buf)
-        reply = self.link.master_recv()
+        reply = self.deliver(self.frame(self.cw if cw is None else cw))
         assert reply is not None
         self.t += MS
         self.k += 1
         return bytes(reply)
+
+    def deliver(self, raw: bytes) -> bytes | None:
+        """One frame through the daemon, arriving now; its reply (None: none)."""
+        self.link.master_send(raw)
+        if self.responder:
+            self.daemon.serve_once(self.buf, 0, self.clock.t)
+        else:
+            self.link.rx_ns = self.clock.t
+            self.daemon.handle_one(self.buf)
+        reply = self.link.master_recv()
+        return None if reply is None else bytes(reply)
 
 
 def csp_cycle_cost(drives: int, cycles: int = 300) -> float:

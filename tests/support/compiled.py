@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from types import SimpleNamespace
 from typing import Any
 
 import pytest
@@ -22,7 +23,7 @@ def require_built(module: object, name: str) -> None:
 def record_results(
     monkeypatch: pytest.MonkeyPatch, owner: object, attr: str, function: str
 ) -> list[Any]:
-    """Replace the extension module ``owner.attr`` for this test by one whose
+    """Replace the extension module ``owner.attr`` for this test by a stand-in whose
     ``function`` calls the real one and records every result, in order."""
     real = getattr(owner, attr)
     require_built(real, f"{getattr(owner, '__name__', owner)}.{attr}")
@@ -34,5 +35,7 @@ def record_results(
         results.append(r)
         return r
 
-    monkeypatch.setattr(owner, attr, type("Recording", (), {function: staticmethod(recording)}))
+    stand_in = SimpleNamespace(**{k: getattr(real, k) for k in dir(real) if not k.startswith("__")})
+    setattr(stand_in, function, recording)  # the module's constants stay as they are
+    monkeypatch.setattr(owner, attr, stand_in)
     return results

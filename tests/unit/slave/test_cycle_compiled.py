@@ -1,9 +1,11 @@
-"""The compiled DC cycle (_cycle.c) against the Python firmware, its reference: two
-identical segments, one serving SYNC0 events compiled and one in Python, run the same
-frames and must agree on every byte of ESC memory, every SM and event state, every OD
-value, the drive's state and every reply, through enable, motion, mode changes, a fault
-with its emergency, SAFEOP and back.
-Ref: ecatsim/slave/cycle.py; ecatsim/slave/firmware.py Firmware.service; decision P3."""
+"""The compiled paths against the Python model, their reference: two identical segments,
+one with every compiled path (the DC cycle _cycle.c, the drive's steady cycle, the logical
+walk, and with ``responder`` the daemon's compiled responder _serve.c) and one in pure
+Python, run the same frames and must agree on every byte of ESC memory, every SM and
+event state, every OD value, the drive's state and every reply, through enable, motion,
+mode changes, a fault with its emergency, SAFEOP and back.
+Ref: ecatsim/slave/cycle.py; ecatsim/slave/firmware.py Firmware.service; ecatsim/daemon.py
+Daemon.serve_once; decisions P3, P5, P6, P9."""
 
 from __future__ import annotations
 
@@ -15,6 +17,7 @@ from typing import Any
 
 import pytest
 
+from ecatsim import daemon as daemon_mod
 from ecatsim import segment as segment_mod
 from ecatsim.device import drive as drive_mod
 from ecatsim.esc import regs
@@ -22,7 +25,7 @@ from ecatsim.slave import cycle
 from ecatsim.slave.pdo import Codec, Field, codec
 from ecatsim.wire import datagram as dg
 from ecatsim.wire.frame import ecat_offset
-from tests.perf.hotpath import CSP, MS, CspCycle
+from tests.perf.hotpath import CSP, IN, MS, OUT, CspCycle
 from tests.support.compiled import record_results, require_built
 from tests.support.fuzz import mutate
 
@@ -54,9 +57,24 @@ def walked(monkeypatch: pytest.MonkeyPatch) -> list[int]:
     return record_results(monkeypatch, segment_mod, "_logical", "run")
 
 
+@pytest.fixture
+def answered(monkeypatch: pytest.MonkeyPatch) -> list[tuple[int, int, int, int]]:
+    """Every result of the compiled responder (_serve.serve: code, n, t_rx, p)."""
+    return record_results(monkeypatch, daemon_mod, "_serve", "serve")
+
+
+def codes(results: list[tuple[int, int, int, int]]) -> list[int]:
+    return [r[0] for r in results]
+
+
+REPLIED, FRAME, RESUME = 3, 2, 4  # _serve's codes (test_codes checks them)
+
+
 def snapshot(c: CspCycle) -> dict[str, Any]:
     """Everything the SYNC0 work can change."""
-    out: dict[str, Any] = {"pending": sorted(c.seg.ctx.pending)}
+    seg = c.seg
+    out: dict[str, Any] = {"pending": sorted(seg.ctx.pending), "irq": seg.irq}
+    out["frames"] = (seg.frames, seg.bad_frames, seg.ctx.frame_no, seg.ctx.t_ns)
     for esc in c.seg.escs:
         p = esc.position
         out[f"mem{p}"] = bytes(esc.mem)
@@ -85,9 +103,9 @@ def snapshot(c: CspCycle) -> dict[str, Any]:
     return out
 
 
-def lockstep(n: int, ecat_irq: bool = False) -> tuple[CspCycle, CspCycle]:
+def lockstep(n: int, ecat_irq: bool = False, responder: bool = False) -> tuple[CspCycle, CspCycle]:
     return (
-        CspCycle(n, compiled=True, ecat_irq=ecat_irq),
+        CspCycle(n, compiled=True, ecat_irq=ecat_irq, responder=responder),
         CspCycle(n, compiled=False, ecat_irq=ecat_irq),
     )
 
@@ -120,16 +138,25 @@ def al_request(state: int) -> Callable[[CspCycle], bytes | None]:
     return go
 
 
+@pytest.mark.parametrize("responder", [False, True], ids=["walk", "responder"])
 def test_compiled_cycle_matches_python_firmware(
-    served: list[bool], stepped: list[bool], walked: list[int]
+    served: list[bool],
+    stepped: list[bool],
+    walked: list[int],
+    answered: list[tuple[int, int, int, int]],
+    responder: bool,
 ) -> None:
-    a, b = lockstep(2)
+    a, b = lockstep(2, responder=responder)
     same(a, b, lambda c: None)  # enabled by the constructors
     for _ in range(40):  # csp motion
         both(a, b)
     assert served and all(served[-40:]), "the compiled cycle served the steady state"
     assert stepped and all(stepped[-40:]), "and the drive's compiled steady cycle with it"
-    assert walked[-40:] == [6] * 40, "the LRW went through the compiled walk (WKC 2 x 3)"
+    if responder:
+        assert codes(answered) == [REPLIED] * 45, "every cyclic frame answered in C"
+        assert not walked, "the Python walk never ran"
+    else:
+        assert walked[-40:] == [6] * 40, "the LRW went through the compiled walk (WKC 2 x 3)"
 
     def od(*values: tuple[int, int]) -> Callable[[CspCycle], None]:
         """OD writes on every drive, as an SDO download would make them."""
@@ -237,12 +264,15 @@ def test_compiled_cycle_matches_python_firmware(
     assert served.count(True) >= 2 * 60
     assert served.count(False) >= 2, "the fallback paths ran too"
     assert stepped.count(False) >= 10, "the drive's Python path ran in the transitions"
+    if responder:
+        assert set(codes(answered)) == {REPLIED}, "the mailbox and AL work ran after replies"
 
 
-def test_compiled_cycle_with_ecat_events_and_padding(served: list[bool]) -> None:
+@pytest.mark.parametrize("responder", [False, True], ids=["walk", "responder"])
+def test_compiled_cycle_with_ecat_events_and_padding(served: list[bool], responder: bool) -> None:
     """SM events routed to the ECAT side as well (0x0210 and the IRQ field), and an input
     image with a padding byte, which must be written as 0."""
-    a, b = lockstep(1, ecat_irq=True)
+    a, b = lockstep(1, ecat_irq=True, responder=responder)
     both(a, b)
 
     def pad(c: CspCycle) -> None:
@@ -298,11 +328,15 @@ def test_layout_follows_the_struct_format() -> None:
     assert cycle.layout(c) == b"\x00\x00b\x02\x00H\x06\x00i"
 
 
-def test_compiled_walk_matches_python_on_other_maps(walked: list[int]) -> None:
+@pytest.mark.parametrize("responder", [False, True], ids=["walk", "responder"])
+def test_compiled_walk_matches_python_on_other_maps(
+    walked: list[int], answered: list[tuple[int, int, int, int]], responder: bool
+) -> None:
     """FMMUs beyond the usual pair: a read/write map over SM2 (the master reads its outputs
     back), partial accesses that leave a buffer open across a pulse, a bit-wise map and a
-    map onto plain memory (both left to Python)."""
-    a, b = lockstep(1)
+    map onto plain memory (both left to Python; the responder hands the rest of the frame
+    to it). The frames go through the daemon."""
+    a, b = lockstep(1, responder=responder)
     for _ in range(3):
         both(a, b)
 
@@ -312,9 +346,8 @@ def test_compiled_walk_matches_python_on_other_maps(walked: list[int]) -> None:
 
     def frame(*datagrams: bytes) -> Callable[[CspCycle], bytes | None]:
         def go(c: CspCycle) -> bytes | None:
-            r = c.master.frame(list(datagrams))
-            assert r is not None
-            return b"".join(d.data + struct.pack("<H", d.wkc) for d in r)
+            c.clock.t = c.t + MS // 2
+            return c.deliver(dg.ethernet_frame(list(datagrams)))
 
         return go
 
@@ -324,6 +357,7 @@ def test_compiled_walk_matches_python_on_other_maps(walked: list[int]) -> None:
 
         return go
 
+    lrd_sm3 = dg.build_logical(dg.Cmd.LRD, 12, bytes(17), more=True)
     # FMMU2: read/write over SM2 at logical 0x8000: a read returns the latest outputs
     same(a, b, program(2, fmmu(2, 0x8000, 12, 0x1100, 3)))
     same(a, b, frame(dg.build_logical(dg.Cmd.LRD, 0x8000, bytes(12))))
@@ -335,17 +369,79 @@ def test_compiled_walk_matches_python_on_other_maps(walked: list[int]) -> None:
     same(a, b, frame(dg.build_logical(dg.Cmd.LRD, 12, bytes(1))))
     both(a, b)
     same(a, b, frame(dg.build_logical(dg.Cmd.LRD, 13, bytes(16))))
-    assert all(r >= 0 for r in walked[-6:])
-    # a bit-wise map and one onto plain memory: Python
+    if responder:  # a frame with a SYNC0 pulse due before it (after both()) is Python's
+        assert codes(answered)[-6:] == [REPLIED, FRAME, REPLIED, REPLIED, REPLIED, FRAME]
+    else:
+        assert all(r >= 0 for r in walked[-6:])
+    # a bit-wise map and one onto plain memory: Python (behind a compiled LRD of SM3); the
+    # first frame after an FMMU changed finds the tables to refresh and goes to Python whole
     before = len(walked)
     same(a, b, program(3, fmmu(3, 0x9000, 1, 0x1100, 1, lsb=1)))
-    same(a, b, frame(dg.build_logical(dg.Cmd.LRD, 0x9000, bytes(1))))
+    for _ in range(2):
+        same(a, b, frame(lrd_sm3, dg.build_logical(dg.Cmd.LRD, 0x9000, bytes(1))))
     same(a, b, program(3, fmmu(3, 0x9000, 4, 0x1800, 3)))
-    same(a, b, frame(dg.build_logical(dg.Cmd.LRW, 0x9000, b"\x01\x02\x03\x04")))
+    for _ in range(2):
+        same(a, b, frame(lrd_sm3, dg.build_logical(dg.Cmd.LRW, 0x9000, b"\x01\x02\x03\x04")))
     same(a, b, frame(dg.build_logical(dg.Cmd.LRD, 0x9000, bytes(4))))
-    assert walked[before:] == [-1, -1, -1]
+    if responder:  # the Python walk took over where the compiled one declined
+        assert codes(answered)[-5:] == [FRAME, RESUME, FRAME, RESUME, RESUME]
+        assert walked[before:] == [1, -1, -1, 1, -1, -1, -1]
+    else:
+        assert walked[before:] == [1, -1, 1, -1, 1, -1, 1, -1, -1]
     for _ in range(3):
         both(a, b)
+
+
+def test_responder_serves_every_reference_clock(
+    answered: list[tuple[int, int, int, int]],
+) -> None:
+    """The FRMW of 0x0910 addressed to each slave of three in turn (the reference's time
+    is its arrival time at that slave, plus its offset; the writers before and behind it
+    get the master's and the reference's data), to no slave at all (every slave writes),
+    and 4 bytes long, each carrying the DC time of the master's last frame: the compiled
+    responder and Python agree on replies and state."""
+    a, b = lockstep(3, responder=True)
+    for _ in range(3):
+        both(a, b)
+    lrw = 3 * (OUT + IN)
+    dc_time = {False: 0, True: 0}
+
+    def cycle(adp: int, size: int) -> Callable[[CspCycle], bytes | None]:
+        def go(c: CspCycle) -> bytes | None:
+            c.pulse()  # each frame in a cycle of its own
+            c.clock.t = c.t + MS // 2
+            raw = bytearray(c.frame(0x0F))
+            if size == 4:
+                raw = bytearray(
+                    dg.ethernet_frame(
+                        [
+                            dg.build_logical(dg.Cmd.LRW, 0, bytes(raw[26 : 26 + lrw]), more=True),
+                            dg.build(dg.Cmd.FRMW, adp, 0x0910, bytes(4)),
+                        ]
+                    )
+                )
+            p = 14 + 2 + 10 + lrw + 2  # the FRMW's header
+            struct.pack_into("<H", raw, p + 2, adp)
+            # what the master sends along, the DC time of its last frame, as SOEM does: the
+            # slaves before the reference write it
+            raw[p + 10 : p + 10 + size] = dc_time[c.responder].to_bytes(8, "little")[:size]
+            reply = c.deliver(bytes(raw))
+            assert reply is not None
+            dc_time[c.responder] = int.from_bytes(reply[p + 10 : p + 10 + size], "little")
+            c.t += MS
+            return reply
+
+        return go
+
+    # a new reference makes the slaves before it correct a large difference (their SYNC
+    # deadlines move: Python fires the pulses first, FRAME) before it settles
+    for adp in (0x1000, 0x1001, 0x1002, 0x7777):
+        for size in (8, 4):
+            for _ in range(4):
+                same(a, b, cycle(adp, size))
+            assert REPLIED in codes(answered)[-4:], (hex(adp), size, codes(answered)[-4:])
+    assert codes(answered)[-32:].count(REPLIED) >= 16
+    both(a, b)
 
 
 def test_dc_time_loops_wait_for_the_reply() -> None:
@@ -371,23 +467,23 @@ def test_dc_time_loops_wait_for_the_reply() -> None:
     assert all(t != r for t, r in zip(after[1:], rebased[1:], strict=True))
 
 
-def test_compiled_paths_agree_on_mutated_frames(walked: list[int]) -> None:
+@pytest.mark.parametrize("responder", [False, True], ids=["walk", "responder"])
+def test_compiled_paths_agree_on_mutated_frames(
+    walked: list[int], answered: list[tuple[int, int, int, int]], responder: bool
+) -> None:
     """Differential fuzz: mutated cyclic frames (truncated, extended, bit flips, broken
     headers and lengths, unknown commands, random tails; a few with changed logical
     addresses so FMMUs are met in part) go through both segments, with SYNC0 pulses
     between them. Replies and every state must agree, and both must still run."""
     rng = random.Random(7)
-    a, b = lockstep(2)
+    a, b = lockstep(2, responder=responder)
     for _ in range(3):
         both(a, b)
 
     def send(raw: bytes) -> Callable[[CspCycle], bytes | None]:
         def go(c: CspCycle) -> bytes | None:
             c.clock.t = c.t + MS // 2
-            c.link.master_send(raw)
-            c.link.rx_ns = c.clock.t
-            c.daemon.handle_one(c.buf)
-            return c.link.master_recv()
+            return c.deliver(raw)
 
         return go
 
@@ -404,5 +500,10 @@ def test_compiled_paths_agree_on_mutated_frames(walked: list[int]) -> None:
     for _ in range(3):
         both(a, b)
     assert a.seg.firmware[0].device.state.name == b.seg.firmware[0].device.state.name  # type: ignore[attr-defined]
-    assert len(walked) > 150, "half the mutated frames reached the compiled walk"
-    assert len(set(walked)) > 3, "with several different WKC results"
+    if responder:
+        seen = codes(answered)
+        assert seen.count(REPLIED) > 100, "the compiled responder answered many of them"
+        assert seen.count(FRAME) > 50, "and handed the others to Python"
+    else:
+        assert len(walked) > 150, "half the mutated frames reached the compiled walk"
+        assert len(set(walked)) > 3, "with several different WKC results"
