@@ -65,7 +65,7 @@ enum { TIMEOUT = 0, WAKE = 1, FRAME = 2, REPLIED = 3, RESUME = 4 };
 
 static PyObject *s_logical, *s_reach, *s_irq, *s_port0_closed, *s_pulse_hint, *s_dc_pending,
     *s_dc_reader, *s_dc_reach, *s_dc_before, *s_dc_after, *s_addr_map, *s_escs, *s_frames,
-    *s_frame_no, *s_t_ns, *s_topology_dirty, *s_addr_dirty, *s_logical_dirty,
+    *s_frame_no, *s_topology_dirty, *s_addr_dirty, *s_logical_dirty,
     *s_timers_dirty, *s_dc, *s_local_ref, *s_t_ref, *s_spd, *s_hop_ns, *s_sm_windows;
 
 static long long clock_ns(clockid_t id)
@@ -538,7 +538,7 @@ PyMODINIT_FUNC PyInit__serve(void)
         {&s_dc_pending, "_dc_pending"}, {&s_dc_reader, "_dc_reader"},
         {&s_dc_reach, "_dc_reach"}, {&s_dc_before, "_dc_before"}, {&s_dc_after, "_dc_after"},
         {&s_addr_map, "addr_map"}, {&s_escs, "escs"}, {&s_frames, "frames"},
-        {&s_frame_no, "frame_no"}, {&s_t_ns, "t_ns"}, {&s_topology_dirty, "topology_dirty"},
+        {&s_frame_no, "frame_no"}, {&s_topology_dirty, "topology_dirty"},
         {&s_addr_dirty, "addr_dirty"}, {&s_logical_dirty, "logical_dirty"},
         {&s_timers_dirty, "timers_dirty"}, {&s_dc, "dc"}, {&s_local_ref, "local_ref"},
         {&s_t_ref, "t_ref"}, {&s_spd, "spd"}, {&s_hop_ns, "hop_ns"},

@@ -11,8 +11,9 @@
  * Per ESC the writes come first (the data as received), then the reads overlay it; WKC
  * +1 for a read, +1 (LWR) or +2 (LRW) for a write. The SM accesses are the ECAT face of
  * SyncManager (writer_write / reader_read / peek, with the 3-buffer exchange, status and
- * event bits) and the watchdog trigger of Esc.wd_pd_trigger. The Python methods are the
- * reference: tests/unit/slave/test_cycle_compiled.py and tests/golden run both.
+ * event bits) and the watchdog trigger of Esc.wd_pd_trigger (Watchdog.trigger). The
+ * Python methods are the reference: tests/unit/slave/test_cycle_compiled.py and
+ * tests/golden run both.
  *
  * Ref: ETG.1000.4 §5.4.3 Table 12 (WKC); TMC8460 §5.48 (FMMU), §5.49 Tables 88-89 (SM);
  * docs/decisions.md P6.
@@ -31,10 +32,11 @@
 #define LWR 0x0B
 #define LRW 0x0C
 #define SM_CTRL_WATCHDOG 0x40
+#define WD_STATUS_PD 0x0440
 #define MAX_MAPS 1024
 
 static PyObject *s_fmmus, *s_lbit, *s_lend, *s_lstart, *s_lstop, *s_pstart, *s_read,
-    *s_write, *s_aligned, *s_sm, *s_mem, *s_ctx, *s_pending, *s_position, *s_wd_pd_trigger;
+    *s_write, *s_aligned, *s_sm, *s_mem, *s_ctx, *s_pending, *s_position, *s_wd, *s_timeout_ns, *s_deadline_ns, *s_t_ns;
 
 /* One FMMU the datagram meets, resolved in the first pass. */
 typedef struct {
@@ -74,6 +76,26 @@ static void esc_close(Esc *e, PyObject *mem)
     Py_XDECREF(e->position);
 }
 
+/* Esc.wd_pd_trigger: Watchdog.trigger at the frame's time (ctx.t_ns): the process-data
+ * watchdog restarts if it is enabled, and 0x0440 bit 0 reads "active". Ref: TMC8460
+ * §5.41 Table 55, §5.42 Table 56. */
+static int wd_pd_trigger(Esc *e)
+{
+    PyObject *wd = PyObject_GetAttr(e->esc, s_wd);
+    if (wd == NULL)
+        return -1;
+    int err = 0;
+    long long timeout = get_long(wd, s_timeout_ns, &err);
+    long long t = timeout && !err ? get_long(e->ctx, s_t_ns, &err) : 0;
+    if (!err && timeout && set_long(wd, s_deadline_ns, t + timeout) < 0)
+        err = 1;
+    Py_DECREF(wd);
+    if (err)
+        return -1;
+    e->m[WD_STATUS_PD] |= 0x01;
+    return 0;
+}
+
 /* SyncManager.ecat_write (writer_write + _writer_access, buffered) after ecat_may_write;
  * 1 written, 0 refused. */
 static int sm_ecat_write(Esc *e, PyObject *smobj, long off, const uint8_t *data, long n)
@@ -109,12 +131,8 @@ static int sm_ecat_write(Esc *e, PyObject *smobj, long off, const uint8_t *data,
     long control = get_long(smobj, s_control, &err);
     if (err)
         return -1;
-    if (control & SM_CTRL_WATCHDOG) {
-        PyObject *r = PyObject_CallMethodNoArgs(e->esc, s_wd_pd_trigger);
-        if (r == NULL)
-            return -1;
-        Py_DECREF(r);
-    }
+    if (control & SM_CTRL_WATCHDOG)
+        return wd_pd_trigger(e) < 0 ? -1 : 1;
     return 1;
 }
 
@@ -295,7 +313,8 @@ static int logical_init(void)
         {&s_lstop, "lstop"}, {&s_pstart, "pstart"}, {&s_read, "read"}, {&s_write, "write"},
         {&s_aligned, "aligned"}, {&s_sm, "sm"}, {&s_mem, "mem"}, {&s_ctx, "ctx"},
         {&s_pending, "pending"}, {&s_position, "position"},
-        {&s_wd_pd_trigger, "wd_pd_trigger"},
+        {&s_wd, "wd"}, {&s_timeout_ns, "timeout_ns"}, {&s_deadline_ns, "deadline_ns"},
+        {&s_t_ns, "t_ns"},
     };
     if (intern_names(names, sizeof names / sizeof names[0]) < 0)
         return -1;

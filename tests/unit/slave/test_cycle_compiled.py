@@ -79,6 +79,7 @@ def snapshot(c: CspCycle) -> dict[str, Any]:
         p = esc.position
         out[f"mem{p}"] = bytes(esc.mem)
         out[f"ecat_irq{p}"] = esc.ecat_irq
+        out[f"wd{p}"] = (esc.wd.deadline_ns, esc.wd.timeout_ns)
         out[f"sm{p}"] = [
             (s.w, s.l, s.r, s.r_open, s.w_open, s.status, s.mirror, s.mbx_full) for s in esc.sm
         ]
