@@ -1,5 +1,6 @@
 """In-process frame-path micro-benchmark: cost per cyclic frame for N slaves, and per DC
-cycle with N drives in csp.
+cycle with N drives in csp (the frame through the daemon's Python loop, and through the
+compiled responder over a socket pair).
 
 .venv/bin/python tools/microbench.py            # print
 .venv/bin/python tools/microbench.py --save     # store tests/perf/baseline.json
@@ -32,6 +33,11 @@ def main() -> int:
         c = csp_cycle_cost(n)
         out[f"dc_csp_{n}"] = round(c / unit, 1)
         print(f"{n:3d} drives, DC csp: {c * 1e6:8.1f} us/cycle ({c / unit:6.0f} calibration units)")
+    for n in (1, 16):
+        c = csp_cycle_cost(n, responder=True)
+        out[f"dc_csp_responder_{n}"] = round(c / unit, 1)
+        print(f"{n:3d} drives, DC csp, compiled responder: {c * 1e6:8.1f} us/cycle "
+              f"({c / unit:6.0f} calibration units)")  # fmt: skip
     if args.save:
         (ROOT / "tests/perf/baseline.json").write_text(json.dumps(out, indent=2) + "\n")
         print("saved tests/perf/baseline.json")

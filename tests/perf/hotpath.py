@@ -190,10 +190,11 @@ class CspCycle:
         return None if reply is None else bytes(reply)
 
 
-def csp_cycle_cost(drives: int, cycles: int = 300) -> float:
+def csp_cycle_cost(drives: int, cycles: int = 300, responder: bool = False) -> float:
     """Seconds per DC cycle (SYNC0 pulse + cyclic frame) with enabled drives in csp, best
-    of three runs."""
-    c = CspCycle(drives)
+    of three runs; ``responder``: the frame through the compiled responder (P9) over a
+    socket pair."""
+    c = CspCycle(drives, responder=responder)
     for _ in range(50):
         c.step()
     best = float("inf")

@@ -11,7 +11,9 @@ from pathlib import Path
 
 import pytest
 
+from ecatsim import daemon as daemon_mod
 from tests.perf.hotpath import calibrate, csp_cycle_cost, frame_cost
+from tests.support.compiled import require_built
 
 BASELINE = json.loads((Path(__file__).parent / "baseline.json").read_text())
 
@@ -33,4 +35,14 @@ def test_dc_csp_cycle_not_regressed(drives: int) -> None:
     unit = calibrate()
     ratio = csp_cycle_cost(drives, cycles=200) / unit
     base = BASELINE[f"dc_csp_{drives}"]
+    assert ratio <= 3 * base, f"{drives} drives: {ratio:.0f} calibration units vs {base:.0f}"
+
+
+@pytest.mark.parametrize("drives", [1, 16])
+def test_dc_csp_cycle_through_the_responder_not_regressed(drives: int) -> None:
+    """The same DC cycle with the frame answered by the compiled responder (decision P9)."""
+    require_built(daemon_mod._serve, "ecatsim._serve")
+    unit = calibrate()
+    ratio = csp_cycle_cost(drives, cycles=200, responder=True) / unit
+    base = BASELINE[f"dc_csp_responder_{drives}"]
     assert ratio <= 3 * base, f"{drives} drives: {ratio:.0f} calibration units vs {base:.0f}"
