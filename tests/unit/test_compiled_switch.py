@@ -1,4 +1,4 @@
-"""ECATSIM_PURE_PYTHON=1 switches every compiled path off (decisions P2-P6), so the daemon
+"""ECATSIM_PURE_PYTHON=1 switches every compiled path off (decisions P2-P6, P9), so the daemon
 runs the Python reference only; without it, every extension is in use where it was built.
 Ref: ecatsim/compiled.py."""
 
@@ -13,8 +13,9 @@ import pytest
 PROBE = """
 import ecatsim.device.servo as servo, ecatsim.device.drive as drive
 import ecatsim.slave.cycle as cycle, ecatsim.link.raw as raw, ecatsim.segment as segment
+import ecatsim.daemon as daemon
 print(*(m is not None for m in (servo._compiled, drive._compiled, cycle.compiled,
-                                raw._rawio, segment._logical)))
+                                raw._rawio, segment._logical, daemon._serve)))
 """
 
 
@@ -28,13 +29,13 @@ def probe(**env: str) -> str:
 
 
 def test_pure_python_switches_every_compiled_path_off() -> None:
-    assert probe(ECATSIM_PURE_PYTHON="1") == "False False False False False"
+    assert probe(ECATSIM_PURE_PYTHON="1") == "False False False False False False"
 
 
 def test_compiled_paths_are_used_where_built() -> None:
     got = probe()
-    if got != "True True True True True":
-        msg = f"not every extension was built (servo, drive, cycle, rawio, logical: {got})"
+    if got != "True True True True True True":
+        msg = f"not every extension was built (servo, drive, cycle, rawio, logical, serve: {got})"
         if os.environ.get("CI"):
             pytest.fail(msg, pytrace=False)
         pytest.skip(msg)
