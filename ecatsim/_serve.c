@@ -2,12 +2,15 @@
  * cyclic frame's walk and the send in one call, with no Python run between the frame's
  * arrival and its reply.
  *
- * serve(fd, others, buf, rx_copy, deadline_ns, busy, seg, t_rx) -> (code, n, t_rx, p)
+ * serve(fd, others, buf, rx_copy, deadline_ns, busy, seg, t_rx, timer_fd)
+ *     -> (code, n, t_rx, p)
  *   fd: the RawLink socket; others: fds that end the wait when readable (wake pipe,
  *   control socket); buf, rx_copy: bytearrays of equal size; deadline_ns: host monotonic
  *   time at which the wait ends; busy: spin instead of sleeping in ppoll(2); seg: the
  *   Segment, or None to only wait and receive; t_rx: the frame's arrival time (host
- *   monotonic ns), 0: from the kernel's receive time stamp (tests give the time).
+ *   monotonic ns), 0: from the kernel's receive time stamp (tests give the time);
+ *   timer_fd: from timer(), armed once per deadline and watched with the rest, or -1 (a
+ *   ppoll timeout instead).
  *
  *   code TIMEOUT: the deadline came with no frame waiting.
  *        WAKE:    one of ``others`` is readable, or a signal came (its handler has run).
@@ -36,7 +39,9 @@
 #include <sched.h>
 #include <stdint.h>
 #include <string.h>
+#include <sys/timerfd.h>
 #include <time.h>
+#include <unistd.h>
 
 #include "esc/_logical.h"
 #include "link/_rawio.h"
@@ -58,6 +63,7 @@ enum { TIMEOUT = 0, WAKE = 1, FRAME = 2, REPLIED = 3, RESUME = 4 };
 #define DC_SYSTEM_TIME 0x0910
 #define DC_SYSTEM_TIME_OFFSET 0x0920
 #define MAX_WATCH 8
+#define MAX_TIMER_FD 4096
 /* a receive time stamp older than this: the wall clock was stepped (raw.py MAX_RX_AGE_NS) */
 #define MAX_RX_AGE_NS 1000000000LL
 /* busy mode: spins between two looks at ``others`` */
@@ -416,9 +422,33 @@ done:
     return rc;
 }
 
-/* Wait for a frame (or the deadline, or ``others``) and receive it: n > 0, or -code. */
-static long wait_frame(int fd, struct pollfd *pfd, int nothers, uint8_t *buf, long cap,
-                       long long deadline, int busy, long long *stamp)
+/* The deadline each timer fd (from timer()) is armed for; -1: not armed. */
+static long long armed[MAX_TIMER_FD];
+
+/* Arm timer fd ``tfd`` for ``deadline`` (absolute, CLOCK_MONOTONIC) unless it already is:
+ * the kernel's timer is programmed once per deadline, not once per wait. -1 on error. */
+static int arm(int tfd, long long deadline)
+{
+    if (armed[tfd] == deadline)
+        return 0;
+    struct itimerspec its;
+    memset(&its, 0, sizeof its);
+    its.it_value.tv_sec = (time_t)(deadline / 1000000000LL);
+    its.it_value.tv_nsec = (long)(deadline % 1000000000LL);
+    if (its.it_value.tv_sec == 0 && its.it_value.tv_nsec == 0)
+        its.it_value.tv_nsec = 1; /* all zero would disarm it */
+    if (timerfd_settime(tfd, TFD_TIMER_ABSTIME, &its, NULL) < 0)
+        return -1;
+    armed[tfd] = deadline;
+    return 0;
+}
+
+/* Wait for a frame (or the deadline, or ``others``) and receive it: n > 0, or -code.
+ * pfd: the link, ``others``, then the timer fd if tfd >= 0. With a timer fd the wait has
+ * no timeout of its own: ppoll(2) with a timeout arms and cancels a kernel timer on every
+ * call, which costs about 10 us per frame in a VM (decision P9). */
+static long wait_frame(int fd, struct pollfd *pfd, int nothers, int tfd, uint8_t *buf,
+                       long cap, long long deadline, int busy, long long *stamp)
 {
     for (int spin = 0;; spin++) {
         long n = raw_recv(fd, buf, cap, MSG_DONTWAIT, stamp);
@@ -439,6 +469,21 @@ static long wait_frame(int fd, struct pollfd *pfd, int nothers, uint8_t *buf, lo
             if (spin % BUSY_SPINS || nothers == 0)
                 continue;
             rc = poll(pfd + 1, (nfds_t)nothers, 0);
+        } else if (tfd >= 0) {
+            if (arm(tfd, deadline) < 0) {
+                PyErr_SetFromErrno(PyExc_OSError);
+                return -1000;
+            }
+            Py_BEGIN_ALLOW_THREADS
+            rc = ppoll(pfd, (nfds_t)(nothers + 2), NULL, NULL);
+            Py_END_ALLOW_THREADS
+            if (rc > 0 && pfd[nothers + 1].revents) {
+                uint64_t expirations;
+                if (read(tfd, &expirations, sizeof expirations) < 0 && errno != EAGAIN) {
+                    PyErr_SetFromErrno(PyExc_OSError);
+                    return -1000;
+                }
+            }
         } else {
             struct timespec ts = {(time_t)(left / 1000000000LL), (long)(left % 1000000000LL)};
             Py_BEGIN_ALLOW_THREADS
@@ -460,25 +505,47 @@ static long wait_frame(int fd, struct pollfd *pfd, int nothers, uint8_t *buf, lo
     }
 }
 
+/* timer() -> fd: a timer fd for serve()'s deadlines (the caller closes it). */
+static PyObject *timer(PyObject *self, PyObject *noargs)
+{
+    (void)self;
+    (void)noargs;
+    int tfd = timerfd_create(CLOCK_MONOTONIC, TFD_NONBLOCK | TFD_CLOEXEC);
+    if (tfd < 0)
+        return PyErr_SetFromErrno(PyExc_OSError);
+    if (tfd >= MAX_TIMER_FD) {
+        close(tfd);
+        PyErr_SetString(PyExc_OSError, "timer fd number too large");
+        return NULL;
+    }
+    armed[tfd] = -1;
+    return PyLong_FromLong(tfd);
+}
+
 static PyObject *serve(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     (void)self;
-    if (nargs != 8 || !PyTuple_Check(args[1]) || !PyByteArray_Check(args[2]) ||
+    if (nargs != 9 || !PyTuple_Check(args[1]) || !PyByteArray_Check(args[2]) ||
         !PyByteArray_Check(args[3]) ||
         PyByteArray_GET_SIZE(args[3]) < PyByteArray_GET_SIZE(args[2])) {
         PyErr_SetString(PyExc_TypeError,
                         "serve(fd, others: tuple, buf: bytearray, rx_copy: bytearray, "
-                        "deadline_ns, busy, seg, t_rx)");
+                        "deadline_ns, busy, seg, t_rx, timer_fd)");
         return NULL;
     }
     int fd = (int)PyLong_AsLong(args[0]);
     long long deadline = PyLong_AsLongLong(args[4]);
     int busy = PyObject_IsTrue(args[5]);
     long long t_given = PyLong_AsLongLong(args[7]);
+    int tfd = (int)PyLong_AsLong(args[8]);
     if (PyErr_Occurred() || busy < 0)
         return NULL;
+    if (tfd >= MAX_TIMER_FD) {
+        PyErr_SetString(PyExc_ValueError, "timer_fd: not from timer()");
+        return NULL;
+    }
     PyObject *seg = args[6];
-    struct pollfd pfd[MAX_WATCH + 1];
+    struct pollfd pfd[MAX_WATCH + 2];
     Py_ssize_t nothers = PyTuple_GET_SIZE(args[1]);
     if (nothers > MAX_WATCH) {
         PyErr_SetString(PyExc_ValueError, "too many fds to watch");
@@ -491,12 +558,15 @@ static PyObject *serve(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         pfd[i + 1].events = POLLIN;
         pfd[i + 1].revents = 0;
     }
+    pfd[nothers + 1].fd = tfd;
+    pfd[nothers + 1].events = POLLIN;
+    pfd[nothers + 1].revents = 0;
     if (PyErr_Occurred())
         return NULL;
     uint8_t *buf = (uint8_t *)PyByteArray_AS_STRING(args[2]);
     long cap = (long)PyByteArray_GET_SIZE(args[2]);
     long long stamp = 0;
-    long n = wait_frame(fd, pfd, (int)nothers, buf, cap, deadline, busy, &stamp);
+    long n = wait_frame(fd, pfd, (int)nothers, tfd, buf, cap, deadline, busy, &stamp);
     if (n == -1000)
         return NULL;
     if (n <= 0)
@@ -521,7 +591,9 @@ static PyObject *serve(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 
 static PyMethodDef methods[] = {
     {"serve", (PyCFunction)(void (*)(void))serve, METH_FASTCALL,
-     "serve(fd, others, buf, rx_copy, deadline_ns, busy, seg, t_rx) -> (code, n, t_rx, p)."},
+     "serve(fd, others, buf, rx_copy, deadline_ns, busy, seg, t_rx, timer_fd) -> "
+     "(code, n, t_rx, p)."},
+    {"timer", timer, METH_NOARGS, "timer() -> fd: a timer fd for serve()'s deadlines."},
     {NULL, NULL, 0, NULL},
 };
 

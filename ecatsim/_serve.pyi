@@ -17,5 +17,7 @@ def serve(
     busy: bool,
     seg: Segment | None,
     t_rx: int,
+    timer_fd: int,
     /,
 ) -> tuple[int, int, int, int]: ...
+def timer() -> int: ...

@@ -91,6 +91,8 @@ class Daemon:
         self.compiled = True
         #: the frame as received, kept by the compiled responder for the recorder
         self._rx_copy = bytearray(MAX_FRAME)
+        #: the compiled responder's timer fd (armed once per deadline), made on first use
+        self._timer_fd = -1
         self.failures = 0
         self.replies = 0
         #: replies the compiled responder sent (served whole in C)
@@ -281,11 +283,21 @@ class Daemon:
         Returns the responder's code (``_serve.REPLIED`` ...)."""
         srv = _serve
         assert srv is not None
+        if self._timer_fd < 0:
+            self._timer_fd = srv.timer()
         rx_copy = self._rx_copy
         seg = self.segment if self._fast_ok() else None
         try:
             code, n, t_rx, p = srv.serve(
-                self._fd, self._watch, buf, rx_copy, deadline_ns, self.busy_poll, seg, t_rx_ns
+                self._fd,
+                self._watch,
+                buf,
+                rx_copy,
+                deadline_ns,
+                self.busy_poll,
+                seg,
+                t_rx_ns,
+                self._timer_fd,
             )
         except OSError:
             raise  # the socket failed: as from link.recv_into
@@ -370,7 +382,9 @@ class Daemon:
 
     def close(self) -> None:
         self.link.close()
-        for f in (self._wake_r, self._wake_w):
+        for f in (self._wake_r, self._wake_w, self._timer_fd):
+            if f < 0:
+                continue
             try:
                 os.close(f)
             except OSError:

@@ -49,14 +49,67 @@ def test_codes(srv: ModuleType) -> None:
     )
 
 
-@pytest.mark.parametrize("busy", [False, True])
-def test_waits_until_the_deadline(srv: ModuleType, link: SocketLink, busy: bool) -> None:
-    buf, copy = bytearray(2048), bytearray(2048)
-    t0 = time.monotonic_ns()
-    code, n, _t, _p = srv.serve(link.fileno(), (), buf, copy, t0 + 20_000_000, busy, None, 0)
-    waited = time.monotonic_ns() - t0
-    assert (code, n) == (TIMEOUT, 0)
-    assert 20_000_000 <= waited < 2_000_000_000  # a wide guard, not a timing test
+@pytest.mark.parametrize(("busy", "timer"), [(False, False), (False, True), (True, False)])
+def test_waits_until_the_deadline(
+    srv: ModuleType, link: SocketLink, busy: bool, timer: bool
+) -> None:
+    """The wait ends at the deadline: a ppoll timeout, the timer fd (armed once per
+    deadline, so a second wait for the same deadline must still end), or spinning."""
+    tfd = srv.timer() if timer else -1
+    try:
+        buf, copy = bytearray(2048), bytearray(2048)
+        for _ in range(2):
+            t0 = time.monotonic_ns()
+            deadline = t0 + 20_000_000
+            code, n, _t, _p = srv.serve(link.fileno(), (), buf, copy, deadline, busy, None, 0, tfd)
+            waited = time.monotonic_ns() - t0
+            assert (code, n) == (TIMEOUT, 0)
+            assert 20_000_000 <= waited < 2_000_000_000  # a wide guard, not a timing test
+        # the same deadline again, now passed: no wait at all
+        code, *_ = srv.serve(link.fileno(), (), buf, copy, deadline, busy, None, 0, tfd)
+        assert code == TIMEOUT
+    finally:
+        if tfd >= 0:
+            os.close(tfd)
+
+
+def test_timer_armed_once_per_deadline(srv: ModuleType, link: SocketLink) -> None:
+    """A wait that another descriptor ended leaves the timer armed: the next wait for the
+    same deadline is not re-armed and still ends at it."""
+    tfd = srv.timer()
+    r, w = os.pipe()
+    try:
+        buf, copy = bytearray(2048), bytearray(2048)
+        deadline = time.monotonic_ns() + 30_000_000
+        os.write(w, b"x")
+        code, *_ = srv.serve(link.fileno(), (r,), buf, copy, deadline, False, None, 0, tfd)
+        assert code == WAKE
+        os.read(r, 1)
+        code, *_ = srv.serve(link.fileno(), (r,), buf, copy, deadline, False, None, 0, tfd)
+        assert code == TIMEOUT
+        assert deadline <= time.monotonic_ns() < deadline + 2_000_000_000
+    finally:
+        for f in (r, w, tfd):
+            os.close(f)
+
+
+def test_a_frame_ends_a_timer_wait(srv: ModuleType, link: SocketLink) -> None:
+    """Blocked on the timer fd with a far deadline, a frame from another thread ends the
+    wait at once."""
+    tfd = srv.timer()
+    frame = dg.ethernet_frame([dg.build(dg.Cmd.BRD, 0, 0x0130, bytes(2))])
+    sender = threading.Timer(0.05, link.master_send, (frame,))
+    try:
+        sender.start()
+        t0 = time.monotonic_ns()
+        code, n, _t, _p = srv.serve(
+            link.fileno(), (), bytearray(2048), bytearray(2048), t0 + 10**10, False, None, 0, tfd
+        )
+        assert (code, n) == (FRAME, len(frame))
+        assert time.monotonic_ns() - t0 < 5 * 10**9
+    finally:
+        sender.join()
+        os.close(tfd)
 
 
 @pytest.mark.parametrize("busy", [False, True])
@@ -66,7 +119,7 @@ def test_another_descriptor_ends_the_wait(srv: ModuleType, link: SocketLink, bus
         os.write(w, b"x")
         t0 = time.monotonic_ns()
         code, _n, _t, _p = srv.serve(
-            link.fileno(), (r,), bytearray(64), bytearray(64), t0 + 10**10, busy, None, 0
+            link.fileno(), (r,), bytearray(64), bytearray(64), t0 + 10**10, busy, None, 0, -1
         )
         assert code == WAKE
         assert time.monotonic_ns() - t0 < 5 * 10**9
@@ -81,7 +134,7 @@ def test_a_frame_waiting_comes_before_the_deadline(srv: ModuleType, link: Socket
     link.master_send(frame)
     buf, copy = bytearray(2048), bytearray(2048)
     before = time.monotonic_ns()
-    code, n, t_rx, p = srv.serve(link.fileno(), (), buf, copy, 0, False, None, 0)
+    code, n, t_rx, p = srv.serve(link.fileno(), (), buf, copy, 0, False, None, 0, -1)
     assert (code, n, p) == (FRAME, len(frame), 0)
     assert bytes(buf[:n]) == frame
     assert before - 10**9 < t_rx <= time.monotonic_ns()
@@ -91,9 +144,13 @@ def test_a_frame_waiting_comes_before_the_deadline(srv: ModuleType, link: Socket
 
 def test_bad_arguments_raise(srv: ModuleType, link: SocketLink) -> None:
     with pytest.raises(TypeError):
-        srv.serve(link.fileno(), (), bytearray(64), bytearray(8), 0, False, None, 0)
+        srv.serve(link.fileno(), (), bytearray(64), bytearray(8), 0, False, None, 0, -1)
     with pytest.raises(ValueError):
-        srv.serve(link.fileno(), tuple(range(9)), bytearray(64), bytearray(64), 0, False, None, 0)
+        srv.serve(
+            link.fileno(), tuple(range(9)), bytearray(64), bytearray(64), 0, False, None, 0, -1
+        )
+    with pytest.raises(ValueError):
+        srv.serve(link.fileno(), (), bytearray(64), bytearray(64), 0, False, None, 0, 1 << 20)
 
 
 def test_daemon_run_serves_through_the_responder(srv: ModuleType, link: SocketLink) -> None:
