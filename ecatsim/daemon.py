@@ -38,7 +38,7 @@ _serve = available(_serve)  # ECATSIM_PURE_PYTHON=1: the reference only
 log = structlog.get_logger("ecatsim.daemon")
 
 MAX_FRAME = 2048
-IDLE_TIMEOUT_S = 0.2
+#: the longest the loop sleeps with no timer due
 IDLE_TIMEOUT_NS = 200_000_000
 #: prctl(2) option: the slack the kernel may add to this thread's timer expiries
 PR_SET_TIMERSLACK = 29
@@ -252,7 +252,7 @@ class Daemon:
                     self._service_timers()
                 continue
             deadline = self._deadline()
-            timeout = IDLE_TIMEOUT_S
+            timeout = IDLE_TIMEOUT_NS / 1e9
             if deadline is not None:
                 timeout = max(0.0, min(timeout, (deadline - clock.now_ns()) / 1e9))
             # select(2), not poll(2): poll's timeout is in whole milliseconds, which would
@@ -303,7 +303,7 @@ class Daemon:
             raise  # the socket failed: as from link.recv_into
         except Exception as exc:  # the loop never dies on a frame
             self._failure("process", exc)
-            return int(srv.FRAME)  # handled: counted as a failure
+            return int(srv.FRAME)  # the frame was handled: by a failure, as in handle_frame
         if code == srv.REPLIED:
             self.recorder.record(rx_copy, n)
             self.replies += 1
