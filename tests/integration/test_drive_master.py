@@ -214,7 +214,7 @@ def test_csp_sine_with_dc_sync0(master_factory: Any, daemon_factory: Any, tmp_pa
     # demand jumps, on real drives too. Each such interval in the last 150 cycles (7
     # position-loop time constants) adds one demand step to the bound; cycles with more
     # than 5 of them are not judged.
-    judged: list[tuple[int, float]] = []
+    judged: list[tuple[int, float, int]] = []  # (error, bound, cycle)
     anomalies: list[int] = []
     window, max_anomalies = 150, 5
     interval_prev = (m.dc_time - sync0_start) // 1_000_000
@@ -234,7 +234,7 @@ def test_csp_sine_with_dc_sync0(master_factory: Any, daemon_factory: Any, tmp_pa
                 errors.append(err)
             recent = sum(anomalies[-window:])
             if k > window and recent <= max_anomalies:
-                judged.append((err, bound + step * recent))
+                judged.append((err, bound + step * recent, k))
     finally:
         gc.enable()
         os.sched_setscheduler(0, old_policy, old_param)
@@ -245,7 +245,7 @@ def test_csp_sine_with_dc_sync0(master_factory: Any, daemon_factory: Any, tmp_pa
         f"the master met its schedule in only {len(judged)} of {k} cycles "
         f"({sum(1 for a in anomalies if a)} SYNC0 intervals without exactly one frame)"
     )
-    over = [(e, round(b)) for e, b in judged if e > b]
+    over = [(e, round(b), f"cycle {c}", anomalies[c - 10 : c]) for e, b, c in judged if e > b]
     assert not over, (len(judged), over[:10])
     diff = struct.unpack("<I", m.slaves[1]._fprd(0x092C, 4))[0] & 0x7FFFFFFF
     assert diff < 1000  # ns
