@@ -18,7 +18,8 @@
  *        WAKE:    one of ``others`` is readable, or a signal came (its handler has run).
  *        FRAME:   a frame is in buf[:n], received at t_rx, untouched: Python serves it
  *                 (Daemon.handle_frame). Every frame this module does not serve whole goes
- *                 there before anything is changed.
+ *                 there before any state is changed (at most seg.irq is refreshed first,
+ *                 as Segment._refresh would refresh it).
  *        REPLIED: the frame (as received: rx_copy[:n]) was processed and its reply sent.
  *        RESUME:  the datagrams before offset p are processed (rx_copy[:n] as received);
  *                 Segment.resume walks the rest and Python replies.
@@ -455,6 +456,18 @@ static int other_threads(void)
     return t != NULL && (t != me || PyThreadState_Next(t) != NULL);
 }
 
+/* ppoll(2), with the GIL released only if another Python thread could use it. */
+static int wait_fds(struct pollfd *pfd, nfds_t n, const struct timespec *ts)
+{
+    int rc;
+    if (!other_threads())
+        return ppoll(pfd, n, ts, NULL);
+    Py_BEGIN_ALLOW_THREADS
+    rc = ppoll(pfd, n, ts, NULL);
+    Py_END_ALLOW_THREADS
+    return rc;
+}
+
 /* Wait for a frame (or the deadline, or ``others``) and receive it: n > 0, or -code.
  * pfd: the link, ``others``, then the timer fd if tfd >= 0. With a timer fd the wait has
  * no timeout of its own: ppoll(2) with a timeout arms and cancels a kernel timer on every
@@ -486,13 +499,7 @@ static long wait_frame(int fd, struct pollfd *pfd, int nothers, int tfd, uint8_t
                 PyErr_SetFromErrno(PyExc_OSError);
                 return -1000;
             }
-            if (other_threads()) {
-                Py_BEGIN_ALLOW_THREADS
-                rc = ppoll(pfd, (nfds_t)(nothers + 2), NULL, NULL);
-                Py_END_ALLOW_THREADS
-            } else {
-                rc = ppoll(pfd, (nfds_t)(nothers + 2), NULL, NULL);
-            }
+            rc = wait_fds(pfd, (nfds_t)(nothers + 2), NULL);
             if (rc > 0 && pfd[nothers + 1].revents) {
                 uint64_t expirations;
                 if (read(tfd, &expirations, sizeof expirations) < 0 && errno != EAGAIN) {
@@ -502,13 +509,7 @@ static long wait_frame(int fd, struct pollfd *pfd, int nothers, int tfd, uint8_t
             }
         } else {
             struct timespec ts = {(time_t)(left / 1000000000LL), (long)(left % 1000000000LL)};
-            if (other_threads()) {
-                Py_BEGIN_ALLOW_THREADS
-                rc = ppoll(pfd, (nfds_t)(nothers + 1), &ts, NULL);
-                Py_END_ALLOW_THREADS
-            } else {
-                rc = ppoll(pfd, (nfds_t)(nothers + 1), &ts, NULL);
-            }
+            rc = wait_fds(pfd, (nfds_t)(nothers + 1), &ts);
         }
         if (rc < 0) {
             if (errno != EINTR) {
