@@ -4,6 +4,8 @@
 #ifndef ECATSIM_ATTR_H
 #define ECATSIM_ATTR_H
 #include <Python.h>
+#include <stdint.h>
+#include <structmember.h>
 
 /* One attribute name to intern at module init. */
 typedef struct {
@@ -21,9 +23,76 @@ static inline int intern_names(const Name *names, size_t n)
     return 0;
 }
 
+/* Where a __slots__ attribute lives in an object, found once per (name, type) through
+ * the type's member descriptor and kept while the type is unchanged (its version tag):
+ * the compiled paths read their state after a sleep, when every line is a cache miss,
+ * and a slot read touches two lines where PyObject_GetAttr touches about ten. */
+typedef struct {
+    PyObject *name;
+    PyTypeObject *type;
+    unsigned int version;
+    Py_ssize_t offset;
+} SlotCache;
+
+#define SLOT_CACHE_SIZE 256
+static SlotCache slot_cache[SLOT_CACHE_SIZE];
+
+/* The slot of ``name`` in ``o``, or NULL: not a plain __slots__ member (Python's lookup
+ * then decides, errors included). */
+static inline PyObject **slot_of(PyObject *o, PyObject *name)
+{
+    PyTypeObject *t = Py_TYPE(o);
+    SlotCache *c = &slot_cache[((uintptr_t)name >> 4) % SLOT_CACHE_SIZE];
+    if (c->name == name && c->type == t && c->version == t->tp_version_tag && c->version)
+        return (PyObject **)((char *)o + c->offset);
+    PyObject *d = _PyType_Lookup(t, name);
+    if (d == NULL || !Py_IS_TYPE(d, &PyMemberDescr_Type) ||
+        !PyType_HasFeature(t, Py_TPFLAGS_VALID_VERSION_TAG))
+        return NULL;
+    PyMemberDef *m = ((PyMemberDescrObject *)d)->d_member;
+    if (m->type != T_OBJECT_EX || (m->flags & READONLY))
+        return NULL;
+    c->name = name;
+    c->type = t;
+    c->version = t->tp_version_tag;
+    c->offset = m->offset;
+    return (PyObject **)((char *)o + m->offset);
+}
+
+/* getattr(o, name): a new reference, or NULL with the exception set. */
+static inline PyObject *get_attr(PyObject *o, PyObject *name)
+{
+    PyObject **p = slot_of(o, name);
+    if (p != NULL && *p != NULL) {
+        Py_INCREF(*p);
+        return *p;
+    }
+    return PyObject_GetAttr(o, name);
+}
+
+/* setattr(o, name, v): 0, or -1 with the exception set. */
+static inline int set_attr(PyObject *o, PyObject *name, PyObject *v)
+{
+    PyObject **p = slot_of(o, name);
+    if (p == NULL)
+        return PyObject_SetAttr(o, name, v);
+    PyObject *old = *p;
+    Py_INCREF(v);
+    *p = v;
+    Py_XDECREF(old);
+    return 0;
+}
+
 /* An int attribute; on failure 0, with *err set and the exception pending. */
 static inline long get_long(PyObject *o, PyObject *name, int *err)
 {
+    PyObject **p = slot_of(o, name);
+    if (p != NULL && *p != NULL && PyLong_CheckExact(*p)) {
+        int overflow;
+        long x = PyLong_AsLongAndOverflow(*p, &overflow);
+        if (!overflow)
+            return x;
+    }
     PyObject *v = PyObject_GetAttr(o, name);
     if (v == NULL) {
         *err = 1;
@@ -38,6 +107,9 @@ static inline long get_long(PyObject *o, PyObject *name, int *err)
 
 static inline int get_bool(PyObject *o, PyObject *name, int *err)
 {
+    PyObject **p = slot_of(o, name);
+    if (p != NULL && (*p == Py_True || *p == Py_False))
+        return *p == Py_True;
     PyObject *v = PyObject_GetAttr(o, name);
     if (v == NULL) {
         *err = 1;
@@ -55,7 +127,7 @@ static inline int set_long(PyObject *o, PyObject *name, long long x)
     PyObject *v = PyLong_FromLongLong(x);
     if (v == NULL)
         return -1;
-    int rc = PyObject_SetAttr(o, name, v);
+    int rc = set_attr(o, name, v);
     Py_DECREF(v);
     return rc;
 }

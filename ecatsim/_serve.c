@@ -113,7 +113,7 @@ static inline void wr64(uint8_t *m, long a, uint64_t v)
 /* An attribute that must be a bytearray of at least ``size`` bytes (new reference). */
 static PyObject *get_bytearray(PyObject *o, PyObject *name, Py_ssize_t size)
 {
-    PyObject *v = PyObject_GetAttr(o, name);
+    PyObject *v = get_attr(o, name);
     if (v != NULL && (!PyByteArray_Check(v) || PyByteArray_GET_SIZE(v) < size)) {
         Py_DECREF(v);
         PyErr_SetString(PyExc_TypeError, "expected a bytearray");
@@ -133,7 +133,7 @@ typedef struct {
  * (FRAME), -1 error. */
 static int frmw_resolve(PyObject *seg, unsigned adp, long dlen, long reach, Frmw *f)
 {
-    PyObject *amap = PyObject_GetAttr(seg, s_addr_map);
+    PyObject *amap = get_attr(seg, s_addr_map);
     if (amap == NULL)
         return -1;
     PyObject *key = PyLong_FromLong((long)adp);
@@ -156,7 +156,7 @@ static int frmw_resolve(PyObject *seg, unsigned adp, long dlen, long reach, Frmw
     Py_DECREF(amap);
     if (ok <= 0 || f->reader >= reach)
         return ok;
-    PyObject *escs = PyObject_GetAttr(seg, s_escs);
+    PyObject *escs = get_attr(seg, s_escs);
     if (escs == NULL)
         return -1;
     if (!PyList_Check(escs) || f->reader < 0 || f->reader >= PyList_GET_SIZE(escs)) {
@@ -165,7 +165,7 @@ static int frmw_resolve(PyObject *seg, unsigned adp, long dlen, long reach, Frmw
     }
     f->esc = PyList_GET_ITEM(escs, f->reader);
     Py_DECREF(escs); /* the segment keeps the list and the ESC */
-    PyObject *wins = PyObject_GetAttr(f->esc, s_sm_windows);
+    PyObject *wins = get_attr(f->esc, s_sm_windows);
     if (wins == NULL)
         return -1;
     if (!PyTuple_Check(wins)) {
@@ -195,13 +195,13 @@ static int frmw_resolve(PyObject *seg, unsigned adp, long dlen, long reach, Frmw
  * Ref: TMC8460 §5.50.2 Table 95, §5.50.3 Table 96. */
 static int system_time_read(PyObject *esc, long long t_ns, uint8_t *data, long dlen)
 {
-    PyObject *dc = PyObject_GetAttr(esc, s_dc);
+    PyObject *dc = get_attr(esc, s_dc);
     if (dc == NULL)
         return -1;
     PyObject *mem = get_bytearray(esc, s_mem, MEM_SIZE);
-    PyObject *lref = PyObject_GetAttr(dc, s_local_ref);
-    PyObject *tref = PyObject_GetAttr(dc, s_t_ref);
-    PyObject *spdo = PyObject_GetAttr(dc, s_spd);
+    PyObject *lref = get_attr(dc, s_local_ref);
+    PyObject *tref = get_attr(dc, s_t_ref);
+    PyObject *spdo = get_attr(dc, s_spd);
     int err = 0;
     long position = get_long(dc, s_position, &err);
     long hop = get_long(dc, s_hop_ns, &err);
@@ -279,7 +279,7 @@ static int settle(PyObject *seg, PyObject *ctx, long reach, long *irq, int with_
         return 1;
     if (!get_bool(ctx, s_irq_dirty, &err))
         return err ? -1 : 0;
-    PyObject *escs = PyObject_GetAttr(seg, s_escs);
+    PyObject *escs = get_attr(seg, s_escs);
     if (escs == NULL)
         return -1;
     if (!PyList_Check(escs) || PyList_GET_SIZE(escs) < reach) {
@@ -290,7 +290,7 @@ static int settle(PyObject *seg, PyObject *ctx, long reach, long *irq, int with_
     for (long i = 0; i < reach && !err; i++)
         v |= get_long(PyList_GET_ITEM(escs, i), s_ecat_irq, &err);
     Py_DECREF(escs);
-    if (err || PyObject_SetAttr(ctx, s_irq_dirty, Py_False) < 0 || set_long(seg, s_irq, v) < 0)
+    if (err || set_attr(ctx, s_irq_dirty, Py_False) < 0 || set_long(seg, s_irq, v) < 0)
         return -1;
     *irq = v;
     return 0;
@@ -313,7 +313,7 @@ static int walk(PyObject *seg, uint8_t *b, long n, long long t_rx, long *p_out)
     long end = off + ECAT_HEADER_LEN + (hdr & LEN_MASK);
     if ((hdr >> 12) != 1 || end > n)
         return FRAME;
-    PyObject *ctx = PyObject_GetAttr(seg, s_ctx);
+    PyObject *ctx = get_attr(seg, s_ctx);
     if (ctx == NULL)
         return -1;
     int err = 0;
@@ -321,7 +321,7 @@ static int walk(PyObject *seg, uint8_t *b, long n, long long t_rx, long *p_out)
     long reach = get_long(seg, s_reach, &err), irq = get_long(seg, s_irq, &err);
     long dc_pending = get_long(seg, s_dc_pending, &err);
     int closed = get_bool(seg, s_port0_closed, &err);
-    PyObject *hinto = err ? NULL : PyObject_GetAttr(seg, s_pulse_hint);
+    PyObject *hinto = err ? NULL : get_attr(seg, s_pulse_hint);
     if (hinto != NULL) {
         hint = PyLong_AsLongLong(hinto);
         Py_DECREF(hinto);
@@ -370,7 +370,7 @@ static int walk(PyObject *seg, uint8_t *b, long n, long long t_rx, long *p_out)
         rc = -1;
         goto done;
     }
-    PyObject *logical = PyObject_GetAttr(seg, s_logical);
+    PyObject *logical = get_attr(seg, s_logical);
     if (logical == NULL || !PyList_Check(logical)) {
         if (logical != NULL)
             PyErr_SetString(PyExc_TypeError, "Segment.logical must be a list");

@@ -50,6 +50,34 @@ class Serviceable(Protocol):
 class Segment:
     """N slaves in wire order; one call per received frame."""
 
+    #: fixed attributes: the compiled paths read them as slots (ecatsim/_attr.h)
+    __slots__ = (
+        "_dc_after",
+        "_dc_before",
+        "_dc_pending",
+        "_dc_reach",
+        "_dc_reader",
+        "_next_sync",
+        "_pulse_hint",
+        "_sync_escs",
+        "addr_map",
+        "bad_frames",
+        "clock",
+        "compiled",
+        "ctx",
+        "escs",
+        "firmware",
+        "frames",
+        "irq",
+        "logical",
+        "persist",
+        "port0_closed",
+        "reach",
+        "reply_first",
+        "sync0_late_ns",
+        "sync0_ticks",
+    )
+
     def __init__(
         self,
         escs: Sequence[Esc],

@@ -70,7 +70,7 @@ static int entry_int(PyObject *entry, long long *out)
     *out = 0;
     if (entry == Py_None)
         return 0;
-    PyObject *v = PyObject_GetAttr(entry, s_value);
+    PyObject *v = get_attr(entry, s_value);
     if (v == NULL)
         return -1;
     int rc = 0;
@@ -88,7 +88,7 @@ static int entry_int(PyObject *entry, long long *out)
 
 static int get_double(PyObject *o, PyObject *name, double *out)
 {
-    PyObject *v = PyObject_GetAttr(o, name);
+    PyObject *v = get_attr(o, name);
     if (v == NULL)
         return -1;
     *out = PyFloat_AsDouble(v);
@@ -99,7 +99,7 @@ static int get_double(PyObject *o, PyObject *name, double *out)
 /* An int attribute; 1 if it does not fit a long long. */
 static int get_ll(PyObject *o, PyObject *name, long long *out)
 {
-    PyObject *v = PyObject_GetAttr(o, name);
+    PyObject *v = get_attr(o, name);
     if (v == NULL)
         return -1;
     int over = 0;
@@ -115,7 +115,7 @@ static int set_double(PyObject *o, PyObject *name, double x)
     PyObject *v = PyFloat_FromDouble(x);
     if (v == NULL)
         return -1;
-    int rc = PyObject_SetAttr(o, name, v);
+    int rc = set_attr(o, name, v);
     Py_DECREF(v);
     return rc;
 }
@@ -175,31 +175,31 @@ static PyObject *step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 
     /* ---- preconditions: read only */
     PyObject *o;
-    o = PyObject_GetAttr(drive, s_tracer);
+    o = get_attr(drive, s_tracer);
     if (o == NULL)
         return NULL;
     int tracer = o != Py_None;
     Py_DECREF(o);
-    o = PyObject_GetAttr(drive, s_index_output);
+    o = get_attr(drive, s_index_output);
     if (o == NULL)
         return NULL;
     int index_out = o != Py_None;
     Py_DECREF(o);
     if (tracer)
         Py_RETURN_FALSE;
-    o = PyObject_GetAttr(drive, s_state);
+    o = get_attr(drive, s_state);
     if (o == NULL)
         return NULL;
     int enabled = o == ITEM(F_OE);
     Py_DECREF(o);
-    o = PyObject_GetAttr(drive, s_al_state);
+    o = get_attr(drive, s_al_state);
     if (o == NULL)
         return NULL;
     int al_op = o == ITEM(F_AL_OP);
     Py_DECREF(o);
     if (!enabled || !al_op)
         Py_RETURN_FALSE;
-    o = PyObject_GetAttr(drive, s_active_faults);
+    o = get_attr(drive, s_active_faults);
     if (o == NULL)
         return NULL;
     Py_ssize_t faults = PyObject_Size(o);
@@ -212,7 +212,7 @@ static PyObject *step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         return rc < 0 ? NULL : (Py_INCREF(Py_False), Py_False);
     if (mode != CSP && mode != CSV && mode != CST)
         Py_RETURN_FALSE;
-    o = PyObject_GetAttr(drive, s_t_ns);
+    o = get_attr(drive, s_t_ns);
     if (o == NULL)
         return NULL;
     int no_time = o == Py_None;
@@ -222,7 +222,7 @@ static PyObject *step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     if ((rc = get_ll(drive, s_t_ns, &t_ns)) != 0 || (rc = get_ll(drive, s_prev_cw, &prev_cw)) != 0 ||
         (rc = get_ll(drive, s_fault_code, &fault_code)) != 0)
         return rc < 0 ? NULL : (Py_INCREF(Py_False), Py_False);
-    o = PyObject_GetAttr(servo, s_compiled);
+    o = get_attr(servo, s_compiled);
     if (o == NULL)
         return NULL;
     int servo_compiled = PyObject_IsTrue(o);
@@ -321,10 +321,10 @@ static PyObject *step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     int new_ff = 0, new_target = 0;
     if (outputs && mode == CSP) {
         double target = (double)target_607a;
-        PyObject *lt = PyObject_GetAttr(drive, s_last_target);
+        PyObject *lt = get_attr(drive, s_last_target);
         if (lt == NULL)
             return NULL;
-        PyObject *ltn = PyObject_GetAttr(drive, s_last_t_ns);
+        PyObject *ltn = get_attr(drive, s_last_t_ns);
         if (ltn == NULL) {
             Py_DECREF(lt);
             return NULL;
@@ -397,7 +397,7 @@ static PyObject *step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         return NULL;
     if (new_target) {
         if (set_double(drive, s_last_target, last_target) < 0 ||
-            PyObject_SetAttr(drive, s_last_t_ns, now_obj) < 0)
+            set_attr(drive, s_last_t_ns, now_obj) < 0)
             return NULL;
     }
     if (outputs && set_long(drive, s_prev_cw, cw) < 0)

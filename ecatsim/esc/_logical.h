@@ -49,7 +49,7 @@ typedef struct {
 /* The event side of one ESC (Esc struct of _sm.h): new references in *e. */
 static int esc_open(Esc *e, PyObject *esc, PyObject **mem)
 {
-    *mem = PyObject_GetAttr(esc, s_mem);
+    *mem = get_attr(esc, s_mem);
     if (*mem == NULL)
         return -1;
     if (!PyByteArray_Check(*mem) || PyByteArray_GET_SIZE(*mem) < MEM_SIZE) {
@@ -58,13 +58,13 @@ static int esc_open(Esc *e, PyObject *esc, PyObject **mem)
     }
     e->m = (uint8_t *)PyByteArray_AS_STRING(*mem);
     e->esc = esc;
-    e->ctx = PyObject_GetAttr(esc, s_ctx);
+    e->ctx = get_attr(esc, s_ctx);
     if (e->ctx == NULL)
         return -1;
-    e->pending = PyObject_GetAttr(e->ctx, s_pending);
+    e->pending = get_attr(e->ctx, s_pending);
     if (e->pending == NULL)
         return -1;
-    e->position = PyObject_GetAttr(esc, s_position);
+    e->position = get_attr(esc, s_position);
     return e->position == NULL ? -1 : 0;
 }
 
@@ -81,7 +81,7 @@ static void esc_close(Esc *e, PyObject *mem)
  * §5.41 Table 55, §5.42 Table 56. */
 static int wd_pd_trigger(Esc *e)
 {
-    PyObject *wd = PyObject_GetAttr(e->esc, s_wd);
+    PyObject *wd = get_attr(e->esc, s_wd);
     if (wd == NULL)
         return -1;
     int err = 0;
@@ -189,7 +189,7 @@ static long logical_run(PyObject *escs, long cmd, long long lad, uint8_t *data,
     int nmaps = 0;
     Py_ssize_t n_escs = PyList_GET_SIZE(escs);
     for (Py_ssize_t k = 0; k < n_escs; k++) {
-        PyObject *fmmus = PyObject_GetAttr(PyList_GET_ITEM(escs, k), s_fmmus);
+        PyObject *fmmus = get_attr(PyList_GET_ITEM(escs, k), s_fmmus);
         if (fmmus == NULL)
             return LOGICAL_ERROR;
         if (!PyTuple_Check(fmmus)) {
@@ -218,7 +218,7 @@ static long logical_run(PyObject *escs, long cmd, long long lad, uint8_t *data,
                     return LOGICAL_ERROR;
                 return LOGICAL_DECLINED;
             }
-            PyObject *sm = PyObject_GetAttr(f, s_sm);
+            PyObject *sm = get_attr(f, s_sm);
             if (sm == NULL) {
                 Py_DECREF(fmmus);
                 return LOGICAL_ERROR;

@@ -151,7 +151,7 @@ static int irq_update(Esc *e)
     if (irq != cur) {
         if (set_long(e->esc, s_ecat_irq, irq) < 0)
             return -1;
-        if (PyObject_SetAttr(e->ctx, s_irq_dirty, Py_True) < 0)
+        if (set_attr(e->ctx, s_irq_dirty, Py_True) < 0)
             return -1;
     }
     return 0;
@@ -198,9 +198,9 @@ static int sm_store(Sm *sm)
     if (set_long(sm->obj, s_w, sm->w) < 0 || set_long(sm->obj, s_l, sm->l) < 0 ||
         set_long(sm->obj, s_r, sm->r) < 0 || set_long(sm->obj, s_status, sm->status) < 0)
         return -1;
-    if (PyObject_SetAttr(sm->obj, s_r_open, sm->r_open ? Py_True : Py_False) < 0)
+    if (set_attr(sm->obj, s_r_open, sm->r_open ? Py_True : Py_False) < 0)
         return -1;
-    return PyObject_SetAttr(sm->obj, s_w_open, sm->w_open ? Py_True : Py_False);
+    return set_attr(sm->obj, s_w_open, sm->w_open ? Py_True : Py_False);
 }
 
 #endif

@@ -160,6 +160,32 @@ def hook_names() -> set[str]:
 class Esc:
     """One TMC8460 ESC instance (64 KiB address space, 6 FMMUs, 6 SMs)."""
 
+    #: fixed attributes: the compiled paths read them as slots (ecatsim/_attr.h)
+    __slots__ = (
+        "_scratch",
+        "al_control_locked",
+        "ctx",
+        "dc",
+        "ecat_irq",
+        "eeprom",
+        "fmmus",
+        "link_down",
+        "mem",
+        "on_reset",
+        "pdram_ok",
+        "port0_open",
+        "port1_closed",
+        "position",
+        "reset_progress_frame",
+        "slaves_behind",
+        "sm",
+        "sm_windows",
+        "t",
+        "wd",
+        "wr_e",
+        "wr_s",
+    )
+
     def __init__(
         self,
         position: int,

@@ -122,7 +122,7 @@ static int unpack_rx(const uint8_t *buf, PyObject *entries, PyObject *layout)
         }
         if (v == NULL)
             return -1;
-        int rc = PyObject_SetAttr(PyTuple_GET_ITEM(entries, i), s_value, v);
+        int rc = set_attr(PyTuple_GET_ITEM(entries, i), s_value, v);
         Py_DECREF(v);
         if (rc < 0)
             return -1;
@@ -138,7 +138,7 @@ static int pack_tx(uint8_t *buf, PyObject *entries, PyObject *layout)
     Py_ssize_t n = PyTuple_GET_SIZE(entries);
     for (Py_ssize_t i = 0; i < n; i++) {
         char c = (char)lay[3 * i + 2];
-        PyObject *v = PyObject_GetAttr(PyTuple_GET_ITEM(entries, i), s_value);
+        PyObject *v = get_attr(PyTuple_GET_ITEM(entries, i), s_value);
         if (v == NULL)
             return -1;
         if (!PyLong_Check(v)) {
@@ -203,7 +203,7 @@ static PyObject *run(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         Py_RETURN_FALSE;
     if ((m[DC_ACTIVATION] & 0x03) != 0x03 || (m[DC_ACTIVATION_STATUS] & 0x01))
         Py_RETURN_FALSE; /* not DC synchronous with the pulses running */
-    PyObject *state = PyObject_GetAttr(fw, s_state);
+    PyObject *state = get_attr(fw, s_state);
     if (state == NULL)
         return NULL;
     int op = state == ITEM(C_OP);
