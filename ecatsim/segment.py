@@ -25,6 +25,12 @@ try:  # the compiled logical datagram (optional, decision P6)
 except ImportError:  # pragma: no cover - built without a C compiler
     _logical = None
 _logical = available(_logical)  # ECATSIM_PURE_PYTHON=1: the reference only
+_dcloop: ModuleType | None
+try:  # the compiled DC time loops of an FRMW of 0x0910 (optional, decision P11)
+    from ecatsim.esc import _dcloop
+except ImportError:  # pragma: no cover - built without a C compiler
+    _dcloop = None
+_dcloop = available(_dcloop)
 
 #: overdue SYNC0 pulses fired one by one before the rest are skipped (a stall this long,
 #: or a forward jump of the system time, is not caught up). Decision DC2.
@@ -260,6 +266,12 @@ class Segment:
         n = self._dc_pending
         if not n:
             return
+        if (
+            _dcloop is not None
+            and self.compiled
+            and _dcloop.time_loops(self, Esc._ew_dc_system_time)
+        ):
+            return  # every writer served compiled (decision P11)
         self._dc_pending = 0
         reader = self._dc_reader
         reach = self._dc_reach

@@ -1,4 +1,4 @@
-"""ECATSIM_PURE_PYTHON=1 switches every compiled path off (decisions P2-P6, P9), so the daemon
+"""ECATSIM_PURE_PYTHON=1 switches every compiled path off (decisions P2-P6, P9, P11), so the daemon
 runs the Python reference only; without it, every extension is in use where it was built.
 Ref: ecatsim/compiled.py."""
 
@@ -15,7 +15,7 @@ import ecatsim.device.servo as servo, ecatsim.device.drive as drive
 import ecatsim.slave.cycle as cycle, ecatsim.link.raw as raw, ecatsim.segment as segment
 import ecatsim.daemon as daemon
 print(*(m is not None for m in (servo._compiled, drive._compiled, cycle.compiled,
-                                raw._rawio, segment._logical, daemon._serve)))
+                                raw._rawio, segment._logical, daemon._serve, segment._dcloop)))
 """
 
 
@@ -29,13 +29,14 @@ def probe(**env: str) -> str:
 
 
 def test_pure_python_switches_every_compiled_path_off() -> None:
-    assert probe(ECATSIM_PURE_PYTHON="1") == "False False False False False False"
+    assert probe(ECATSIM_PURE_PYTHON="1") == "False False False False False False False"
 
 
 def test_compiled_paths_are_used_where_built() -> None:
     got = probe()
-    if got != "True True True True True True":
-        msg = f"not every extension was built (servo, drive, cycle, rawio, logical, serve: {got})"
+    if got != "True True True True True True True":
+        names = "servo, drive, cycle, rawio, logical, serve, dcloop"
+        msg = f"not every extension was built ({names}: {got})"
         if os.environ.get("CI"):
             pytest.fail(msg, pytrace=False)
         pytest.skip(msg)

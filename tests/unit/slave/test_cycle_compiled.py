@@ -75,11 +75,15 @@ def snapshot(c: CspCycle) -> dict[str, Any]:
     seg = c.seg
     out: dict[str, Any] = {"pending": sorted(seg.ctx.pending), "irq": seg.irq}
     out["frames"] = (seg.frames, seg.bad_frames, seg.ctx.frame_no, seg.ctx.t_ns)
+    out["dirty"] = (seg.ctx.timers_dirty, seg._dc_pending)
     for esc in c.seg.escs:
         p = esc.position
         out[f"mem{p}"] = bytes(esc.mem)
         out[f"ecat_irq{p}"] = esc.ecat_irq
         out[f"wd{p}"] = (esc.wd.deadline_ns, esc.wd.timeout_ns)
+        dc = esc.dc
+        out[f"dc{p}"] = (dc.local_ref, dc.t_ref, dc.rate_ppb, dc.spd, dc.moved_ns)
+        out[f"wr{p}"] = (esc.wr_s, esc.wr_e)
         out[f"sm{p}"] = [
             (s.w, s.l, s.r, s.r_open, s.w_open, s.status, s.mirror, s.mbx_full) for s in esc.sm
         ]
