@@ -59,6 +59,47 @@ static inline PyObject **slot_of(PyObject *o, PyObject *name)
     return (PyObject **)((char *)o + m->offset);
 }
 
+/* The offsets of several __slots__ members of one type, found together: an object read
+ * member by member through slot_of touches one cache entry per member; through a Layout
+ * it touches one table. */
+#define LAYOUT_MAX 24
+typedef struct {
+    PyTypeObject *type;
+    unsigned int version;
+    int n;
+    Py_ssize_t offset[LAYOUT_MAX];
+} Layout;
+
+/* 1: every one of names[:n] is a plain __slots__ member of o's type, their offsets in L;
+ * 0: not (read them by name). */
+static inline int layout_of(Layout *L, PyObject *o, PyObject *const *names, int n)
+{
+    PyTypeObject *t = Py_TYPE(o);
+    if (L->type == t && L->version == t->tp_version_tag && L->version && L->n == n)
+        return 1;
+    L->type = NULL; /* invalid while it is filled */
+    if (n > LAYOUT_MAX)
+        return 0;
+    for (int i = 0; i < n; i++) {
+        PyObject *d = _PyType_Lookup(t, names[i]);
+        if (d == NULL || !Py_IS_TYPE(d, &PyMemberDescr_Type))
+            return 0;
+        PyMemberDef *m = ((PyMemberDescrObject *)d)->d_member;
+        if (m->type != T_OBJECT_EX || (m->flags & READONLY))
+            return 0;
+        L->offset[i] = m->offset;
+    }
+    if (!PyType_HasFeature(t, Py_TPFLAGS_VALID_VERSION_TAG))
+        return 0;
+    L->version = t->tp_version_tag;
+    L->n = n;
+    L->type = t;
+    return 1;
+}
+
+/* Member i of a Layout (borrowed; NULL if unset). */
+#define LAYOUT_SLOT(o, L, i) (*(PyObject **)((char *)(o) + (L)->offset[i]))
+
 /* getattr(o, name): a new reference, or NULL with the exception set. */
 static inline PyObject *get_attr(PyObject *o, PyObject *name)
 {

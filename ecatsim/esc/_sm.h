@@ -40,6 +40,9 @@ static PyObject *s_active, *s_locked, *s_mailbox, *s_ecat_side_writes, *s_start,
     *s_w, *s_l, *s_r, *s_r_open, *s_w_open, *s_status, *s_mirror, *s_irq_to_ecat,
     *s_irq_to_pdi, *s_status_addr, *s_n, *s_ecat_irq, *s_irq_dirty, *s_control, *s_mbx_full;
 
+/* The names sm_load reads, in its order (filled by sm_names_init). */
+static PyObject *sm_names[17];
+
 /* Intern the attribute names above (module init); -1 on failure. */
 static int sm_names_init(void)
 {
@@ -52,7 +55,13 @@ static int sm_names_init(void)
         {&s_status_addr, "status_addr"}, {&s_n, "n"}, {&s_ecat_irq, "ecat_irq"},
         {&s_irq_dirty, "irq_dirty"}, {&s_control, "control"}, {&s_mbx_full, "mbx_full"},
     };
-    return intern_names(names, sizeof names / sizeof names[0]);
+    if (intern_names(names, sizeof names / sizeof names[0]) < 0)
+        return -1;
+    PyObject *order[17] = {s_active, s_locked, s_mailbox, s_ecat_side_writes, s_r_open,
+                           s_w_open, s_start, s_length, s_w, s_l, s_r, s_status, s_mirror,
+                           s_irq_to_ecat, s_irq_to_pdi, s_status_addr, s_n};
+    memcpy(sm_names, order, sizeof order);
+    return 0;
 }
 
 static inline uint32_t rd32(const uint8_t *m, int a)
@@ -84,10 +93,61 @@ typedef struct {
     long start, length, w, l, r, status, mirror, irq_to_ecat, irq_to_pdi, status_addr, n;
 } Sm;
 
+/* The members sm_load reads, in the order of SM_* below. */
+enum {
+    SM_ACTIVE, SM_LOCKED, SM_MAILBOX, SM_ECAT_SIDE_WRITES, SM_R_OPEN, SM_W_OPEN, SM_START,
+    SM_LENGTH, SM_W, SM_L, SM_R, SM_STATUS, SM_MIRROR, SM_IRQ_TO_ECAT, SM_IRQ_TO_PDI,
+    SM_STATUS_ADDR, SM_N, SM_FIELDS
+};
+
+static Layout sm_layout;
+
+/* A member read through the layout: an exact int or bool as it is, anything else by
+ * name (Python's conversion and errors). */
+static inline long sm_long(PyObject *obj, int i, int *err)
+{
+    PyObject *v = LAYOUT_SLOT(obj, &sm_layout, i);
+    if (v != NULL && PyLong_CheckExact(v)) {
+        int overflow;
+        long x = PyLong_AsLongAndOverflow(v, &overflow);
+        if (!overflow)
+            return x;
+    }
+    return get_long(obj, sm_names[i], err);
+}
+
+static inline int sm_bool(PyObject *obj, int i, int *err)
+{
+    PyObject *v = LAYOUT_SLOT(obj, &sm_layout, i);
+    if (v == Py_True || v == Py_False)
+        return v == Py_True;
+    return get_bool(obj, sm_names[i], err);
+}
+
 static int sm_load(Sm *sm, PyObject *obj)
 {
     int err = 0;
     sm->obj = obj;
+    if (layout_of(&sm_layout, obj, sm_names, SM_FIELDS)) {
+        sm->active = sm_bool(obj, SM_ACTIVE, &err);
+        sm->locked = sm_bool(obj, SM_LOCKED, &err);
+        sm->mailbox = sm_bool(obj, SM_MAILBOX, &err);
+        sm->ecat_side_writes = sm_bool(obj, SM_ECAT_SIDE_WRITES, &err);
+        sm->r_open = sm_bool(obj, SM_R_OPEN, &err);
+        sm->w_open = sm_bool(obj, SM_W_OPEN, &err);
+        sm->start = sm_long(obj, SM_START, &err);
+        sm->length = sm_long(obj, SM_LENGTH, &err);
+        sm->w = sm_long(obj, SM_W, &err);
+        sm->l = sm_long(obj, SM_L, &err);
+        sm->r = sm_long(obj, SM_R, &err);
+        sm->status = sm_long(obj, SM_STATUS, &err);
+        sm->mirror = sm_long(obj, SM_MIRROR, &err);
+        sm->irq_to_ecat = sm_long(obj, SM_IRQ_TO_ECAT, &err);
+        sm->irq_to_pdi = sm_long(obj, SM_IRQ_TO_PDI, &err);
+        sm->status_addr = sm_long(obj, SM_STATUS_ADDR, &err);
+        sm->n = sm_long(obj, SM_N, &err);
+        return err ? -1 : 0;
+    }
     sm->active = get_bool(obj, s_active, &err);
     sm->locked = get_bool(obj, s_locked, &err);
     sm->mailbox = get_bool(obj, s_mailbox, &err);
@@ -193,14 +253,35 @@ static int sm_sync(Esc *e, Sm *sm)
     return 0;
 }
 
+/* setattr through the layout when it holds for obj, by name otherwise. */
+static int sm_set(PyObject *obj, int i, PyObject *v)
+{
+    PyTypeObject *t = Py_TYPE(obj);
+    if (v == NULL)
+        return -1;
+    if (sm_layout.type != t || sm_layout.version != t->tp_version_tag || !sm_layout.version) {
+        int rc = set_attr(obj, sm_names[i], v);
+        Py_DECREF(v);
+        return rc;
+    }
+    PyObject **p = &LAYOUT_SLOT(obj, &sm_layout, i);
+    PyObject *old = *p;
+    *p = v; /* the reference is handed over */
+    Py_XDECREF(old);
+    return 0;
+}
+
 static int sm_store(Sm *sm)
 {
-    if (set_long(sm->obj, s_w, sm->w) < 0 || set_long(sm->obj, s_l, sm->l) < 0 ||
-        set_long(sm->obj, s_r, sm->r) < 0 || set_long(sm->obj, s_status, sm->status) < 0)
+    PyObject *o = sm->obj;
+    if (sm_set(o, SM_W, PyLong_FromLong(sm->w)) < 0 ||
+        sm_set(o, SM_L, PyLong_FromLong(sm->l)) < 0 ||
+        sm_set(o, SM_R, PyLong_FromLong(sm->r)) < 0 ||
+        sm_set(o, SM_STATUS, PyLong_FromLong(sm->status)) < 0)
         return -1;
-    if (set_attr(sm->obj, s_r_open, sm->r_open ? Py_True : Py_False) < 0)
+    if (sm_set(o, SM_R_OPEN, Py_NewRef(sm->r_open ? Py_True : Py_False)) < 0)
         return -1;
-    return set_attr(sm->obj, s_w_open, sm->w_open ? Py_True : Py_False);
+    return sm_set(o, SM_W_OPEN, Py_NewRef(sm->w_open ? Py_True : Py_False));
 }
 
 #endif
