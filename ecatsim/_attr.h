@@ -1,6 +1,8 @@
-/* Attribute access shared by the compiled paths (_logical.c, _cycle.c, _drive.c): the
- * state they work on lives in the Python objects, read and written by name.
- * Errors are flagged in *err (get_*) or returned as -1 (set_*, intern_names). */
+/* Attribute access shared by the compiled paths (_logical.c, _cycle.c, _drive.c, _serve.c,
+ * _dcloop.c): the state they work on lives in the Python objects, read and written at
+ * their __slots__ offsets where the attribute is a plain slot, by name otherwise
+ * (decision P10). Errors are flagged in *err (get_*) or returned as -1 (set_*,
+ * intern_names). */
 #ifndef ECATSIM_ATTR_H
 #define ECATSIM_ATTR_H
 #include <Python.h>
