@@ -47,6 +47,7 @@
 #include <unistd.h>
 
 #include "esc/_logical.h"
+#include "esc/_windows.h"
 #include "link/_rawio.h"
 
 enum { TIMEOUT = 0, WAKE = 1, FRAME = 2, REPLIED = 3, RESUME = 4 };
@@ -165,28 +166,8 @@ static int frmw_resolve(PyObject *seg, unsigned adp, long dlen, long reach, Frmw
     }
     f->esc = PyList_GET_ITEM(escs, f->reader);
     Py_DECREF(escs); /* the segment keeps the list and the ESC */
-    PyObject *wins = get_attr(f->esc, s_sm_windows);
-    if (wins == NULL)
-        return -1;
-    if (!PyTuple_Check(wins)) {
-        Py_DECREF(wins);
-        return 0;
-    }
-    for (Py_ssize_t i = 0; i < PyTuple_GET_SIZE(wins) && ok == 1; i++) {
-        PyObject *w = PyTuple_GET_ITEM(wins, i);
-        if (!PyTuple_Check(w) || PyTuple_GET_SIZE(w) < 2) {
-            ok = 0;
-            break;
-        }
-        long ws = PyLong_AsLong(PyTuple_GET_ITEM(w, 0));
-        long we = PyLong_AsLong(PyTuple_GET_ITEM(w, 1));
-        if (PyErr_Occurred())
-            ok = -1;
-        else if (ws < DC_SYSTEM_TIME + dlen && DC_SYSTEM_TIME < we)
-            ok = 0; /* Esc.ecat_read would go to the SM */
-    }
-    Py_DECREF(wins);
-    return ok;
+    /* a window over 0x0910: Esc.ecat_read would go to the SM */
+    return no_sm_window(f->esc, s_sm_windows, DC_SYSTEM_TIME, DC_SYSTEM_TIME + dlen);
 }
 
 /* DcUnit.refresh_system_time at the frame's time, then the read of 0x0910 into data:

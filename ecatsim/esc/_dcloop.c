@@ -28,6 +28,7 @@
 #include <string.h>
 
 #include "../_attr.h"
+#include "_windows.h"
 
 /* ecatsim/esc/regs.py, ecatsim/esc/dc.py (the test checks they agree) */
 #define DC_SYSTEM_TIME 0x0910
@@ -122,26 +123,8 @@ static int set_obj(PyObject *o, PyObject *name, PyObject *v)
  * 1 yes, 0 no, -1 error. */
 static int plain_system_time(PyObject *esc, PyObject *hook, long n)
 {
-    int ok = 1;
-    PyObject *wins = get_attr(esc, s_sm_windows);
-    if (wins == NULL)
-        return -1;
-    if (!PyTuple_Check(wins))
-        ok = 0;
-    for (Py_ssize_t i = 0; ok == 1 && i < PyTuple_GET_SIZE(wins); i++) {
-        PyObject *w = PyTuple_GET_ITEM(wins, i);
-        if (!PyTuple_Check(w) || PyTuple_GET_SIZE(w) < 2) {
-            ok = 0;
-            break;
-        }
-        long ws = PyLong_AsLong(PyTuple_GET_ITEM(w, 0));
-        long we = PyLong_AsLong(PyTuple_GET_ITEM(w, 1));
-        if (PyErr_Occurred())
-            ok = -1;
-        else if (ws < DC_SYSTEM_TIME + n && DC_SYSTEM_TIME < we)
-            ok = 0; /* Esc.ecat_write goes to the SM */
-    }
-    Py_DECREF(wins);
+    /* a window over 0x0910: Esc.ecat_write goes to the SM */
+    int ok = no_sm_window(esc, s_sm_windows, DC_SYSTEM_TIME, DC_SYSTEM_TIME + n);
     if (ok != 1)
         return ok;
     PyObject *t = get_attr(esc, s_t);

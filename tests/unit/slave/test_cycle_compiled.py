@@ -397,6 +397,22 @@ def test_compiled_walk_matches_python_on_other_maps(
         both(a, b)
 
 
+def test_responder_leaves_a_reference_behind_an_sm_window_to_python(
+    answered: list[tuple[int, int, int, int]],
+) -> None:
+    """An SM window over the reference's 0x0910 (Esc.ecat_read then goes to the SM): the
+    responder hands the frame over untouched (FRAME), and both sides agree."""
+    a, b = lockstep(2, responder=True)
+    for _ in range(3):
+        both(a, b)
+    assert codes(answered)[-1] == REPLIED
+    for c in (a, b):
+        ref = c.seg.escs[0]
+        ref.sm_windows = (*ref.sm_windows, (0x0900, 0x0920, ref.sm[0]))
+    both(a, b)
+    assert codes(answered)[-1] == FRAME
+
+
 def test_responder_serves_every_reference_clock(
     answered: list[tuple[int, int, int, int]],
 ) -> None:
