@@ -102,11 +102,11 @@ enum {
 
 static Layout sm_layout;
 
-/* A member read through the layout: an exact int or bool as it is, anything else by
- * name (Python's conversion and errors). */
-static inline long sm_long(PyObject *obj, int i, int *err)
+/* Member i: through the layout if it holds for obj (``lay``) and the value is an exact
+ * int or bool, by name otherwise (Python's conversion and errors). */
+static inline long sm_long(PyObject *obj, int lay, int i, int *err)
 {
-    PyObject *v = LAYOUT_SLOT(obj, &sm_layout, i);
+    PyObject *v = lay ? LAYOUT_SLOT(obj, &sm_layout, i) : NULL;
     if (v != NULL && PyLong_CheckExact(v)) {
         int overflow;
         long x = PyLong_AsLongAndOverflow(v, &overflow);
@@ -116,9 +116,9 @@ static inline long sm_long(PyObject *obj, int i, int *err)
     return get_long(obj, sm_names[i], err);
 }
 
-static inline int sm_bool(PyObject *obj, int i, int *err)
+static inline int sm_bool(PyObject *obj, int lay, int i, int *err)
 {
-    PyObject *v = LAYOUT_SLOT(obj, &sm_layout, i);
+    PyObject *v = lay ? LAYOUT_SLOT(obj, &sm_layout, i) : NULL;
     if (v == Py_True || v == Py_False)
         return v == Py_True;
     return get_bool(obj, sm_names[i], err);
@@ -126,45 +126,25 @@ static inline int sm_bool(PyObject *obj, int i, int *err)
 
 static int sm_load(Sm *sm, PyObject *obj)
 {
-    int err = 0;
+    int err = 0, lay = layout_of(&sm_layout, obj, sm_names, SM_FIELDS);
     sm->obj = obj;
-    if (layout_of(&sm_layout, obj, sm_names, SM_FIELDS)) {
-        sm->active = sm_bool(obj, SM_ACTIVE, &err);
-        sm->locked = sm_bool(obj, SM_LOCKED, &err);
-        sm->mailbox = sm_bool(obj, SM_MAILBOX, &err);
-        sm->ecat_side_writes = sm_bool(obj, SM_ECAT_SIDE_WRITES, &err);
-        sm->r_open = sm_bool(obj, SM_R_OPEN, &err);
-        sm->w_open = sm_bool(obj, SM_W_OPEN, &err);
-        sm->start = sm_long(obj, SM_START, &err);
-        sm->length = sm_long(obj, SM_LENGTH, &err);
-        sm->w = sm_long(obj, SM_W, &err);
-        sm->l = sm_long(obj, SM_L, &err);
-        sm->r = sm_long(obj, SM_R, &err);
-        sm->status = sm_long(obj, SM_STATUS, &err);
-        sm->mirror = sm_long(obj, SM_MIRROR, &err);
-        sm->irq_to_ecat = sm_long(obj, SM_IRQ_TO_ECAT, &err);
-        sm->irq_to_pdi = sm_long(obj, SM_IRQ_TO_PDI, &err);
-        sm->status_addr = sm_long(obj, SM_STATUS_ADDR, &err);
-        sm->n = sm_long(obj, SM_N, &err);
-        return err ? -1 : 0;
-    }
-    sm->active = get_bool(obj, s_active, &err);
-    sm->locked = get_bool(obj, s_locked, &err);
-    sm->mailbox = get_bool(obj, s_mailbox, &err);
-    sm->ecat_side_writes = get_bool(obj, s_ecat_side_writes, &err);
-    sm->r_open = get_bool(obj, s_r_open, &err);
-    sm->w_open = get_bool(obj, s_w_open, &err);
-    sm->start = get_long(obj, s_start, &err);
-    sm->length = get_long(obj, s_length, &err);
-    sm->w = get_long(obj, s_w, &err);
-    sm->l = get_long(obj, s_l, &err);
-    sm->r = get_long(obj, s_r, &err);
-    sm->status = get_long(obj, s_status, &err);
-    sm->mirror = get_long(obj, s_mirror, &err);
-    sm->irq_to_ecat = get_long(obj, s_irq_to_ecat, &err);
-    sm->irq_to_pdi = get_long(obj, s_irq_to_pdi, &err);
-    sm->status_addr = get_long(obj, s_status_addr, &err);
-    sm->n = get_long(obj, s_n, &err);
+    sm->active = sm_bool(obj, lay, SM_ACTIVE, &err);
+    sm->locked = sm_bool(obj, lay, SM_LOCKED, &err);
+    sm->mailbox = sm_bool(obj, lay, SM_MAILBOX, &err);
+    sm->ecat_side_writes = sm_bool(obj, lay, SM_ECAT_SIDE_WRITES, &err);
+    sm->r_open = sm_bool(obj, lay, SM_R_OPEN, &err);
+    sm->w_open = sm_bool(obj, lay, SM_W_OPEN, &err);
+    sm->start = sm_long(obj, lay, SM_START, &err);
+    sm->length = sm_long(obj, lay, SM_LENGTH, &err);
+    sm->w = sm_long(obj, lay, SM_W, &err);
+    sm->l = sm_long(obj, lay, SM_L, &err);
+    sm->r = sm_long(obj, lay, SM_R, &err);
+    sm->status = sm_long(obj, lay, SM_STATUS, &err);
+    sm->mirror = sm_long(obj, lay, SM_MIRROR, &err);
+    sm->irq_to_ecat = sm_long(obj, lay, SM_IRQ_TO_ECAT, &err);
+    sm->irq_to_pdi = sm_long(obj, lay, SM_IRQ_TO_PDI, &err);
+    sm->status_addr = sm_long(obj, lay, SM_STATUS_ADDR, &err);
+    sm->n = sm_long(obj, lay, SM_N, &err);
     return err ? -1 : 0;
 }
 
