@@ -17,6 +17,7 @@ from ecatsim.clock import Clock
 from ecatsim.compiled import available
 from ecatsim.esc import regs
 from ecatsim.esc.core import Esc, FrameContext
+from ecatsim.esc.dc import DcUnit
 from ecatsim.wire.datagram import CIRCULATING, LEN_MASK, MORE_FOLLOWS
 
 _logical: ModuleType | None
@@ -26,7 +27,7 @@ except ImportError:  # pragma: no cover - built without a C compiler
     _logical = None
 _logical = available(_logical)  # ECATSIM_PURE_PYTHON=1: the reference only
 _dcloop: ModuleType | None
-try:  # the compiled DC time loops of an FRMW of 0x0910 (optional, decision P11)
+try:  # the compiled DC loops: an FRMW's time loops, the SYNC0 pulses (decisions P11, P12)
     from ecatsim.esc import _dcloop
 except ImportError:  # pragma: no cover - built without a C compiler
     _dcloop = None
@@ -427,6 +428,8 @@ class Segment:
         frame that arrived at ``t`` is processed, and from the timers.
         Ref: TMC8460 §5.50.4 (SYNC0 generation); ETG.1000.6 §5.3 (DC synchronous mode).
         """
+        if _dcloop is not None and self.compiled and _dcloop.pulses(self, t, Esc, DcUnit):
+            return  # SYNC0-only units, served compiled (decision P12)
         ctx = self.ctx
         nxt = NO_DEADLINE
         for esc in self.sync_escs:

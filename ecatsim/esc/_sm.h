@@ -12,19 +12,14 @@
 #include <string.h>
 
 #include "../_attr.h"
+#include "_events.h"
 
 /* Register addresses and bits (ecatsim/esc/regs.py; the test checks they agree). */
 #define DL_STATUS 0x0110
 #define ECAT_EVENT_MASK 0x0200
-#define AL_EVENT_MASK 0x0204
 #define ECAT_EVENT_REQUEST 0x0210
-#define AL_EVENT_REQUEST 0x0220
-#define DC_ACTIVATION 0x0981
 #define DC_PULSE_LENGTH 0x0982
-#define DC_ACTIVATION_STATUS 0x0984
-#define DC_SYNC0_STATUS 0x098E
 #define EV_AL_CONTROL 0x0001
-#define EV_SYNC0 0x0004
 #define EV_SM_ACTIVATION 0x0010
 #define EV_WATCHDOG_PD 0x0040
 #define EV_SM0 0x0100
@@ -62,28 +57,6 @@ static int sm_names_init(void)
                            s_irq_to_ecat, s_irq_to_pdi, s_status_addr, s_n};
     memcpy(sm_names, order, sizeof order);
     return 0;
-}
-
-static inline uint32_t rd32(const uint8_t *m, int a)
-{
-    return (uint32_t)m[a] | ((uint32_t)m[a + 1] << 8) | ((uint32_t)m[a + 2] << 16) |
-           ((uint32_t)m[a + 3] << 24);
-}
-
-static inline void wr32(uint8_t *m, int a, uint32_t v)
-{
-    m[a] = (uint8_t)v;
-    m[a + 1] = (uint8_t)(v >> 8);
-    m[a + 2] = (uint8_t)(v >> 16);
-    m[a + 3] = (uint8_t)(v >> 24);
-}
-
-static inline unsigned rd16(const uint8_t *m, int a) { return m[a] | (m[a + 1] << 8); }
-
-static inline void wr16(uint8_t *m, int a, unsigned v)
-{
-    m[a] = (uint8_t)v;
-    m[a + 1] = (uint8_t)(v >> 8);
 }
 
 /* A SyncManager's state, read once per call and written back where it changed. */
@@ -146,38 +119,6 @@ static int sm_load(Sm *sm, PyObject *obj)
     sm->status_addr = sm_long(obj, lay, SM_STATUS_ADDR, &err);
     sm->n = sm_long(obj, lay, SM_N, &err);
     return err ? -1 : 0;
-}
-
-/* The ESC side of one call: memory, and what the event functions touch. */
-typedef struct {
-    uint8_t *m;
-    PyObject *esc, *ctx, *pending, *position;
-} Esc;
-
-/* Esc._pdi_irq: the PDI interrupt line is AL event request AND AL event mask. */
-static int pdi_irq(Esc *e, uint32_t request)
-{
-    if (request & rd32(e->m, AL_EVENT_MASK))
-        return PySet_Add(e->pending, e->position);
-    return PySet_Discard(e->pending, e->position) < 0 ? -1 : 0;
-}
-
-/* Esc.set_al_event / clr_al_event */
-static int set_al_event(Esc *e, uint32_t bits)
-{
-    uint32_t v = rd32(e->m, AL_EVENT_REQUEST) | bits;
-    wr32(e->m, AL_EVENT_REQUEST, v);
-    return pdi_irq(e, v);
-}
-
-static int clr_al_event(Esc *e, uint32_t bits)
-{
-    uint32_t v = rd32(e->m, AL_EVENT_REQUEST);
-    if (!(v & bits))
-        return 0;
-    v &= ~bits;
-    wr32(e->m, AL_EVENT_REQUEST, v);
-    return pdi_irq(e, v);
 }
 
 /* Esc._irq_update: ECAT event request AND ECAT event mask, into the IRQ field. */
