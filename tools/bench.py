@@ -119,6 +119,14 @@ def cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+def steal_seconds() -> list[float]:
+    """Time the hypervisor ran something else on each of this VM's CPUs (steal time,
+    the 8th field of each cpuN line of /proc/stat), in seconds; zeros on bare metal."""
+    tck = os.sysconf("SC_CLK_TCK")
+    return [int(ln.split()[8]) / tck for ln in Path("/proc/stat").read_text().splitlines()
+            if ln.startswith("cpu") and ln[3:4].isdigit()]  # fmt: skip
+
+
 def pysoem_master(pair: NetnsPair, n: int, period_us: int) -> Any:
     """A pysoem master with the segment in OP, DC active (SYNC0 every cycle)."""
     import pysoem
@@ -182,17 +190,26 @@ class CspMotion:
             s.output = RX.pack(cw, self.start[i] + round(x), 0, 0)
 
 
+#: --master-spin: the master waits for its next cycle spinning, not in time.sleep(), so its
+#: CPU never halts between cycles (a halted vCPU can be slow to come back on a VM)
+MASTER_SPIN = False
+
+
 def cycles(m: Any, seconds: float, period_us: int, pid: int, lock: bool = True) -> dict[str, Any]:
     """Cyclic exchange for ``seconds``: round trips, lost frames (no reply within two
-    periods), WKC mismatches, the daemon's CPU per cycle and in % of one core. It stops
+    periods), WKC mismatches, the daemon's CPU per cycle and in % of one core, the VM's
+    steal time per CPU. A lost frame whose receive call took more than a millisecond past
+    its timeout is also counted in ``lost_master_stalled``: the master itself was off its
+    CPU while it waited, and may have missed a reply that had arrived. It stops
     early, ``fell_behind``, once the cycle runs a whole second late (the rate is not
     kept: replies come slower than the period). With
     ``lock`` the cycle is kept mid-way between SYNC0 pulses by the DC time of the replies,
     as SOEM's examples do (ec_sync)."""
     rtts, lost, wkc_err = [], 0, 0
+    lost_waits: list[int] = []  # how long the master's send + receive took for each lost frame
     cycle_ns = period_us * 1000
     sync0 = struct.unpack("<Q", m.slaves[0]._fprd(0x0990, 8))[0] if lock else None
-    cpu0, wall0 = cpu_seconds(pid), time.perf_counter()
+    cpu0, wall0, steal0 = cpu_seconds(pid), time.perf_counter(), steal_seconds()
     t_next = wall0
     n = max(1, int(seconds * 1e6 / period_us))
     motion = CspMotion(m, period_us) if lock else None
@@ -210,20 +227,28 @@ def cycles(m: Any, seconds: float, period_us: int, pid: int, lock: bool = True) 
         rtts.append(time.perf_counter() - t)
         if w < 0:
             lost += 1
+            lost_waits.append(round(rtts[-1] * 1e6))
         elif w != m.expected_wkc:
             wkc_err += 1
         t_next += period_us / 1e6
         if sync0 is not None and w > 0:
             t_next += 0.1 * (cycle_ns / 2 - (m.dc_time - sync0) % cycle_ns) / 1e9
+        if MASTER_SPIN:
+            while time.perf_counter() < t_next:
+                pass
+            continue
         d = t_next - time.perf_counter()
         if d > 0:
             time.sleep(d)
     cpu, wall = cpu_seconds(pid) - cpu0, time.perf_counter() - wall0
+    steal = [round(b - a, 2) for a, b in zip(steal0, steal_seconds(), strict=True)]
     enabled = sum(TX.unpack(bytes(s.input))[0] & 0x6F == 0x27 for s in m.slaves) if lock else 0
     return {"period_us": period_us, "cycles": done, "fell_behind": behind,
             "rtt_us": stats(rtts), "lost": lost, "drives_enabled": enabled,
             "wkc_errors": wkc_err, "cpu_per_cycle_us": round(cpu / done * 1e6, 1),
-            "cpu_percent": round(cpu / wall * 100, 1)}  # fmt: skip
+            "cpu_percent": round(cpu / wall * 100, 1), "steal_s": steal,
+            "lost_wait_us": lost_waits[:200],
+            "lost_master_stalled": sum(w > 2 * period_us + 1000 for w in lost_waits)}  # fmt: skip
 
 
 def with_master(
@@ -279,8 +304,9 @@ def max_rate(n: int, extra: tuple[str, ...], hold_s: float, rates: list[int],
             finally:
                 d.stop()
         print(f"      {1e6 / period:6.0f} Hz for {hold_s:g} s: lost {r['lost']} "
+              f"({r['lost_master_stalled']} while the master was stalled) "
               f"wkc-err {r['wkc_errors']} cpu {r['cpu_percent']} % "
-              f"rtt p99.9 {r['rtt_us']['p999']} us"
+              f"rtt p99.9 {r['rtt_us']['p999']} us, steal {r['steal_s']} s"
               + (f"; fell 1 s behind after {r['cycles']} cycles" if r["fell_behind"] else "")
               + (f"; the C floor, same hold: lost {r['floor_lost']}" if echo else ""))  # fmt: skip
         tried.append(r)
@@ -300,12 +326,16 @@ def main() -> int:
                     help="same-cpu pins master, daemon and floor to --cpu (default 0)")  # fmt: skip
     ap.add_argument("--cpu", type=int, help="pin the daemon (and the floor) to this CPU")
     ap.add_argument("--rt-priority", type=int, help="run the daemon SCHED_FIFO at this priority")
+    ap.add_argument("--master-spin", action="store_true",
+                    help="the master spins between cycles instead of sleeping")  # fmt: skip
     ap.add_argument("--max-rate", action="store_true", help="also search the highest rate")
     ap.add_argument("--hold", type=float, default=60.0, help="seconds a rate must hold")
     ap.add_argument("--rates", type=int, nargs="+", default=[8000, 4000, 2000, 1000, 500])
     ap.add_argument("--hold-floor", action="store_true",
                     help="hold each rate against the C floor too: is 0 lost possible?")  # fmt: skip
     args = ap.parse_args()
+    global MASTER_SPIN
+    MASTER_SPIN = args.master_spin
     if os.geteuid() != 0:
         print("bench: needs root (namespaces, raw sockets)", file=sys.stderr)
         return 2
@@ -320,7 +350,8 @@ def main() -> int:
     results: dict[str, Any] = {"machine": platform.node(), "cpus": os.cpu_count(),
                                "cpu_model": cpu_model,
                                "kernel": platform.release(),
-                               "python": platform.python_version(), "runs": []}  # fmt: skip
+                               "python": platform.python_version(),
+                               "master_spin": args.master_spin, "runs": []}  # fmt: skip
     all_cpus = os.sched_getaffinity(0)
     for mode in args.modes:
         busy = mode == "busy-poll"

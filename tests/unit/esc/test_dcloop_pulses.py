@@ -106,18 +106,20 @@ def frmw() -> bytes:
 
 
 def test_constants_agree_with_the_python_model() -> None:
-    assert _dcloop.MAX_SYNC0_CATCHUP == segment_mod.MAX_SYNC0_CATCHUP
-    assert _dcloop.PULSE_HINT_MARGIN_NS == segment_mod.PULSE_HINT_MARGIN_NS
-    assert _dcloop.NO_DEADLINE == segment_mod.NO_DEADLINE
-    assert _dcloop.SYNC_LATCH_CONFIG == regs.SYNC_LATCH_CONFIG
-    assert _dcloop.DC_START_TIME == regs.DC_START_TIME
-    assert _dcloop.DC_SYNC0_CYCLE == regs.DC_SYNC0_CYCLE
-    assert _dcloop.DC_ACTIVATION == regs.DC_ACTIVATION
-    assert _dcloop.DC_ACTIVATION_STATUS == regs.DC_ACTIVATION_STATUS
-    assert _dcloop.DC_SYNC0_STATUS == regs.DC_SYNC0_STATUS
-    assert _dcloop.AL_EVENT_REQUEST == regs.AL_EVENT_REQUEST
-    assert _dcloop.AL_EVENT_MASK == regs.AL_EVENT_MASK
-    assert _dcloop.EV_SYNC0 == regs.EV_SYNC0
+    for name in ("MAX_SYNC0_CATCHUP", "PULSE_HINT_MARGIN_NS", "NO_DEADLINE"):
+        assert getattr(_dcloop, name) == getattr(segment_mod, name), name
+    for name in (
+        "SYNC_LATCH_CONFIG",
+        "DC_START_TIME",
+        "DC_SYNC0_CYCLE",
+        "DC_ACTIVATION",
+        "DC_ACTIVATION_STATUS",
+        "DC_SYNC0_STATUS",
+        "AL_EVENT_REQUEST",
+        "AL_EVENT_MASK",
+        "EV_SYNC0",
+    ):
+        assert getattr(_dcloop, name) == getattr(regs, name), name
 
 
 def test_pulses_match_the_python_loop() -> None:
