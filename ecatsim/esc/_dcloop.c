@@ -186,6 +186,44 @@ static int plain_system_time(PyObject *esc, PyObject *hook, long n)
     return ok;
 }
 
+/* A DC unit's clock as DcUnit reads it: local_ref at host time t_ref, spd ticks per ns. */
+typedef struct {
+    i128 local_ref;
+    long long t_ref;
+    double spd;
+} DcClock;
+
+static int clock_load(PyObject *dc, DcClock *c)
+{
+    PyObject *lro = get_attr(dc, s_local_ref);
+    PyObject *tro = lro == NULL ? NULL : get_attr(dc, s_t_ref);
+    PyObject *spdo = tro == NULL ? NULL : get_attr(dc, s_spd);
+    int rc = -1;
+    if (spdo != NULL && as_i128(lro, &c->local_ref) == 0) {
+        c->t_ref = PyLong_AsLongLong(tro);
+        c->spd = PyFloat_AsDouble(spdo);
+        rc = PyErr_Occurred() ? -1 : 0;
+    }
+    Py_XDECREF(lro);
+    Py_XDECREF(tro);
+    Py_XDECREF(spdo);
+    return rc;
+}
+
+/* Python's float(i) for an integer of up to 126 bits: correctly rounded. */
+static inline double to_double(i128 v)
+{
+    if (v >= INT64_MIN && v <= INT64_MAX)
+        return (double)(long long)v;
+    return (double)v;
+}
+
+/* DcUnit.local_time(now) = (local_ref + int((now - t_ref) * spd)) & MASK64 */
+static inline uint64_t local_time(const DcClock *c, i128 now)
+{
+    return (uint64_t)(c->local_ref + (i128)(to_double(now - c->t_ref) * c->spd));
+}
+
 /* The writer's part: the masked write of data (n bytes) into 0x0910, then
  * Esc._ew_dc_system_time -> DcUnit.system_time_written at the frame's time t_ns.
  * 1: the corrections moved the clock by more than MOVE_NS (SYNC deadlines are stale);
@@ -211,36 +249,29 @@ static int write_system_time(PyObject *esc, const uint8_t *data, long n, long lo
     /* DcUnit.system_time_written */
     long position = get_long(dc, s_position, &err);
     long long hop = get_long(dc, s_hop_ns, &err);
-    long long t_ref = 0;
-    i128 local_ref = 0, moved = 0;
-    PyObject *tro = err ? NULL : get_attr(dc, s_t_ref);
-    PyObject *lro = tro == NULL ? NULL : get_attr(dc, s_local_ref);
-    PyObject *mvo = lro == NULL ? NULL : get_attr(dc, s_moved_ns);
-    PyObject *spdo = mvo == NULL ? NULL : get_attr(dc, s_spd);
-    PyObject *rateo = spdo == NULL ? NULL : get_attr(dc, s_rate_ppb);
+    DcClock c;
+    if (err || clock_load(dc, &c) < 0)
+        goto done;
+    i128 moved = 0;
+    PyObject *mvo = get_attr(dc, s_moved_ns);
+    PyObject *rateo = mvo == NULL ? NULL : get_attr(dc, s_rate_ppb);
     PyObject *drifto = rateo == NULL ? NULL : get_attr(dc, s_drift_ppm);
-    double spd = 0, rate = 0, drift = 0;
+    double spd = c.spd, rate = 0, drift = 0;
     if (drifto != NULL) {
-        t_ref = PyLong_AsLongLong(tro);
-        spd = PyFloat_AsDouble(spdo);
         rate = PyFloat_AsDouble(rateo);
         drift = PyFloat_AsDouble(drifto);
-        if (!PyErr_Occurred() && as_i128(lro, &local_ref) == 0)
+        if (!PyErr_Occurred())
             as_i128(mvo, &moved);
     }
-    Py_XDECREF(tro);
-    Py_XDECREF(lro);
     Py_XDECREF(mvo);
-    Py_XDECREF(spdo);
     Py_XDECREF(rateo);
     Py_XDECREF(drifto);
-    if (err || drifto == NULL || PyErr_Occurred())
+    if (drifto == NULL || PyErr_Occurred())
         goto done;
     long long t = t_ns + (long long)position * hop; /* arrival_ns */
     uint32_t delay = (uint32_t)rd(m, DC_SYSTEM_TIME_DELAY, 4);
     uint64_t offset = rd(m, DC_SYSTEM_TIME_OFFSET, 8);
-    /* local_time(t): (local_ref + int((t - t_ref) * spd)) & MASK64 */
-    uint64_t local_now = (uint64_t)(local_ref + (i128)(long long)((double)(t - t_ref) * spd));
+    uint64_t local_now = local_time(&c, t);
     uint64_t local = local_now + offset - delay; /* only local mod 2^64 matters below */
     i128 diff = nbytes < 8 ? (i128)(int32_t)(uint32_t)(local - value)
                            : (i128)(int64_t)(local - value);
@@ -349,38 +380,6 @@ done:
 }
 
 
-/* A DC unit's clock as DcUnit reads it: local_ref at host time t_ref, spd ticks per ns. */
-typedef struct {
-    i128 local_ref;
-    long long t_ref;
-    double spd;
-} DcClock;
-
-static int clock_load(PyObject *dc, DcClock *c)
-{
-    PyObject *lro = get_attr(dc, s_local_ref);
-    PyObject *tro = lro == NULL ? NULL : get_attr(dc, s_t_ref);
-    PyObject *spdo = tro == NULL ? NULL : get_attr(dc, s_spd);
-    int rc = -1;
-    if (spdo != NULL && as_i128(lro, &c->local_ref) == 0) {
-        c->t_ref = PyLong_AsLongLong(tro);
-        c->spd = PyFloat_AsDouble(spdo);
-        rc = PyErr_Occurred() ? -1 : 0;
-    }
-    Py_XDECREF(lro);
-    Py_XDECREF(tro);
-    Py_XDECREF(spdo);
-    return rc;
-}
-
-/* Python's float(i) for an integer of up to 126 bits: correctly rounded. */
-static inline double to_double(i128 v)
-{
-    if (v >= INT64_MIN && v <= INT64_MAX)
-        return (double)(long long)v;
-    return (double)v;
-}
-
 /* DcUnit.host_time_of: when the host clock reaches ``system`` here. */
 static i128 host_time_of(const DcClock *c, const uint8_t *m, i128 system)
 {
@@ -392,8 +391,7 @@ static i128 host_time_of(const DcClock *c, const uint8_t *m, i128 system)
 /* DcUnit.system_time(now) = (local_time(now) + offset) & MASK64. */
 static uint64_t system_time(const DcClock *c, const uint8_t *m, i128 now)
 {
-    i128 ticks = (i128)(to_double(now - c->t_ref) * c->spd);
-    return (uint64_t)(c->local_ref + ticks) + rd(m, DC_SYSTEM_TIME_OFFSET, 8);
+    return local_time(c, now) + rd(m, DC_SYSTEM_TIME_OFFSET, 8);
 }
 
 /* dc.next_sync0: 1 with *out set, 0 for None, -1 on error. */
