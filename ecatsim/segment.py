@@ -405,7 +405,8 @@ class Segment:
         t = self.clock.now_ns() if now_ns is None else now_ns
         self.pulses_due(t)  # first: each pulse is handled at its own, earlier, time
         for esc in self.escs:
-            if esc.wd.deadline_ns:
+            d = esc.wd.deadline_ns
+            if d and t >= d:  # due (the running watchdogs of a cyclic bus are not)
                 esc.check_timers(t)
         ctx = self.ctx
         if ctx.pending and self.firmware:
