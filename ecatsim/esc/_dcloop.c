@@ -659,8 +659,9 @@ static PyMethodDef methods[] = {
 };
 
 static struct PyModuleDef module = {
-    PyModuleDef_HEAD_INIT, "_dcloop", "Compiled DC loops: the time loops of an FRMW of 0x0910, the SYNC0 pulses.", -1,
-    methods, NULL, NULL, NULL, NULL,
+    PyModuleDef_HEAD_INIT, "_dcloop",
+    "Compiled DC loops: the time loops of an FRMW of 0x0910, the SYNC0 pulses.", -1, methods,
+    NULL, NULL, NULL, NULL,
 };
 
 PyMODINIT_FUNC PyInit__dcloop(void)
