@@ -1,6 +1,7 @@
-/* The ESC's memory access helpers, its AL event request and the SYNC0 registers, shared by the compiled paths
- * (ecatsim/esc/_sm.h and through it _logical.c and _cycle.c; _dcloop.c). Each function
- * transcribes the Python method it names; ecatsim/esc/core.py Esc is the reference.
+/* The ESC's memory access helpers, its AL event request and the SYNC0 registers, shared
+ * by the compiled paths (ecatsim/esc/_sm.h and through it _logical.c and _cycle.c;
+ * _dcloop.c). Each function transcribes the Python method it names;
+ * ecatsim/esc/core.py Esc is the reference.
  * Ref: TMC8460 §5.32 (AL event request), §5.33 (AL event mask).
  */
 #ifndef ECATSIM_EVENTS_H
