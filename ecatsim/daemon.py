@@ -22,6 +22,7 @@ import structlog
 
 from ecatsim.clock import MonotonicClock
 from ecatsim.compiled import available
+from ecatsim.doors import DoorHost
 from ecatsim.faults.engine import FaultEngine
 from ecatsim.link.base import Link
 from ecatsim.recorder import FrameRecorder
@@ -74,8 +75,11 @@ class Daemon:
         trace_frames: bool = False,
         ctl: ControlServer | None = None,
         faults: FaultEngine | None = None,
+        doors: DoorHost | None = None,
     ) -> None:
         self.ctl = ctl
+        #: the TMCL and LIN front doors served in the same loop, between frames
+        self.doors = doors
         self.link = link
         self.segment = segment
         segment.reply_first = True  # handle_one calls after_reply() once the reply is out
@@ -103,9 +107,11 @@ class Daemon:
         os.set_blocking(self._wake_r, False)
         os.set_blocking(self._wake_w, False)
         self._fd = link.fileno()
-        #: the descriptors besides the link's that end a wait: wake-up pipe, control socket
+        #: the descriptors besides the link's that end a wait: wake-up pipe, control
+        #: socket, front doors
         ctl_fd = ctl.fileno() if ctl is not None else -1
-        self._watch = tuple(f for f in (self._wake_r, ctl_fd) if f >= 0)
+        doors_fd = doors.fileno() if doors is not None else -1
+        self._watch = tuple(f for f in (self._wake_r, ctl_fd, doors_fd) if f >= 0)
 
     def stop(self) -> None:
         """Ask the loop to return (safe from a signal handler)."""
@@ -354,6 +360,8 @@ class Daemon:
                     self.ctl.serve()
                 except Exception as exc:
                     self._failure("ctl", exc)
+            elif self.doors is not None and efd == self.doors.fileno():
+                self.doors.serve()  # a door's failure is counted by the host
 
     def _deadline(self) -> int | None:
         ds = [
@@ -361,6 +369,10 @@ class Daemon:
         ]
         if self.delayed:
             ds.append(self.delayed[0][0])
+        if self.doors is not None:
+            d = self.doors.next_deadline()
+            if d is not None:
+                ds.append(d)
         return min(ds) if ds else None
 
     def _service_timers(self) -> None:
@@ -371,6 +383,11 @@ class Daemon:
         d = seg.next_deadline()
         if ctx.pending or ctx.flush or (d is not None and d <= seg.clock.now_ns()):
             self._service()
+        doors = self.doors
+        if doors is not None:
+            d = doors.next_deadline()
+            if d is not None and d <= seg.clock.now_ns():
+                doors.service(seg.clock.now_ns())
         if self.delayed or self.faults.active:
             now = self.segment.clock.now_ns()
             self._send_delayed(now)
