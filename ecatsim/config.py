@@ -14,6 +14,8 @@ slaves:
 faults:                      # optional: faults injected while running (ecatsim/faults/spec.py)
   - {kind: wkc, value: -1, count: 3, on_state: op}
   - {kind: drop, probability: 0.001, seed: 7}
+tmcl: {...}                  # optional: TMCL modules served beside the segment (ecatsim tmcl)
+lin: {...}                   # optional: a LIN bus of TMC211 nodes served beside it (ecatsim lin)
 ```
 """
 
@@ -29,6 +31,8 @@ from ecatsim.errors import UserError
 from ecatsim.faults.spec import FaultSpec, FaultSpecError, parse_fault
 
 DEVICE_TYPES = ("tmc8670", "echo")
+#: the front doors a segment file may list beside its slaves
+DOOR_KEYS = ("tmcl", "lin")
 MAX_SLAVES = 4096
 
 _SLAVE_KEYS = {
@@ -69,6 +73,11 @@ class SegmentConfig:
     slaves: tuple[SlaveConfig, ...]
     source: str = "<default>"
     faults: tuple[FaultSpec, ...] = field(default_factory=tuple)
+    #: the front doors besides EtherCAT, by key (``tmcl``, ``lin``): their YAML mapping as
+    #: written, validated by the door itself when it is built (ecatsim/frontdoors.py)
+    doors: tuple[tuple[str, dict[str, object]], ...] = ()
+    #: the directory relative paths in the file are taken from
+    base: Path | None = None
 
 
 def _err(src: str, key: str, msg: str) -> UserError:
@@ -94,10 +103,16 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
     """Validate a loaded YAML document into a SegmentConfig."""
     if not isinstance(data, dict):
         raise UserError(f"{src}: expected a mapping with a 'slaves:' list at the top level")
-    unknown = set(data) - {"slaves", "faults"}
+    unknown = set(data) - {"slaves", "faults", *DOOR_KEYS}
     if unknown:
         k = sorted(unknown)[0]
-        raise _err(src, k, "unknown key (allowed: slaves, faults)")
+        raise _err(src, k, f"unknown key (allowed: {', '.join(('slaves', 'faults', *DOOR_KEYS))})")
+    doors: list[tuple[str, dict[str, object]]] = []
+    for k in DOOR_KEYS:
+        if k in data:
+            if not isinstance(data[k], dict):
+                raise _err(src, k, f"expected a mapping (see 'ecatsim {k} --help')")
+            doors.append((k, data[k]))
     raw = data.get("slaves")
     if not isinstance(raw, list) or not raw:
         raise _err(src, "slaves", "expected a non-empty list of slaves")
@@ -165,7 +180,7 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
             specs.append(parse_fault(f))
         except FaultSpecError as exc:
             raise _err(src, f"faults[{i}]", str(exc)) from None
-    return SegmentConfig(tuple(out), src, tuple(specs))
+    return SegmentConfig(tuple(out), src, tuple(specs), tuple(doors), base)
 
 
 def load_segment(path: Path) -> SegmentConfig:

@@ -18,6 +18,7 @@ from ecatsim.device.drive import Drive
 from ecatsim.errors import UserError
 from ecatsim.faults.engine import FaultEngine
 from ecatsim.faults.spec import FaultSpecError
+from ecatsim.frontdoors import build_doors
 from ecatsim.link.base import Link
 from ecatsim.link.errors import LinkError
 from ecatsim.privileges import drop_privileges
@@ -135,6 +136,7 @@ def run_daemon(opts: RunOptions) -> None:
                 "run as root or with CAP_SYS_NICE"
             ) from exc
     faults = arm_faults(cfg, segment)
+    doors = build_doors(cfg)
     where = opts.iface or opts.tap or opts.udp or "ecatsim"
     ctl = ControlSocket(opts.ctl or default_path(where), segment, faults)
     daemon = Daemon(
@@ -144,6 +146,7 @@ def run_daemon(opts: RunOptions) -> None:
         trace_frames=opts.trace_frames,
         ctl=ctl,
         faults=faults,
+        doors=doors,
     )
     # Everything built so far lives for the whole run: keep it out of the cyclic garbage
     # collector so a full collection cannot stall a reply by milliseconds.
@@ -158,12 +161,15 @@ def run_daemon(opts: RunOptions) -> None:
         config=cfg.source,
         mode="busy-poll" if opts.busy_poll else "blocking",
         ctl=str(ctl.path),
+        doors=sorted(doors.doors) if doors is not None else [],
     )
     try:
         daemon.run()
     finally:
         daemon.close()
         ctl.close()
+        if doors is not None:
+            doors.close()
         if tracer is not None:
             tracer.close()
         log.info(

@@ -1,0 +1,44 @@
+"""Build the front doors a segment file lists beside its slaves (``tmcl:``, ``lin:``).
+
+Each door package validates its own mapping: ``door_from_config(data, src, base)`` in the
+package's ``server`` module returns a :class:`~ecatsim.doors.FrontDoor` or raises
+:class:`~ecatsim.errors.UserError` with one line naming the file, the key and the fix.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+from pathlib import Path
+from typing import cast
+
+from ecatsim.config import SegmentConfig
+from ecatsim.doors import DoorHost, FrontDoor
+
+DoorFactory = Callable[[dict[str, object], str, Path | None], FrontDoor]
+
+#: the module holding each door's ``door_from_config``
+FACTORIES: dict[str, str] = {
+    "tmcl": "ecatsim.tmcl.server",
+    "lin": "ecatsim.lin.server",
+}
+
+
+def _factory(key: str) -> DoorFactory:
+    module = importlib.import_module(FACTORIES[key])
+    return cast(DoorFactory, module.door_from_config)
+
+
+def build_doors(cfg: SegmentConfig) -> DoorHost | None:
+    """The segment file's doors behind one :class:`DoorHost`, or None if it lists none."""
+    if not cfg.doors:
+        return None
+    built: dict[str, FrontDoor] = {}
+    try:
+        for key, data in cfg.doors:
+            built[key] = _factory(key)(data, cfg.source, cfg.base)
+    except BaseException:
+        for door in built.values():
+            door.close()
+        raise
+    return DoorHost(built)
