@@ -143,6 +143,7 @@ def run(
             "mbx_drop",
             "wire",
             "link",
+            "door",
         ]
     ),
 )
@@ -160,6 +161,7 @@ def ctl_cmd(sock: Path | None, link: str | None, command: str, args: tuple[str, 
     fault SLAVE KIND | clear SLAVE KIND   a drive fault, held until cleared
     al_refuse SLAVE CODE | al_fall SLAVE CODE | mbx_drop SLAVE N | wire KIND N [VALUE]
     link SLAVE PORT up|down | peek SLAVE ADDR LEN | poke SLAVE ADDR HEX | od SLAVE INDEX SUB [V]
+    door tmcl|lin COMMAND [ARGS]    a request for a TMCL or LIN front door (door tmcl help)
     """
     import json
 
@@ -198,6 +200,8 @@ def ctl_cmd(sock: Path | None, link: str | None, command: str, args: tuple[str, 
             req["up"] = args[2] == "up"
         elif command == "mbx_drop":
             req = {"cmd": command, "slave": num(args[0]), "count": num(args[1])}
+        elif command == "door":
+            req = {"cmd": "door", "door": args[0], "command": args[1], "args": list(args[2:])}
         elif command == "poke":
             req = {"cmd": "poke", "slave": num(args[0]), "addr": num(args[1]), "data": args[2]}
         else:

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from ecatsim.device.drive import Drive
+from ecatsim.doors import DoorHost
 from ecatsim.errors import UserError
 from ecatsim.esc import regs
 from ecatsim.faults.engine import FaultEngine
@@ -53,10 +54,14 @@ def parse_value(text: str) -> int | float | str:
 class ControlSocket:
     """The daemon side."""
 
-    def __init__(self, path: Path, segment: Segment, faults: FaultEngine) -> None:
+    def __init__(
+        self, path: Path, segment: Segment, faults: FaultEngine, doors: DoorHost | None = None
+    ) -> None:
         self.path = path
         self.segment = segment
         self.faults = faults
+        #: the TMCL/LIN front doors the daemon serves beside the segment
+        self.doors = doors
         path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
         if path.exists():
             _remove_stale(path)
@@ -97,6 +102,12 @@ class ControlSocket:
         fid = self.faults.add(parse_fault(fault), self.segment.clock.now_ns())
         return {"ok": True, "id": fid}
 
+    def _door(self, name: str, command: str, args: list[Any]) -> dict[str, Any]:
+        doors = self.doors.doors if self.doors is not None else {}
+        if name not in doors:
+            raise ValueError(f"no front door {name!r} (serving: {', '.join(doors) or 'none'})")
+        return {"ok": True, **doors[name].ctl(command, [str(a) for a in args])}
+
     def status(self) -> dict[str, Any]:
         """Every slave's AL state and code, DL status, error counters; the active faults.
 
@@ -129,6 +140,7 @@ class ControlSocket:
             "bad_frames": seg.bad_frames,
             "faults": self.faults.status(),
             "faults_fired": self.faults.fired_total,
+            "doors": self.doors.status() if self.doors is not None else {},
         }
 
     def handle(self, req: dict[str, Any]) -> dict[str, Any]:
@@ -146,6 +158,8 @@ class ControlSocket:
                 "ok": True,
                 "cleared": self.faults.clear(None if fid is None else int(fid), now),
             }
+        if cmd == "door":  # a request for a TMCL or LIN front door: its own commands
+            return self._door(str(req["door"]), str(req["command"]), list(req.get("args", [])))
         if cmd == "wire":  # shorthand: a wire fault on the next N replies
             return self._inject(
                 {"kind": req["kind"], "count": req.get("count", 1), "value": req.get("value")}

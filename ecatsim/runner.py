@@ -138,7 +138,7 @@ def run_daemon(opts: RunOptions) -> None:
     faults = arm_faults(cfg, segment)
     doors = build_doors(cfg)
     where = opts.iface or opts.tap or opts.udp or "ecatsim"
-    ctl = ControlSocket(opts.ctl or default_path(where), segment, faults)
+    ctl = ControlSocket(opts.ctl or default_path(where), segment, faults, doors)
     daemon = Daemon(
         link,
         segment,

@@ -79,3 +79,26 @@ def test_a_failing_door_closes_the_ones_built_before(monkeypatch: pytest.MonkeyP
     with pytest.raises(UserError, match=r"lin\.pty"):
         frontdoors.build_doors(cfg)
     assert closed == [True]
+
+
+def test_ctl_reaches_a_door_and_lists_it_in_status(tmp_path: Path) -> None:
+    from ecatsim.build import build_segment
+    from ecatsim.clock import MonotonicClock
+    from ecatsim.ctl import ControlSocket
+    from ecatsim.doors import DoorHost
+    from ecatsim.faults.engine import FaultEngine
+
+    segment = build_segment(parse_segment({"slaves": SLAVES}, "seg.yaml"), MonotonicClock())
+    door = PipeDoor()
+    host = DoorHost({"tmcl": door})
+    ctl = ControlSocket(tmp_path / "ctl", segment, FaultEngine(segment), host)
+    try:
+        assert ctl.handle({"cmd": "door", "door": "tmcl", "command": "x", "args": [1]}) == {
+            "ok": True
+        }
+        assert ctl.handle({"cmd": "status"})["doors"] == {"tmcl": {"got": 0}}
+        with pytest.raises(ValueError, match=r"no front door 'lin' \(serving: tmcl\)"):
+            ctl.handle({"cmd": "door", "door": "lin", "command": "x"})
+    finally:
+        ctl.close()
+        host.close()
