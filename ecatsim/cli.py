@@ -147,9 +147,12 @@ def run(
         ]
     ),
 )
+@click.option("--json", "as_json", is_flag=True, help="Print the daemon's answer as JSON.")
 @click.argument("args", nargs=-1)
-def ctl_cmd(sock: Path | None, link: str | None, command: str, args: tuple[str, ...]) -> None:
-    """Talk to a running daemon.
+def ctl_cmd(
+    sock: Path | None, link: str | None, as_json: bool, command: str, args: tuple[str, ...]
+) -> None:
+    """Talk to a running daemon (found by itself when exactly one runs).
 
     \b
     status                          AL state/code, DL status, error counters, active faults
@@ -165,7 +168,8 @@ def ctl_cmd(sock: Path | None, link: str | None, command: str, args: tuple[str, 
     """
     import json
 
-    from ecatsim.ctl import default_path, parse_value, request
+    from ecatsim.ctl import default_path, find_socket, parse_value, request
+    from ecatsim.ctl_table import format_status
 
     def num(v: str) -> int:
         return int(v, 0)
@@ -211,11 +215,16 @@ def ctl_cmd(sock: Path | None, link: str | None, command: str, args: tuple[str, 
     except (IndexError, ValueError) as exc:
         raise UserError(f"ctl {command}: bad arguments {' '.join(args)!r} (see --help)") from exc
     if sock is None:
-        if link is None:
-            raise UserError("ctl: give --socket PATH (the daemon's --ctl) or --link IFACE")
-        sock = default_path(link)
+        sock = default_path(link) if link is not None else find_socket()
     reply = request(sock, req)
-    click.echo(json.dumps(reply, indent=2))
+    if as_json:
+        click.echo(json.dumps(reply, indent=2))
+    elif not reply.get("ok"):
+        click.echo(f"ecatsim: error: ctl {command}: {reply.get('error')}", err=True)
+    elif command == "status":
+        click.echo(format_status(reply))
+    else:
+        click.echo(json.dumps({k: v for k, v in reply.items() if k != "ok"}, indent=2))
     if not reply.get("ok"):
         raise SystemExit(1)
 

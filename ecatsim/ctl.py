@@ -14,6 +14,8 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+import structlog
+
 from ecatsim.device.drive import Drive
 from ecatsim.doors import DoorHost
 from ecatsim.errors import UserError
@@ -21,6 +23,12 @@ from ecatsim.esc import regs
 from ecatsim.faults.engine import FaultEngine
 from ecatsim.faults.spec import parse_fault
 from ecatsim.segment import Segment
+from ecatsim.slave.od import SdoAbort, abort_text
+
+log = structlog.get_logger("ecatsim.ctl")
+
+#: one past the last byte address of the ESC (registers and process RAM)
+ADDRESS_END = 0x10000
 
 MAX_REQUEST = 4096
 
@@ -88,15 +96,29 @@ class ControlSocket:
                 data, addr = self.sock.recvfrom(MAX_REQUEST)
             except BlockingIOError:
                 return
-            try:
-                reply = self.handle(json.loads(data))
-            except (ValueError, KeyError, TypeError, IndexError) as exc:
-                reply = {"ok": False, "error": str(exc)}
+            reply = self.answer(data)
             if addr:
                 try:
                     self.sock.sendto(json.dumps(reply).encode(), addr)
                 except OSError:
                     pass
+
+    def answer(self, data: bytes) -> dict[str, Any]:
+        """One request's answer: every request gets one, whatever goes wrong in it."""
+        try:
+            req = json.loads(data)
+            if not isinstance(req, dict):
+                raise ValueError('a request is a JSON object like {"cmd": "status"}')
+            return self.handle(req)
+        except SdoAbort as exc:
+            return {"ok": False, "error": abort_text(exc.code), "abort": exc.code}
+        except KeyError as exc:
+            return {"ok": False, "error": f"missing field {exc}"}
+        except (ValueError, TypeError, IndexError, UserError) as exc:
+            return {"ok": False, "error": str(exc)}
+        except Exception as exc:  # a bug: answer it, log it, keep serving
+            log.error("ctl_request_failed", request=data[:200], exc_info=exc)
+            return {"ok": False, "error": f"internal error: {exc!r}"}
 
     def _inject(self, fault: dict[str, Any]) -> dict[str, Any]:
         fid = self.faults.add(parse_fault(fault), self.segment.clock.now_ns())
@@ -129,6 +151,7 @@ class ControlSocket:
                     "pu_errors": m[0x030C],
                     "pdi_errors": m[0x030D],
                     "lost_link": list(m[0x0310:0x0312]),
+                    "wd_pd_status": m[regs.WD_STATUS_PD] & 1,
                     "wd_expired": m[0x0442],
                 }
             )
@@ -185,11 +208,13 @@ class ControlSocket:
             return {"ok": True}
         if cmd == "peek":
             addr, n = int(req["addr"]), int(req["len"])
+            _check_range(addr, n)
             esc = seg.escs[slave]
-            return {"ok": True, "data": esc.peek(addr, max(0, min(n, 0x10000 - addr))).hex()}
+            return {"ok": True, "data": esc.peek(addr, n).hex()}
         if cmd == "poke":
             addr = int(req["addr"])
             data = bytes.fromhex(str(req["data"]))
+            _check_range(addr, len(data))
             esc = seg.escs[slave]
             esc.mem[addr : addr + len(data)] = data
             return {"ok": True}
@@ -214,16 +239,51 @@ class ControlSocket:
             pass
 
 
-def _remove_stale(path: Path) -> None:
-    """Remove a socket left by a daemon that is gone; refuse one a live daemon serves."""
+def _check_range(addr: int, n: int) -> None:
+    """A peek or poke stays inside the ESC's 64 KiB address space (TMC8460 §4)."""
+    if n < 1:
+        raise ValueError(f"length {n}: expected at least 1 byte")
+    if not 0 <= addr <= ADDRESS_END - 1 or addr + n > ADDRESS_END:
+        raise ValueError(
+            f"0x{addr:04X}+{n} runs past the end of the ESC address space "
+            f"(0x0000..0x{ADDRESS_END - 1:04X})"
+        )
+
+
+def _alive(path: Path) -> bool:
+    """A daemon serves the socket at ``path`` (connecting to a dead one's file fails)."""
     probe = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
     try:
         probe.connect(str(path))
     except OSError:
-        path.unlink(missing_ok=True)
-        return
+        return False
     finally:
         probe.close()
+    return True
+
+
+def find_socket(directory: Path | None = None) -> Path:
+    """The control socket of the one daemon running, when neither --socket nor --link says.
+
+    With none or several, one line says which exist and what to pass."""
+    directory = directory or run_dir()
+    live = sorted(p for p in directory.glob("*.sock") if _alive(p))
+    if len(live) == 1:
+        return live[0]
+    if not live:
+        raise UserError(
+            f"ctl: no running daemon has a control socket in {directory}; start one with "
+            "'ecatsim run', or give --socket PATH (its --ctl)"
+        )
+    names = ", ".join(p.name.removesuffix(".sock") for p in live)
+    raise UserError(f"ctl: several daemons are running ({names}); say which with --link NAME")
+
+
+def _remove_stale(path: Path) -> None:
+    """Remove a socket left by a daemon that is gone; refuse one a live daemon serves."""
+    if not _alive(path):
+        path.unlink(missing_ok=True)
+        return
     raise UserError(f"--ctl {path}: another daemon serves this control socket; pass --ctl PATH")
 
 

@@ -72,6 +72,67 @@ CODE_SM_WATCHDOG = 0x001B
 CODE_INVALID_OUTPUT_CONFIG = 0x001D
 CODE_INVALID_INPUT_CONFIG = 0x001E
 
+#: the meaning of every AL status code (0x0134). Ref: ETG.1000.6 Table 11.
+AL_STATUS_CODE_TEXT: dict[int, str] = {
+    0x0000: "no error",
+    0x0001: "unspecified error",
+    0x0002: "no memory",
+    0x0011: "invalid requested state change",
+    0x0012: "unknown requested state",
+    0x0013: "bootstrap not supported",
+    0x0014: "no valid firmware",
+    0x0015: "invalid mailbox configuration (BOOT)",
+    0x0016: "invalid mailbox configuration (PREOP)",
+    0x0017: "invalid sync manager configuration",
+    0x0018: "no valid inputs available",
+    0x0019: "no valid outputs",
+    0x001A: "synchronization error",
+    0x001B: "sync manager watchdog",
+    0x001C: "invalid sync manager types",
+    0x001D: "invalid output configuration",
+    0x001E: "invalid input configuration",
+    0x001F: "invalid watchdog configuration",
+    0x0020: "slave needs cold start",
+    0x0021: "slave needs INIT",
+    0x0022: "slave needs PREOP",
+    0x0023: "slave needs SAFEOP",
+    0x0024: "invalid input mapping",
+    0x0025: "invalid output mapping",
+    0x0026: "inconsistent settings",
+    0x0027: "freerun not supported",
+    0x0028: "synchronization not supported",
+    0x0029: "freerun needs 3-buffer mode",
+    0x002A: "background watchdog",
+    0x002B: "no valid inputs and outputs",
+    0x002C: "fatal sync error",
+    0x002D: "no sync error",
+    0x0030: "invalid DC SYNC configuration",
+    0x0031: "invalid DC latch configuration",
+    0x0032: "PLL error",
+    0x0033: "DC sync IO error",
+    0x0034: "DC sync timeout error",
+    0x0035: "DC invalid sync cycle time",
+    0x0036: "DC sync0 cycle time",
+    0x0037: "DC sync1 cycle time",
+    0x0041: "mailbox AoE",
+    0x0042: "mailbox EoE",
+    0x0043: "mailbox CoE",
+    0x0044: "mailbox FoE",
+    0x0045: "mailbox SoE",
+    0x004F: "mailbox VoE",
+    0x0050: "EEPROM no access",
+    0x0051: "EEPROM error",
+    0x0060: "slave restarted locally",
+    0x0061: "device identification value updated",
+}
+
+
+def status_code_text(code: int) -> str:
+    """``0x001B sync manager watchdog``: an AL status code and its meaning."""
+    if code >= 0x8000:
+        return f"0x{code:04X} vendor specific"
+    return f"0x{code:04X} {AL_STATUS_CODE_TEXT.get(code, 'reserved')}"
+
 
 def parse_state(code: int) -> AlState | None:
     """The AlState for bits 3:0 of AL control, or None for an undefined code."""

@@ -48,6 +48,38 @@ ABORT_VALUE_LOW = 0x0609_0032
 ABORT_GENERAL = 0x0800_0000
 ABORT_STATE = 0x0800_0022
 
+#: what each abort code means, as ETG.1000.6 Table 41 (CiA 301 Table 22) words it
+ABORT_TEXT: dict[int, str] = {
+    ABORT_TOGGLE: "toggle bit not changed",
+    ABORT_COMMAND: "client/server command specifier not valid or unknown",
+    ABORT_OUT_OF_MEMORY: "out of memory",
+    ABORT_UNSUPPORTED_ACCESS: "unsupported access to an object",
+    ABORT_WRITE_ONLY: "attempt to read a write-only object",
+    ABORT_READ_ONLY: "attempt to write a read-only object",
+    ABORT_SI0_NOT_ZERO: "subindex cannot be written, SI0 must be 0 for write access",
+    ABORT_CA_UNSUPPORTED: "complete access not supported for variable-length objects",
+    ABORT_NO_OBJECT: "object does not exist",
+    ABORT_NOT_MAPPABLE: "object cannot be mapped to the PDO",
+    ABORT_PDO_LENGTH: (
+        "the number and length of the objects to be mapped would exceed the PDO length"
+    ),
+    ABORT_PARAM_INCOMPATIBLE: "general parameter incompatibility",
+    ABORT_LENGTH: "data type does not match, length of service parameter does not match",
+    ABORT_LENGTH_HIGH: "data type does not match, length of service parameter too high",
+    ABORT_LENGTH_LOW: "data type does not match, length of service parameter too low",
+    ABORT_NO_SUBINDEX: "subindex does not exist",
+    ABORT_VALUE_RANGE: "value range of parameter exceeded",
+    ABORT_VALUE_HIGH: "value of parameter written too high",
+    ABORT_VALUE_LOW: "value of parameter written too low",
+    ABORT_GENERAL: "general error",
+    ABORT_STATE: "data cannot be transferred or stored because of the present device state",
+}
+
+
+def abort_text(code: int) -> str:
+    """``0x06020000 object does not exist``: the code and its meaning."""
+    return f"0x{code:08X} {ABORT_TEXT.get(code, 'unknown abort code')}"
+
 
 class SdoAbort(Exception):
     """An SDO request refused with a CiA 301 abort code."""

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -101,7 +102,6 @@ def test_sigint_exits_cleanly(netns_pair: NetnsPair, tmp_path: Path) -> None:
            "--iface", netns_pair.slave_if, "--log-format", "json"]  # fmt: skip
     with open(log, "wb") as f:
         p = subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT)
-    import time
 
     deadline = time.monotonic() + 10
     while '"ready"' not in log.read_text() and time.monotonic() < deadline:
@@ -125,7 +125,6 @@ def _caps(pid: int) -> dict[str, str]:
 def test_daemon_keeps_only_cap_net_raw_and_switches_user(
     daemon_factory: object, master_factory: object
 ) -> None:
-    import time
 
     d = daemon_factory("--user", "nobody")  # type: ignore[operator]
     time.sleep(0.2)  # the daemon drops privileges right after "ready"
@@ -150,10 +149,24 @@ def test_default_control_socket_under_the_run_directory(daemon_factory: Any) -> 
     sock = Path("/run/ecatsim") / f"{d.pair.slave_if}.sock"
     assert stat.S_IMODE(sock.stat().st_mode) == 0o600
     assert stat.S_IMODE(sock.parent.stat().st_mode) == 0o700
-    r = ecatsim("ctl", "--link", d.pair.slave_if, "status")
+    r = ecatsim("ctl", "--link", d.pair.slave_if, "--json", "status")
     assert r.returncode == 0, r.stderr
     status = json.loads(r.stdout)
     assert status["ok"] and status["slaves"][0]["al_status"] == 0x01 and status["faults"] == []
+    # the only daemon running: found without --link, its status printed as a table
+    r = ecatsim("ctl", "status")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.splitlines()[1].split()[:5] == ["0", "0x0000", "INIT", "0x0000", "no"]
+    # a missing object: the SDO abort within 1 s, and exit status 1 from the command line
+    from ecatsim.ctl import request
+
+    req = {"cmd": "od", "slave": 0, "index": 0x9999, "sub": 0}
+    assert request(sock, req, timeout=1.0)["abort"] == 0x06020000
+    r = ecatsim("ctl", "od", "0", "0x9999", "0")
+    assert (r.returncode, r.stderr) == (
+        1,
+        "ecatsim: error: ctl od: 0x06020000 object does not exist\n",
+    )
     line = one_error_line(ecatsim("run", "--iface", d.pair.slave_if, ns=d.pair.slave_ns))
     assert "another daemon serves this control socket" in line
     d.stop()
