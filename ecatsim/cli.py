@@ -272,7 +272,12 @@ def eeprom_show(image: Path) -> None:
     try:
         click.echo(format_image(parse_image(data)))
     except SiiError as exc:
-        raise UserError(f"{image}: {exc}") from exc
+        from ecatsim.sii.crc import crc8
+
+        crc = ""
+        if len(data) >= 16 and (want := crc8(data[0:14])) != data[14]:
+            crc = f"; and the header checksum (word 7) is 0x{data[14]:02X}, not 0x{want:02X}"
+        raise UserError(f"{image}: not an SII EEPROM image: {exc}{crc}") from exc
 
 
 def main() -> None:

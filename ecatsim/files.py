@@ -1,6 +1,8 @@
 """Atomic file writes: temp file in the same directory, fsync, rename, fsync the directory.
 
-A crash at any moment leaves either the old or the new file, never a torn one.
+A crash at any moment leaves either the old or the new file, never a torn one. The file
+gets the permissions a plain ``open(path, "w")`` would give it: a replaced file keeps its
+mode, a new one gets 0666 less the umask (the temp file alone would leave it 0600).
 """
 
 from __future__ import annotations
@@ -10,12 +12,28 @@ import tempfile
 from pathlib import Path
 
 
+def current_umask() -> int:
+    """The process umask (read by setting it and setting it back)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _mode_for(path: Path) -> int:
+    try:
+        return path.stat().st_mode & 0o7777
+    except FileNotFoundError:
+        return 0o666 & ~current_umask()
+
+
 def atomic_write(path: Path, data: bytes) -> None:
     """Write ``data`` to ``path`` atomically and durably."""
     path = Path(path)
     d = path.parent if str(path.parent) else Path(".")
+    mode = _mode_for(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=d)
     try:
+        os.fchmod(fd, mode)
         with os.fdopen(fd, "wb") as f:
             f.write(data)
             f.flush()

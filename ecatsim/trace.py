@@ -49,6 +49,35 @@ class TraceWriter:
         self._f.close()
 
 
+def read_trace(csv_path: Path, slave: int) -> list[dict[str, str]]:
+    """The rows of one slave of a ``--trace`` CSV; anything else is one line saying why."""
+    hint = "write one with 'ecatsim run --trace FILE.csv'"
+    try:
+        with open(csv_path, newline="", encoding="utf-8") as f:
+            reader = csv.DictReader(f)
+            header = tuple(reader.fieldnames or ())
+            if header[: len(COLUMNS)] != COLUMNS:
+                missing = [c for c in COLUMNS if c not in header]
+                what = (
+                    f"columns {', '.join(missing[:3])} missing"
+                    if missing
+                    else "columns out of order"
+                )
+                raise UserError(f"{csv_path}: not an ecatsim trace ({what}); {hint}")
+            rows = [r for r in reader if int(r["slave"]) == slave]
+    except OSError as exc:
+        raise UserError(f"{csv_path}: cannot read ({exc.strerror})") from exc
+    except UnicodeDecodeError:
+        raise UserError(
+            f"{csv_path}: not an ecatsim trace (binary, not CSV text); {hint}"
+        ) from None
+    except (ValueError, csv.Error) as exc:
+        raise UserError(f"{csv_path}: not an ecatsim trace (bad row: {exc}); {hint}") from exc
+    if not rows:
+        raise UserError(f"{csv_path}: no rows for slave {slave} (use --slave N)")
+    return rows
+
+
 def plot(csv_path: Path, out: Path, slave: int = 0) -> None:
     """Position, velocity and torque against time, set point over actual, state changes
     marked. Needs the ``plot`` extra (matplotlib)."""
@@ -59,13 +88,7 @@ def plot(csv_path: Path, out: Path, slave: int = 0) -> None:
         import matplotlib.pyplot as plt
     except ImportError as exc:
         raise UserError("ecatsim plot needs matplotlib: pip install 'ecatsim[plot]'") from exc
-    try:
-        with open(csv_path, newline="") as f:
-            rows = [r for r in csv.DictReader(f) if int(r["slave"]) == slave]
-    except (OSError, KeyError, ValueError) as exc:
-        raise UserError(f"{csv_path}: not an ecatsim trace ({exc})") from exc
-    if not rows:
-        raise UserError(f"{csv_path}: no rows for slave {slave}")
+    rows = read_trace(csv_path, slave)
     t = [float(r["time_s"]) for r in rows]
     fig, axes = plt.subplots(3, 1, sharex=True, figsize=(9, 7))
     for ax, (target, actual, label) in zip(

@@ -32,3 +32,27 @@ def test_trace_rows_and_plot(tmp_path: Path) -> None:
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     r = CliRunner().invoke(cli, ["plot", str(path), "-o", str(out), "--slave", "3"])
     assert r.exit_code != 0 and "no rows for slave 3" in str(r.exception)
+
+
+def test_plot_of_a_file_that_is_no_trace_says_why(tmp_path: Path) -> None:
+    other = tmp_path / "other.csv"
+    other.write_text("a,b\n1,2\n")
+    binary = tmp_path / "image.bin"
+    binary.write_bytes(bytes(range(128, 256)))
+    hint = "; write one with 'ecatsim run --trace FILE.csv'"
+    for path, why in (
+        (other, "columns time_s, slave, controlword missing"),
+        (binary, "binary, not CSV text"),
+    ):
+        r = CliRunner().invoke(cli, ["plot", str(path), "-o", str(tmp_path / "p.png")])
+        assert str(r.exception) == f"{path}: not an ecatsim trace ({why}){hint}"
+
+
+def test_eeprom_show_of_junk_says_it_is_no_sii_image(tmp_path: Path) -> None:
+    junk = tmp_path / "junk.bin"
+    junk.write_bytes(bytes(range(16)) + b"\xff" * 112 + b"\x01\x00\xff\x7f")
+    r = CliRunner().invoke(cli, ["eeprom", "show", str(junk)])
+    assert str(r.exception) == (
+        f"{junk}: not an SII EEPROM image: category 1 at word 0x0040 (32767 words) runs past "
+        "the end; and the header checksum (word 7) is 0x0E, not 0xE0"
+    )
