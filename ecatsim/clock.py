@@ -1,6 +1,6 @@
 """The one place that reads the OS clock. Everything else gets a Clock injected.
 
-Ref: design.md habit 8 (time is injected).
+Time is injected, so tests and the simulated devices are deterministic.
 """
 
 from __future__ import annotations

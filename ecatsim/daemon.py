@@ -6,7 +6,7 @@ compiled responder (``_serve.c``, decision P9) waits, receives and answers the c
 frames itself and hands every other frame to :meth:`Daemon.handle_frame`, the reference.
 A failure while processing a frame is counted and logged once with the last frames; the
 loop carries on.
-Ref: design.md "One frame through the layers", habits 3 and 6.
+Ref: docs/architecture.md "Frame path".
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """The device description: one YAML source for the SII image, the ESI and the OD.
 
 Every problem is one line naming the file, the key path and the fix.
-Ref: ETG.2010 (SII content), ETG.2000 (ESI), seed 004 (TMC8670 identity and PDOs).
+Ref: ETG.2010 (SII content), ETG.2000 (ESI), TMC8670 datasheet (identity and PDOs).
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ and a simulated machine it advances on the loop's clock. :class:`DoorHost` puts 
 behind one epoll descriptor, so the EtherCAT daemon waits on a fixed set of descriptors
 and learns with one wake-up that some door has work. :func:`serve_doors` is the loop of a
 daemon that serves only front doors (``ecatsim tmcl``, ``ecatsim lin``).
-Ref: design.md "Growing the family: another bus is another front door".
+Another bus is another front door: ``ecatsim ctl`` sees every device.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """A small in-memory recorder of the last frames, for diagnostics when something fails.
 
 Slots are preallocated; recording is one slice copy (no per-frame objects).
-Ref: design.md habit 6 (log a failure once, with the last frames).
+A failure is logged once, with the last frames.
 """
 
 from __future__ import annotations

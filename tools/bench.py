@@ -11,8 +11,8 @@ records the round trip of each send_processdata()/receive_processdata() pair, lo
 WKC mismatches and the daemon's CPU time. Then the daemon is frozen and the floor, a minimal
 C responder compiled here with the system compiler, answers the same master's same frames in
 the same wake-up mode: the ratio of the medians is the figure the targets use. Each run is
-made unpinned and with master, daemon and floor pinned to one CPU (design.md "Measuring
-speed"). A raw LRW frame timed before bring-up (slaves in INIT) is reported too. Results: a
+made unpinned and with master, daemon and floor pinned to one CPU (docs/performance.md "How to
+measure"). A raw LRW frame timed before bring-up (slaves in INIT) is reported too. Results: a
 table on stdout and JSON in bench/results/. Ref: docs/performance.md.
 """
 
@@ -262,7 +262,7 @@ def with_master(
     daemon_pid: int,
 ) -> dict[str, Any]:
     """Cyclic exchange against the daemon, then, with the same pysoem master and frames,
-    against the C echo swapped in for the daemon (design.md "Measuring speed")."""
+    against the C echo swapped in for the daemon (docs/performance.md "How to measure")."""
     m = pysoem_master(pair, n, period_us)
     try:
         run = cycles(m, seconds, period_us, daemon_pid)

@@ -18,7 +18,7 @@
  * test_cycle_compiled.py compares both paths.
  *
  * Ref: ecatsim/device/drive.py (advance, _steady_demand, outputs_applied, _controlword,
- * _publish); seed 004 Tables 77, 80-83; CiA 402-2 §8 (FSA), §12.6-12.8 (csp, csv, cst);
+ * _publish); TMC8670 Tables 77, 80-83; CiA 402-2 §8 (FSA), §12.6-12.8 (csp, csv, cst);
  * docs/decisions.md P5.
  */
 #define PY_SSIZE_T_CLEAN

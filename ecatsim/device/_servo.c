@@ -10,7 +10,7 @@
  *             lim, vlim, vel_kp, vel_ki, pos_kp, cur_kp, cur_ki)
  * returns (done, why, angle, omega, iq, iq_integ, integ, iq_ref)
  *
- * Ref: seed 004 §5.1.7-5.1.10; docs/decisions.md D15, P2.
+ * Ref: TMC8670 §5.1.7-5.1.10; docs/decisions.md D15, P2.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>

@@ -5,7 +5,7 @@
  *   p = (dt, ppr, kt, load, viscous, coulomb, inertia, vmax, resistance, decay, lim, vlim,
  *        vel_kp, vel_ki, pos_kp, cur_kp, cur_ki)
  * Returns the substeps done; *why_out says why it stopped early (STOP_NONE if it did not).
- * Ref: seed 004 §5.1.7-5.1.10; docs/decisions.md D15, P2.
+ * Ref: TMC8670 §5.1.7-5.1.10; docs/decisions.md D15, P2.
  */
 #ifndef ECATSIM_SERVO_LOOP_H
 #define ECATSIM_SERVO_LOOP_H

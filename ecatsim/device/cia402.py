@@ -1,6 +1,6 @@
 """CiA 402 power drive system (PDS) state machine as a transition table.
 
-States, commands and the transition numbers 0-16 follow CiA 402-2 §8.1 / seed 004
+States, commands and the transition numbers 0-16 follow CiA 402-2 §8.1 / TMC8670 datasheet
 Figure 3 and Tables 77 (command coding) and 83 (state coding).
 """
 
@@ -10,7 +10,7 @@ from enum import IntEnum
 
 
 class PdsState(IntEnum):
-    """PDS states. Ref: CiA 402-2 Figure 10; seed 004 Table 83."""
+    """PDS states. Ref: CiA 402-2 Figure 10; TMC8670 Table 83."""
 
     NOT_READY_TO_SWITCH_ON = 0
     SWITCH_ON_DISABLED = 1
@@ -23,7 +23,7 @@ class PdsState(IntEnum):
 
 
 class Command(IntEnum):
-    """Controlword commands. Ref: seed 004 Table 77; CiA 402-2 Table 34."""
+    """Controlword commands. Ref: TMC8670 Table 77; CiA 402-2 Table 34."""
 
     NONE = 0
     SHUTDOWN = 1  # xxxx x110
@@ -34,7 +34,7 @@ class Command(IntEnum):
     FAULT_RESET = 6  # bit 7 0 -> 1
 
 
-#: Statusword bits 0-3, 5, 6 per state. Ref: seed 004 Table 83.
+#: Statusword bits 0-3, 5, 6 per state. Ref: TMC8670 Table 83.
 STATUS_BITS = {
     PdsState.NOT_READY_TO_SWITCH_ON: 0x0000,
     PdsState.SWITCH_ON_DISABLED: 0x0040,
@@ -81,7 +81,7 @@ POWERED = frozenset({S.OPERATION_ENABLED, S.QUICK_STOP_ACTIVE, S.FAULT_REACTION_
 def decode(controlword: int, previous: int) -> Command:
     """The command in a controlword; the fault reset is the 0->1 edge of bit 7.
 
-    Ref: seed 004 Table 77 (bits 7, 3, 2, 1, 0).
+    Ref: TMC8670 Table 77 (bits 7, 3, 2, 1, 0).
     """
     if controlword & 0x80 and not previous & 0x80:
         return Command.FAULT_RESET

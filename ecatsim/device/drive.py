@@ -2,7 +2,7 @@
 
 It works on object dictionary values (the PDO copy plan moves them) and advances the
 servo on fixed substeps up to the time the process data is exchanged.
-Ref: seed 004 §6-§9 (objects, modes, statusword); CiA 402-2 (PDS FSA §8, modes §10-§12).
+Ref: TMC8670 §6-§9 (objects, modes, statusword); CiA 402-2 (PDS FSA §8, modes §10-§12).
 """
 
 from __future__ import annotations
@@ -41,11 +41,11 @@ except ImportError:  # pragma: no cover - built without a C compiler
     _compiled = None
 _compiled = available(_compiled)  # ECATSIM_PURE_PYTHON=1: the reference only
 
-# Modes of operation (6060h). Ref: CiA 402-2 Table 35; seed 004 §6.1.1.
+# Modes of operation (6060h). Ref: CiA 402-2 Table 35; TMC8670 §6.1.1.
 PP, PV, HM, CSP, CSV, CST = 1, 3, 6, 8, 9, 10
 MODES = (0, PP, PV, HM, CSP, CSV, CST)
 
-# Statusword bits. Ref: seed 004 Tables 80-83, 81 (Trinamic bits 14/15).
+# Statusword bits. Ref: TMC8670 Tables 80-83, 81 (Trinamic bits 14/15).
 SW_VOLTAGE = 0x0010
 SW_WARNING = 0x0080
 SW_REMOTE = 0x0200
@@ -277,7 +277,7 @@ class Drive:
         )
 
     def al_state_changed(self, state: AlState, now_ns: int) -> None:
-        """Leaving OP stops the motor (seed 004 §3.2): quick-stop ramp, voltage off."""
+        """Leaving OP stops the motor (TMC8670 §3.2): quick-stop ramp, voltage off."""
         self.advance(now_ns)
         if self.al_state == AlState.OP and state != AlState.OP:
             if self.state in cia402.POWERED:
@@ -419,7 +419,7 @@ class Drive:
 
     def _index_pulse(self, index: Callable[[bool, int], None], t_ns: int) -> None:
         """The encoder's index (N) pulse, once per revolution at angle 0, as wide as one
-        count at the present speed. Ref: seed 004 §5.1.14 (encoder); decision D14."""
+        count at the present speed. Ref: TMC8670 §5.1.14 (encoder); decision D14."""
         rpm = abs(self.servo.rpm) or 1.0
         width_ns = max(1000, int(60e9 / (self.params.ppr * rpm)))
         index(True, t_ns)
@@ -511,7 +511,7 @@ class Drive:
         return 0.0 if w == 0xFFFFFFFF else float(w)
 
     def _pp_setpoint(self) -> None:
-        """New set point on the rising edge of bit 4; bit 6 relative. Ref: seed 004 Table 76."""
+        """New set point on the rising edge of bit 4; bit 6 relative. Ref: TMC8670 Table 76."""
         cw = self.prev_cw
         new = bool(cw & 0x10)
         if new and not self.set_point_ack:
@@ -573,7 +573,7 @@ class Drive:
 
     # ----------------------------------------------------------------- statusword
     def _publish(self) -> None:
-        """Actual values and the statusword into the OD. Ref: seed 004 Tables 80-83."""
+        """Actual values and the statusword into the OD. Ref: TMC8670 Tables 80-83."""
         s = self.servo
         st = self.state
         sw = cia402.STATUS_BITS[st]
@@ -638,7 +638,7 @@ class Drive:
 
     def _publish_sdo_only(self) -> None:
         """Values no PDO can carry, refreshed when the OD is read (SDO upload, control
-        socket) rather than every cycle. Ref: seed 004 §5.1.7-5.1.14 (PDO mapping: no)."""
+        socket) rather than every cycle. Ref: TMC8670 §5.1.7-5.1.14 (PDO mapping: no)."""
         s = self.servo
         pos = s.counts
         self._set(0x6063, pos)

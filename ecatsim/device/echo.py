@@ -1,6 +1,6 @@
 """A loopback device: inputs echo the outputs, object by object.
 
-It carries the TMC8670 process image (seed 004 §4.1.7/4.1.8 default PDOs) and answers
+It carries the TMC8670 process image (TMC8670 §4.1.7/4.1.8 default PDOs) and answers
 ``6041 <- 6040``, ``6064 <- 607A``, ``6077 <- 6071``, ``606C <- 60FF``; ``60FD`` counts the
 output images received in OP. It makes process-data tests exact without motor physics.
 """

@@ -6,7 +6,7 @@ with back EMF Ke*w (Ke = Kt) integrated exactly over each substep (zero-order ho
 voltage limited by the supply; the velocity loop is a PI (2042h), the position loop a P
 (2043h) with velocity feed-forward. Limits: 2050h, 6072h, 607Fh. Every substep has the
 same length, so the trajectory does not depend on how often the master sends frames.
-Ref: seed 004 §5.1.7-5.1.10, §5.1.14; CiA 402-2 §10-§12.
+Ref: TMC8670 §5.1.7-5.1.10, §5.1.14; CiA 402-2 §10-§12.
 """
 
 from __future__ import annotations
@@ -107,7 +107,7 @@ class Servo:
     # ----------------------------------------------------------------- feedback
     @property
     def counts(self) -> int:
-        """Encoder position (quantised). Ref: seed 004 §5.1.14 (2081h)."""
+        """Encoder position (quantised). Ref: TMC8670 §5.1.14 (2081h)."""
         return math.floor(self.angle / TWO_PI * self.p.ppr)
 
     @property
@@ -131,7 +131,7 @@ class Servo:
         """One substep of a current PI (anti-windup by clamping at the supply voltage) on
         the R-L winding with back EMF ``emf``: (new current mA, new integrator V). The
         torque axis runs the same arithmetic inlined in run().
-        Ref: seed 004 §5.1.7 (2041h); decision D15."""
+        Ref: TMC8670 §5.1.7 (2041h); decision D15."""
         p = self.p
         err = (ref_ma - i_ma) / 1000.0  # A
         v = kp * err + integ + emf  # the back EMF is fed forward (decoupled)
@@ -172,7 +172,7 @@ class Servo:
         One loop, all state in locals: this is the frame path's largest cost per drive.
         The compiled copy of this loop (``_servo.c``, the same arithmetic) runs instead
         where it was built, unless the flux axis carries current.
-        Ref: seed 004 §5.1.7-5.1.10; decisions D15, P2.
+        Ref: TMC8670 §5.1.7-5.1.10; decisions D15, P2.
         """
         state = (self.angle, self.omega, self.iq_ma, self.iq_integ, self.integ, self.iq_ref_ma)
         args = (n, kind, ref, v_ff_rpm, window, i_trip_ma, index, state, self._loop_params())

@@ -1,6 +1,6 @@
 """The interface between the slave firmware and the application (the device).
 
-Ref: ETG.1000.6 §6.4 (the application behind the AL state machine); design.md "device".
+Ref: ETG.1000.6 §6.4 (the application behind the AL state machine).
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """File access over EtherCAT: firmware files written and read in BOOT.
 
 Files live in a configurable directory (written atomically) or in memory. Writes are
-accepted only in BOOT (seed 004 §2.3, §3.2: firmware update via FoE in bootstrap).
+accepted only in BOOT (TMC8670 §2.3, §3.2: firmware update via FoE in bootstrap).
 Ref: ETG.1000.6 §5.8 (FoE: RRQ/WRQ/DATA/ACK/ERR/BUSY, error codes Table 92).
 """
 
@@ -131,7 +131,7 @@ class FoeServer:
             raise FoeError(ERR_NO_RIGHTS, "wrong password")
 
     def _wrq(self, password: int, body: bytes) -> list[tuple[int, bytes]]:
-        """Write request: only in BOOT. Ref: ETG.1000.6 §5.8; seed 004 §3.2."""
+        """Write request: only in BOOT. Ref: ETG.1000.6 §5.8; TMC8670 §3.2."""
         name = self._name(body)
         self._check_password(password)
         if self.state() != int(AlState.BOOT):

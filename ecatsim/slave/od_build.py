@@ -1,7 +1,7 @@
 """Build a device's object dictionary from its description: the communication objects
 are generated from the identity, SMs and PDOs (never typed twice); the rest is the
 description's object table (``od:`` file).
-Ref: ETG.1000.6 §5.6.7 (communication area 0x1000-0x1FFF); seed 004 §4, §5, §6-9.
+Ref: ETG.1000.6 §5.6.7 (communication area 0x1000-0x1FFF); TMC8670 §4, §5, §6-9.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from ecatsim.description import DescriptionError, DeviceDescription, PdoDescript
 from ecatsim.slave.al import AlState
 from ecatsim.slave.od import Entry, ObjectCode, ObjectDictionary, OdObject
 
-MAX_PDO_ENTRIES = 9  # seed 004 §2.1: dynamic mapping with max. 9 entries
+MAX_PDO_ENTRIES = 9  # TMC8670 §2.1: dynamic mapping with max. 9 entries
 PREOP_ONLY = (int(AlState.PREOP),)
 
 
@@ -47,7 +47,7 @@ def _pdo_mapping(index: int, pdo: PdoDescription | None, name: str) -> OdObject:
         entries[s] = Entry(
             s, f"Mapping entry {s}", "UNSIGNED32", access="rw", default=v, write_states=PREOP_ONLY
         )
-    return OdObject(index, name, ObjectCode.RECORD, entries, source="seed 004 §4.1.7/§4.1.8")
+    return OdObject(index, name, ObjectCode.RECORD, entries, source="TMC8670 §4.1.7/§4.1.8")
 
 
 def _assign(index: int, pdo_index: int, name: str) -> OdObject:
@@ -66,7 +66,7 @@ def _assign(index: int, pdo_index: int, name: str) -> OdObject:
             1, "PDO assigned", "UNSIGNED16", access="rw", default=pdo_index, write_states=PREOP_ONLY
         ),
     }
-    return OdObject(index, name, ObjectCode.ARRAY, entries, source="seed 004 §4.1.10/§4.1.11")
+    return OdObject(index, name, ObjectCode.ARRAY, entries, source="TMC8670 §4.1.10/§4.1.11")
 
 
 def communication_objects(desc: DeviceDescription, serial: int) -> list[OdObject]:
@@ -83,7 +83,7 @@ def communication_objects(desc: DeviceDescription, serial: int) -> list[OdObject
             3: Entry(3, "Revision number", "UNSIGNED32", default=idn.revision),
             4: Entry(4, "Serial number", "UNSIGNED32", default=serial),
         },
-        source="seed 004 §4.1.6 (+ serial, ETG.1000.6)",
+        source="TMC8670 §4.1.6 (+ serial, ETG.1000.6)",
     )
     types = {"mbx_out": 1, "mbx_in": 2, "pd_out": 3, "pd_in": 4, "unused": 0}
     smt = {
@@ -105,7 +105,7 @@ def communication_objects(desc: DeviceDescription, serial: int) -> list[OdObject
             "Sync manager communication type",
             ObjectCode.ARRAY,
             smt,
-            source="seed 004 §4.1.9, ETG.1000.6 §5.6.7.4.1",
+            source="TMC8670 §4.1.9, ETG.1000.6 §5.6.7.4.1",
         ),
         _assign(0x1C12, 0x1600, "Sync manager 2 PDO assignment"),
         _assign(0x1C13, 0x1A00, "Sync manager 3 PDO assignment"),

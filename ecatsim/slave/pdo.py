@@ -3,7 +3,7 @@
 Mapping writes are validated when they happen (object exists, is mappable, direction,
 length) and the plan is compiled at PREOP->SAFEOP, when the SM lengths are checked.
 Ref: ETG.1000.6 §5.6.7.4 (PDO mapping/assignment objects); CiA 301 §7.5.2.35/36;
-seed 004 §2.1 (max. 9 mapping entries), §4.1.7-4.1.11.
+TMC8670 §2.1 (max. 9 mapping entries), §4.1.7-4.1.11.
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """CoE against a real master: SDO up/download, aborts, Complete Access, SDO Info, PDO remap,
-mailbox repeat. Ref: ETG.1000.6 §5.6 (CoE); ETG.1000.4 §5.6 (mailbox); seed 004 §4-9.
+mailbox repeat. Ref: ETG.1000.6 §5.6 (CoE); ETG.1000.4 §5.6 (mailbox); TMC8670 §4-9.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
-"""The TMC8670 drive moved by a real master through the seed 004 examples (§7.3, §8.2, §9.2),
+"""The TMC8670 drive moved by a real master through the datasheet examples (§7.3, §8.2, §9.2),
 statusword asserted after each step. Free run: outputs act when SM2 is written.
-Ref: seed 004 §6-§9; CiA 402-2.
+Ref: TMC8670 §6-§9; CiA 402-2.
 """
 
 from __future__ import annotations
@@ -380,7 +380,7 @@ def test_index_pulse_latched_and_sync1(master_factory: Any, daemon_factory: Any)
 def test_master_stops_cycling_watchdog_stops_the_motor(
     master_factory: Any, daemon_factory: Any
 ) -> None:
-    """Loss of the master in OP (seed 004 §3.2): the process-data watchdog expires, the
+    """Loss of the master in OP (TMC8670 §3.2): the process-data watchdog expires, the
     slave leaves OP with 0x001B, the drive drops to switch on disabled and the motor runs
     down to standstill (watched in the inputs the master reads again in SAFEOP)."""
     c = start(master_factory, daemon_factory, 3, x6083=10000)

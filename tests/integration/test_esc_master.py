@@ -1,6 +1,6 @@
 """A real master (pysoem) against the daemon over a veth pair in private namespaces.
 
-Ref: ETG.1000.4/.6 behaviour as SOEM expects it; TMC8460 §5; seed 004 §4.1.6-4.1.8.
+Ref: ETG.1000.4/.6 behaviour as SOEM expects it; TMC8460 §5; TMC8670 §4.1.6-4.1.8.
 """
 
 from __future__ import annotations

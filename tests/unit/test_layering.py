@@ -1,6 +1,6 @@
 """The firmware and devices reach the ESC only through its PDI face.
 
-Ref: design.md habit 5 (two faces, one seam).
+Two faces, one seam: docs/architecture.md.
 """
 
 from __future__ import annotations

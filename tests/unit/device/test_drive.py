@@ -1,5 +1,5 @@
 """CiA 402 drive in process: the PDS table, trajectories against closed forms, physics
-determinism, torque/inertia, quick stop, faults. Ref: CiA 402-2; seed 004 §6-§9."""
+determinism, torque/inertia, quick stop, faults. Ref: CiA 402-2; TMC8670 §6-§9."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """The register table (data) and the ESC hooks (code) agree; identity values are exact.
 
-Ref: TMC8460 §4 Table 11, §5; design.md habit 1.
+Ref: TMC8460 §4 Table 11, §5.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """SII image: CRC, exact header words, round trip, decoding errors, atomic store.
 
-Ref: ETG.2010 §2 (SII layout, checksum); seed 004 §4.1.6 (identity).
+Ref: ETG.2010 §2 (SII layout, checksum); TMC8670 §4.1.6 (identity).
 """
 
 from __future__ import annotations
