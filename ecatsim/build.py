@@ -143,10 +143,9 @@ def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
         pdi = Pdi(esc)
         layout = mailbox_layout(image)
         if "coe" in desc.mailbox.protocols:
-            serial = sc.serial if sc.serial is not None else desc.identity.serial
             base = sc.description.parent if sc.description is not None else None
             try:
-                od = build_od(desc, serial, base)
+                od = build_od(desc, base)
             except DescriptionError as exc:
                 raise UserError(str(exc)) from exc
             mbx = MailboxEngine(pdi)

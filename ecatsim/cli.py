@@ -346,5 +346,5 @@ def esi_export(output: Path) -> None:
     from ecatsim.slave.od_build import build_od
 
     desc = default_description()
-    atomic_write(output, export_esi(desc, build_od(desc, desc.identity.serial)))
+    atomic_write(output, export_esi(desc, build_od(desc)))
     click.echo(f"{output}: ESI of {desc.name}")

@@ -114,6 +114,9 @@ class Entry:
     write_states: tuple[int, ...] = ()
     value: int | str | bytes = 0
     bits: int = 0
+    #: shorter lengths a PDO may map the entry with besides ``bits`` (the low bits, sign-
+    #: extended on the way in), where a datasheet's default mapping uses one
+    pdo_bits: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
         if self.dtype not in DATA_TYPES:

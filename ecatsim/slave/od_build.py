@@ -69,7 +69,7 @@ def _assign(index: int, pdo_index: int, name: str) -> OdObject:
     return OdObject(index, name, ObjectCode.ARRAY, entries, source="TMC8670 §4.1.10/§4.1.11")
 
 
-def communication_objects(desc: DeviceDescription, serial: int) -> list[OdObject]:
+def communication_objects(desc: DeviceDescription) -> list[OdObject]:
     """1008/1009/100A/1018/1600/1A00/1C00/1C12/1C13 from the description."""
     idn = desc.identity
     ident = OdObject(
@@ -77,13 +77,12 @@ def communication_objects(desc: DeviceDescription, serial: int) -> list[OdObject
         "Identity object",
         ObjectCode.RECORD,
         {
-            0: Entry(0, "Number of entries", "UNSIGNED8", default=4),
+            0: Entry(0, "Number of entries", "UNSIGNED8", default=3),
             1: Entry(1, "Vendor ID", "UNSIGNED32", default=idn.vendor_id),
             2: Entry(2, "Product code", "UNSIGNED32", default=idn.product_code),
             3: Entry(3, "Revision number", "UNSIGNED32", default=idn.revision),
-            4: Entry(4, "Serial number", "UNSIGNED32", default=serial),
         },
-        source="TMC8670 §4.1.6 (+ serial, ETG.1000.6)",
+        source="TMC8670 §4.1.6 Tables 16, 17 (subindices 1-3; the serial is in the SII only)",
     )
     types = {"mbx_out": 1, "mbx_in": 2, "pd_out": 3, "pd_in": 4, "unused": 0}
     smt = {
@@ -123,6 +122,7 @@ def _entry(raw: dict[str, Any], sub: int, where: str, fallback_type: str | None 
             dtype,
             access=str(raw.get("access", "ro")),
             pdo=bool(raw.get("pdo", False)),
+            pdo_bits=tuple(int(b) for b in raw.get("pdo_bits", ())),
             minimum=raw.get("min"),
             maximum=raw.get("max"),
             default=raw.get("default", "" if "STRING" in dtype else 0),
@@ -196,9 +196,9 @@ def load_od_table(desc: DeviceDescription, base: Path | None) -> list[OdObject]:
     return table_objects(raw, desc.source)
 
 
-def build_od(desc: DeviceDescription, serial: int, base: Path | None = None) -> ObjectDictionary:
+def build_od(desc: DeviceDescription, base: Path | None = None) -> ObjectDictionary:
     """The full object dictionary of one slave."""
     objs = {o.index: o for o in load_od_table(desc, base)}
-    for o in communication_objects(desc, serial):
+    for o in communication_objects(desc):
         objs[o.index] = o
     return ObjectDictionary(list(objs.values()))

@@ -99,7 +99,7 @@ def _mapped(od: ObjectDictionary, value: int, rx: bool) -> tuple[Entry | None, i
     if index not in od:
         raise SdoAbort(ABORT_NO_OBJECT, f"mapped object 0x{index:04X}")
     e = od.entry(index, sub)
-    if not e.pdo or e.bits != bits or (rx and e.access == "ro"):
+    if not e.pdo or bits not in (e.bits, *e.pdo_bits) or (rx and e.access == "ro"):
         raise SdoAbort(ABORT_NOT_MAPPABLE, f"0x{index:04X}:{sub} ({bits} bits)")
     return e, bits
 

@@ -38,9 +38,11 @@ def test_identity_objects(master_factory: Any, daemon_factory: Any) -> None:
     assert s.sdo_read(0x1008, 0) == b"TMC8670"  # 7 bytes: a normal (non-expedited) upload
     assert struct.unpack("<I", s.sdo_read(0x1018, 1))[0] == 0x286
     assert struct.unpack("<I", s.sdo_read(0x1018, 2))[0] == 8670
-    # SII words 0x08-0x0F equal 0x1018:01-04
-    for sub, word in ((1, 0x08), (2, 0x0A), (3, 0x0C), (4, 0x0E)):
+    # SII words 0x08-0x0D equal 0x1018:01-03; the sheet's 1018h has no serial (:00 = 3)
+    for sub, word in ((1, 0x08), (2, 0x0A), (3, 0x0C)):
         assert s.sdo_read(0x1018, sub) == s.eeprom_read(word)
+    assert s.sdo_read(0x1018, 0) == b"\x03"
+    assert abort_of(s.sdo_read, 0x1018, 4) == 0x06090011
 
 
 def test_abort_codes(master_factory: Any, daemon_factory: Any) -> None:
@@ -52,7 +54,7 @@ def test_abort_codes(master_factory: Any, daemon_factory: Any) -> None:
     assert abort_of(s.sdo_write, 0x6060, 0, b"\x05") == 0x06090030
     assert abort_of(s.sdo_write, 0x6081, 0, struct.pack("<I", 300_000)) == 0x06090031
     assert abort_of(s.sdo_write, 0x6082, 0, struct.pack("<i", -300_000)) == 0x06090032
-    assert abort_of(s.sdo_read, 0x2130, 1) == 0x06010001  # write-only action trigger
+    assert s.sdo_read(0x2130, 1) == b"\x7b"  # RW, default 123 (TMC8670 Table 66)
     # mapping: a non-mappable object, then too long a PDO
     s.sdo_write(0x1A00, 0, b"\x00")
     assert abort_of(s.sdo_write, 0x1A00, 1, struct.pack("<I", 0x60810020)) == 0x06040041
@@ -172,6 +174,58 @@ def test_pdo_remap_changes_the_process_image(
         assert m.receive_processdata(RX_TIMEOUT_US) == 3
     sw, _mode, pos, torque, _vel, _di, _demand = struct.unpack("<HbihiIi", bytes(s.input))
     assert (sw, pos, torque) == (48, 48 * 3, -48)
+
+
+def test_torque_objects_are_signed32_over_sdo_and_pdo(
+    master_factory: Any, daemon_factory: Any, tmp_path: Any
+) -> None:
+    """6071h/6077h/60B2h are SIGNED32 as the TMC8670 object tables type them (Tables 140-149);
+    the default PDOs' 16-bit entries and 32-bit remaps both work (decision C1)."""
+    cfg = tmp_path / "seg.yaml"
+    cfg.write_text("slaves:\n  - device: echo\n")  # 6077 <- 6071 echoed: exact data
+    m, s = up(master_factory, daemon_factory, "--config", str(cfg))
+    s.sdo_write(0x6071, 0, struct.pack("<i", -40000))
+    assert s.sdo_read(0x6071, 0) == struct.pack("<i", -40000)
+    s.sdo_write(0x60B2, 0, struct.pack("<i", -70000))
+    assert s.sdo_read(0x60B2, 0) == struct.pack("<i", -70000)
+    assert abort_of(s.sdo_write, 0x6071, 0, struct.pack("<h", -400)) == 0x06070010
+    assert abort_of(s.sdo_write, 0x6071, 0, struct.pack("<i", 90001)) == 0x06090031
+    assert abort_of(s.sdo_write, 0x6071, 0, struct.pack("<i", -90001)) == 0x06090032
+    s.sdo_write(0x6071, 0, struct.pack("<i", 0))
+    # 60B2h is not mappable (Table 149)
+    s.sdo_write(0x1600, 0, b"\x00")
+    assert abort_of(s.sdo_write, 0x1600, 4, struct.pack("<I", 0x60B20020)) == 0x06040041
+    # both torques remapped with 32 bits
+    s.sdo_write(0x1600, 3, struct.pack("<I", 0x60710020))
+    s.sdo_write(0x1600, 4, struct.pack("<I", 0x60FF0020))
+    s.sdo_write(0x1600, 0, b"\x04")
+    s.sdo_write(0x1A00, 0, b"\x00")
+    s.sdo_write(0x1A00, 4, struct.pack("<I", 0x60770020))
+    s.sdo_write(0x1A00, 0, b"\x06")
+    assert m.config_map() == 14 + 19
+    to_op(m)
+    for _ in range(20):
+        s.output = struct.pack("<Hiii", 0, 0, -40000, 0)
+        m.send_processdata()
+        assert m.receive_processdata(RX_TIMEOUT_US) == 3
+    assert struct.unpack_from("<i", bytes(s.input), 7)[0] == -40000
+
+
+def test_torque_in_the_default_16_bit_entries(
+    master_factory: Any, daemon_factory: Any, tmp_path: Any
+) -> None:
+    """The sheet's default RxPDO/TxPDO (60710010h, 60770010h) carry the low 16 bits."""
+    cfg = tmp_path / "seg.yaml"
+    cfg.write_text("slaves:\n  - device: echo\n")
+    m, s = up(master_factory, daemon_factory, "--config", str(cfg))
+    assert (m.config_map(), len(s.output), len(s.input)) == (12 + 17, 12, 17)
+    to_op(m)
+    for _ in range(20):
+        s.output = struct.pack("<Hihi", 0, 0, -1234, 0)
+        m.send_processdata()
+        assert m.receive_processdata(RX_TIMEOUT_US) == 3
+    assert struct.unpack_from("<h", bytes(s.input), 7)[0] == -1234
+    assert s.sdo_read(0x6077, 0) == struct.pack("<i", -1234)
 
 
 def _mbx_write(s: Any, data: bytes, counter: int, mtype: int = 3) -> None:

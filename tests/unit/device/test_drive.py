@@ -85,7 +85,7 @@ def test_profile_matches_closed_form() -> None:
 
 
 def make(params: MotorParams | None = None) -> tuple[Drive, list[tuple[int, int, bytes]]]:
-    od = build_od(default_description(), 1)
+    od = build_od(default_description())
     emcys: list[tuple[int, int, bytes]] = []
     d = Drive(od, params, lambda c, r, b: emcys.append((c, r, b)))
     d.al_state_changed(AlState.OP, 0)
@@ -246,7 +246,7 @@ def test_current_loop_is_limited_by_the_supply_voltage() -> None:
 
 def test_2041_gains_written_and_used() -> None:
     desc = default_description()
-    od = build_od(desc, 1)
+    od = build_od(desc)
     d = Drive(od)
     assert od.value(0x2041, 5) == 1024 and od.value(0x2041, 6) == 4000  # L, R over 250 us
     od.set(0x2041, 5, 256)  # 1 V/A: a slower loop

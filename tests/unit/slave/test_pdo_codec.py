@@ -23,7 +23,7 @@ def slow(plan: Plan) -> Plan:
 
 
 def test_default_images_have_a_codec_and_it_matches_the_slow_path() -> None:
-    od = build_od(default_description(), 1)
+    od = build_od(default_description())
     img = PdoImage(od, Quiet())  # type: ignore[arg-type]
     plan = img.plan
     assert plan.rx_codec is not None and plan.rx_codec.st.format == "<Hihi"
@@ -49,7 +49,7 @@ def test_default_images_have_a_codec_and_it_matches_the_slow_path() -> None:
 
 
 def test_no_codec_for_types_struct_cannot_carry() -> None:
-    od = build_od(default_description(), 1)
+    od = build_od(default_description())
     e = od.entry(0x1008, 0)  # a VISIBLE_STRING
     assert codec((Field(0, 4, e),), 4) is None
     assert codec((Field(0, 2, None), Field(2, 2, od.entry(0x6040, 0))), 6) is not None
