@@ -1,28 +1,51 @@
 #!/usr/bin/env bash
 # The main job on the embedded default: venv + pinned deps, a veth pair, the daemon on one
-# end and the demo master on the other. Needs root (veth, raw sockets).
-#   sudo tools/demo.sh            # one TMC8670 drive
-#   sudo tools/demo.sh --slaves 4
+# end and the demo master on the other. Needs root (veth, raw sockets): run it as root, or
+# as a user with sudo (it asks for it).
+#   tools/demo.sh                 # one TMC8670 drive
+#   tools/demo.sh --slaves 4
+#   ECATSIM_KEEP_LINKS=1 tools/demo.sh   # leave the veth pair up afterwards
+# A veth pair the demo creates is removed on exit; one that existed before is left as it was
+# found (the master's promiscuous mode switched off again).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 MASTER_IF=${ECATSIM_MASTER_IF:-ecat0}
 SLAVE_IF=${ECATSIM_SLAVE_IF:-ecat1}
 
 if [ "$(id -u)" != 0 ]; then
-    echo "demo: needs root for the veth pair and raw sockets: sudo $0 $*" >&2
+    if command -v sudo >/dev/null; then
+        exec sudo --preserve-env=ECATSIM_MASTER_IF,ECATSIM_SLAVE_IF,ECATSIM_KEEP_LINKS,ECATSIM_DEMO_OUT \
+            "$0" "$@"
+    fi
+    echo "demo: needs root for the veth pair and raw sockets (and sudo is not installed)" >&2
     exit 2
 fi
-if [ ! -x .venv/bin/python ]; then
-    python3 -m venv .venv
-fi
-.venv/bin/python -m pip install --quiet --disable-pip-version-check -r requirements-test.lock
-.venv/bin/python -m pip install --quiet --disable-pip-version-check --no-deps -e .
+tools/ensure-venv.sh
 
+created=0
 if ! ip link show "$MASTER_IF" >/dev/null 2>&1; then
     ip link add "$MASTER_IF" type veth peer name "$SLAVE_IF"
+    created=1
 fi
 ip link set "$MASTER_IF" up
 ip link set "$SLAVE_IF" up
+
+DAEMON=
+cleanup() {
+    if [ -n "$DAEMON" ]; then
+        kill "$DAEMON" 2>/dev/null || true
+        wait "$DAEMON" 2>/dev/null || true
+    fi
+    if [ "${ECATSIM_KEEP_LINKS:-0}" = 1 ]; then
+        echo "demo: leaving $MASTER_IF/$SLAVE_IF up (ECATSIM_KEEP_LINKS=1)"
+    elif [ "$created" = 1 ]; then
+        ip link del "$MASTER_IF" 2>/dev/null || true
+    else
+        ip link set "$MASTER_IF" promisc off 2>/dev/null || true
+        ip link set "$SLAVE_IF" promisc off 2>/dev/null || true
+    fi
+}
+trap cleanup EXIT
 
 OUT=${ECATSIM_DEMO_OUT:-demo-out}
 mkdir -p "$OUT"
@@ -30,14 +53,14 @@ LOG="$OUT/daemon.log"
 .venv/bin/ecatsim run --iface "$SLAVE_IF" --rt-priority 40 --trace "$OUT/trace.csv" "$@" \
     >"$LOG" 2>&1 &
 DAEMON=$!
-trap 'kill $DAEMON 2>/dev/null || true; wait $DAEMON 2>/dev/null || true' EXIT
 for _ in $(seq 100); do
     grep -q ready "$LOG" && break
-    kill -0 $DAEMON 2>/dev/null || { cat "$LOG"; exit 1; }
+    kill -0 "$DAEMON" 2>/dev/null || { cat "$LOG"; exit 1; }
     sleep 0.05
 done
 echo "daemon on $SLAVE_IF (log: $LOG); demo master on $MASTER_IF"
 .venv/bin/python tools/demo_master.py --iface "$MASTER_IF"
-kill "$DAEMON"; wait "$DAEMON" 2>/dev/null || true
-trap - EXIT
+kill "$DAEMON"
+wait "$DAEMON" 2>/dev/null || true
+DAEMON=
 .venv/bin/ecatsim plot "$OUT/trace.csv" -o "$OUT/plot.png"
