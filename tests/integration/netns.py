@@ -303,7 +303,19 @@ class Daemon:
                 proc.kill()
                 proc.wait(timeout)
         self.proc = None
+        if proc.returncode != 0 or "--user" in self.args:
+            self._remove_left_socket()  # a clean exit as root removes its own
         return proc.returncode
+
+    def _remove_left_socket(self) -> None:
+        """A daemon killed with SIGKILL, or one that dropped root (--user) and so may not
+        write /run/ecatsim, leaves its control socket behind; the next daemon on the link
+        would replace it, but a test run leaves nothing behind."""
+        if "--ctl" in self.args:
+            return  # the test chose the path (under its tmp_path)
+        from ecatsim.ctl import default_path
+
+        default_path(self.pair.slave_if).unlink(missing_ok=True)
 
     def restart(self, timeout: float = READY_TIMEOUT) -> None:
         self.stop()
