@@ -56,3 +56,15 @@ def test_eeprom_show_of_junk_says_it_is_no_sii_image(tmp_path: Path) -> None:
         f"{junk}: not an SII EEPROM image: category 1 at word 0x0040 (32767 words) runs past "
         "the end; and the header checksum (word 7) is 0x0E, not 0xE0"
     )
+
+
+def test_state_marks_merge_a_quick_enable_sequence() -> None:
+    from ecatsim.trace import mode_spans, state_marks
+
+    states = ["SWITCH_ON_DISABLED"] * 2 + ["READY_TO_SWITCH_ON", "SWITCHED_ON"]
+    states += ["OPERATION_ENABLED"] * 96 + ["READY_TO_SWITCH_ON"]
+    modes = ["0"] + ["1"] * 50 + ["8"] * 50
+    rows = [{"state": s, "mode": m} for s, m in zip(states, modes, strict=True)]
+    t = [i / 100 for i in range(len(rows))]
+    assert state_marks(t, rows) == [(0.02, "SOD→RTSO→SO→OE"), (1.0, "OE→RTSO")]
+    assert mode_spans(t, rows) == [(0.01, 0.51, "pp"), (0.51, 1.0, "csp")]
