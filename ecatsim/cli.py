@@ -71,8 +71,10 @@ def cli(ctx: click.Context, debug: bool) -> None:
 @click.option(
     "--rt-priority",
     type=click.IntRange(1, 99),
-    help="Run under SCHED_FIFO at this priority (as real-time masters do; needs root).",
+    help="SCHED_FIFO priority (default: 20 where allowed, blocking mode only; needs root "
+    "or CAP_SYS_NICE).",
 )
+@click.option("--no-rt", is_flag=True, help="Keep the ordinary scheduler (no SCHED_FIFO).")
 @click.option("--trace", "trace", type=click.Path(path_type=Path), help="Per-cycle drive CSV.")
 @click.option(
     "--ctl",
@@ -95,6 +97,7 @@ def run(
     busy_poll: bool,
     cpu: int | None,
     rt_priority: int | None,
+    no_rt: bool,
     trace: Path | None,
     ctl: Path | None,
     user: str | None,
@@ -117,6 +120,7 @@ def run(
         busy_poll=busy_poll,
         cpu=cpu,
         rt_priority=rt_priority,
+        no_rt=no_rt,
         trace=trace,
         ctl=ctl,
         user=user,

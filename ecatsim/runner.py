@@ -9,6 +9,7 @@ from pathlib import Path
 
 import structlog
 
+from ecatsim import realtime
 from ecatsim.build import build_segment
 from ecatsim.clock import MonotonicClock
 from ecatsim.config import SegmentConfig, default_segment, load_segment, repeat_default
@@ -42,6 +43,7 @@ class RunOptions:
     busy_poll: bool = False
     cpu: int | None = None
     rt_priority: int | None = None
+    no_rt: bool = False
     trace: Path | None = None
     ctl: Path | None = None
     user: str | None = None
@@ -113,6 +115,7 @@ def arm_faults(cfg: SegmentConfig, segment: Segment) -> FaultEngine:
 def run_daemon(opts: RunOptions) -> None:
     """Build everything, log ``ready``, serve until SIGINT/SIGTERM."""
     cfg = segment_config(opts)
+    priority = realtime.choose_priority(opts.rt_priority, opts.no_rt, opts.busy_poll, opts.cpu)
     clock = MonotonicClock()
     segment = build_segment(cfg, clock)
     tracer = attach_trace(segment, opts.trace) if opts.trace is not None else None
@@ -122,19 +125,6 @@ def run_daemon(opts: RunOptions) -> None:
             os.sched_setaffinity(0, {opts.cpu})
         except OSError as exc:
             raise UserError(f"--cpu {opts.cpu}: cannot pin ({exc.strerror})") from exc
-    if opts.rt_priority is not None:
-        if opts.busy_poll and opts.cpu is None:
-            raise UserError(
-                "--rt-priority with --busy-poll needs --cpu N: a spinning real-time "
-                "task would starve every other task on its CPU"
-            )
-        try:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(opts.rt_priority))
-        except OSError as exc:
-            raise UserError(
-                f"--rt-priority {opts.rt_priority}: cannot set SCHED_FIFO ({exc.strerror}); "
-                "run as root or with CAP_SYS_NICE"
-            ) from exc
     faults = arm_faults(cfg, segment)
     doors = build_doors(cfg)
     where = opts.iface or opts.tap or opts.udp or "ecatsim"
@@ -152,6 +142,7 @@ def run_daemon(opts: RunOptions) -> None:
     # collector so a full collection cannot stall a reply by milliseconds.
     gc.collect()
     gc.freeze()
+    realtime.apply(priority, explicit=opts.rt_priority is not None)
     drop_privileges(opts.user)  # sockets and files are open: keep CAP_NET_RAW only
     daemon.install_signal_handlers()
     log.info(

@@ -1,0 +1,91 @@
+"""Real-time scheduling and locked memory for the daemon, where the host allows them.
+
+A stock master times out after 2 ms or less (KickCAT's default link timeout is 2 ms): on a
+busy machine the daemon must be woken before the ordinary tasks that keep both CPUs busy.
+The blocking daemon therefore takes ``SCHED_FIFO`` at a modest priority by default (below
+the kernel's threaded interrupts at 50 and below a real-time master), and locks the memory
+it has built so a reply never waits for a page to come back. ``--rt-priority N`` picks the
+priority; ``--no-rt`` keeps the ordinary scheduler. See docs/decisions.md K1.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import errno
+import os
+
+import structlog
+
+from ecatsim.errors import UserError
+
+log = structlog.get_logger("ecatsim.realtime")
+
+#: the SCHED_FIFO priority the blocking daemon takes unless told otherwise
+DEFAULT_PRIORITY = 20
+
+#: mlockall(2) flags (linux/mman.h)
+MCL_CURRENT = 1
+
+
+def choose_priority(
+    rt_priority: int | None, no_rt: bool, busy_poll: bool, cpu: int | None
+) -> int | None:
+    """The SCHED_FIFO priority to ask for, or None for the ordinary scheduler.
+
+    Busy-poll spins: as a real-time task it would starve every other task on its CPU, so
+    it is real-time only when asked, and then only pinned to one CPU."""
+    if no_rt:
+        if rt_priority is not None:
+            raise UserError("--no-rt and --rt-priority exclude each other")
+        return None
+    if rt_priority is not None:
+        if busy_poll and cpu is None:
+            raise UserError(
+                "--rt-priority with --busy-poll needs --cpu N: a spinning real-time "
+                "task would starve every other task on its CPU"
+            )
+        return rt_priority
+    return None if busy_poll else DEFAULT_PRIORITY
+
+
+def set_fifo(priority: int, explicit: bool) -> bool:
+    """Take SCHED_FIFO at ``priority``. Without the capability: an error if the user asked
+    for it (``explicit``), else one warning line and the ordinary scheduler."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except OSError as exc:
+        if explicit:
+            raise UserError(
+                f"--rt-priority {priority}: cannot set SCHED_FIFO ({exc.strerror}); "
+                "run as root or with CAP_SYS_NICE"
+            ) from exc
+        log.warning(
+            "realtime_unavailable",
+            reason=exc.strerror,
+            hint="run as root or with CAP_SYS_NICE for SCHED_FIFO; --no-rt silences this",
+        )
+        return False
+    log.info("realtime", policy="SCHED_FIFO", priority=priority, off_switch="--no-rt")
+    return True
+
+
+def lock_memory() -> bool:
+    """Lock the pages the daemon has now (``mlockall(MCL_CURRENT)``). Pages allocated later
+    are not locked: with MCL_FUTURE, a daemon that drops root (``--user``) would see its
+    allocations fail once RLIMIT_MEMLOCK is reached."""
+    libc = ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True)
+    if libc.mlockall(MCL_CURRENT) == 0:
+        log.info("memory_locked")
+        return True
+    err = ctypes.get_errno()
+    log.warning("memory_not_locked", reason=os.strerror(err), errno=errno.errorcode.get(err, err))
+    return False
+
+
+def apply(priority: int | None, explicit: bool) -> None:
+    """Scheduling class and memory lock for the serving loop (call once everything is built)."""
+    if priority is None:
+        return
+    if set_fifo(priority, explicit):
+        lock_memory()
