@@ -15,6 +15,7 @@ import click
 import structlog
 
 from ecatsim import __version__
+from ecatsim.bench_cli import bench
 from ecatsim.errors import UserError
 
 
@@ -233,19 +234,6 @@ def ctl_cmd(
         raise SystemExit(1)
 
 
-@cli.command("bench", context_settings={"ignore_unknown_options": True, "help_option_names": []})
-@click.argument("args", nargs=-1, type=click.UNPROCESSED)
-def bench_cmd(args: tuple[str, ...]) -> None:
-    """The benchmark against a real master and a C echo floor (tools/bench.py; root).
-    Arguments go to the tool: ecatsim bench --slaves 1 4 16 --modes blocking busy-poll."""
-    import os
-
-    tool = Path(__file__).resolve().parents[1] / "tools" / "bench.py"
-    if not tool.exists():
-        raise UserError(f"bench: {tool} not found: the benchmark ships with the source tree")
-    os.execv(sys.executable, [sys.executable, str(tool), *args])
-
-
 @cli.command("plot")
 @click.argument("csv_path", metavar="TRACE.csv", type=click.Path(path_type=Path))
 @click.option("-o", "--output", required=True, type=click.Path(path_type=Path))
@@ -352,3 +340,6 @@ def esi_export(output: Path) -> None:
     desc = default_description()
     atomic_write(output, export_esi(desc, build_od(desc)))
     click.echo(f"{output}: ESI of {desc.name}")
+
+
+cli.add_command(bench)

@@ -1,15 +1,17 @@
 """Benchmark: the daemon against a real master and against a C echo floor, same run.
 
-    sudo .venv/bin/python tools/bench.py --slaves 1 4 16 --seconds 10 --period-us 1000
-    sudo .venv/bin/python tools/bench.py --modes blocking busy-poll --max-rate --hold 60
-    sudo .venv/bin/ecatsim bench -- --slaves 1 4     (the same, from the CLI)
+    .venv/bin/ecatsim bench --slaves 1 --slaves 4 --slaves 16 --seconds 10
+    .venv/bin/ecatsim bench --modes blocking --modes busy-poll --max-rate --hold 60
+    .venv/bin/python tools/bench.py --help     (the same command; root)
 
 For each N it starts the daemon (N TMC8670 drives) in a private network namespace, brings
 the segment to OP with pysoem (DC active, SYNC0 every cycle) in another, runs cyclic
 exchange kept mid-way between SYNC0 pulses with every drive enabled in csp and moving, and
 records the round trip of each send_processdata()/receive_processdata() pair, lost frames,
-WKC mismatches and the daemon's CPU time. Then the daemon is frozen and the floor, a minimal
-C responder compiled here with the system compiler, answers the same master's same frames in
+WKC mismatches, the daemon's CPU time and its own reply time to each frame from kernel
+timestamps on both ends of the link (tools/reply_time.py). Then the daemon is frozen and the
+floor, a minimal C responder compiled here with the system compiler, answers the same
+master's same frames in
 the same wake-up mode: the ratio of the medians is the figure the targets use. Each run is
 made unpinned and with master, daemon and floor pinned to one CPU (docs/performance.md "How to
 measure"). A raw LRW frame timed before bring-up (slaves in INIT) is reported too. Results: a
@@ -18,7 +20,6 @@ table on stdout and JSON in bench/results/. Ref: docs/performance.md.
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import os
@@ -36,8 +37,12 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from ecatsim.bench_cli import BenchOptions  # noqa: E402
 from ecatsim.wire import datagram as dg  # noqa: E402
 from tests.integration.netns import Daemon, NetnsPair, in_netns  # noqa: E402
+
+sys.path.insert(0, str(ROOT / "tools"))
+from reply_time import ReplyTimer  # noqa: E402
 
 CSP = 8
 #: TMC8670 default PDOs (config/tmc8670.yaml): 6040h, 607Ah, 6071h, 60FFh out; 6041h,
@@ -265,7 +270,9 @@ def with_master(
     against the C echo swapped in for the daemon (docs/performance.md "How to measure")."""
     m = pysoem_master(pair, n, period_us)
     try:
-        run = cycles(m, seconds, period_us, daemon_pid)
+        with ReplyTimer((pair.master_ns, pair.master_if), (pair.slave_ns, pair.slave_if)) as rt:
+            run = cycles(m, seconds, period_us, daemon_pid)
+        run["reply_us"] = rt.stats()
         if echo is None:
             return run
         os.kill(daemon_pid, signal.SIGSTOP)  # the daemon is frozen, its socket idle
@@ -315,25 +322,8 @@ def max_rate(n: int, extra: tuple[str, ...], hold_s: float, rates: list[int],
     return {"rate_hz": None, "hold_s": hold_s, "tried": tried}
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--slaves", type=int, nargs="+", default=[1, 4, 16, 64])
-    ap.add_argument("--seconds", type=float, default=5.0, help="cyclic exchange per run")
-    ap.add_argument("--period-us", type=int, default=1000)
-    ap.add_argument("--modes", nargs="+", choices=["blocking", "busy-poll"], default=["blocking"])
-    ap.add_argument("--placements", nargs="+", choices=["unpinned", "same-cpu"],
-                    default=["unpinned", "same-cpu"],
-                    help="same-cpu pins master, daemon and floor to --cpu (default 0)")  # fmt: skip
-    ap.add_argument("--cpu", type=int, help="pin the daemon (and the floor) to this CPU")
-    ap.add_argument("--rt-priority", type=int, help="run the daemon SCHED_FIFO at this priority")
-    ap.add_argument("--master-spin", action="store_true",
-                    help="the master spins between cycles instead of sleeping")  # fmt: skip
-    ap.add_argument("--max-rate", action="store_true", help="also search the highest rate")
-    ap.add_argument("--hold", type=float, default=60.0, help="seconds a rate must hold")
-    ap.add_argument("--rates", type=int, nargs="+", default=[8000, 4000, 2000, 1000, 500])
-    ap.add_argument("--hold-floor", action="store_true",
-                    help="hold each rate against the C floor too: is 0 lost possible?")  # fmt: skip
-    args = ap.parse_args()
+def run(args: BenchOptions) -> int:
+    """The whole benchmark with the options of ``ecatsim bench`` (ecatsim/bench_cli.py)."""
     global MASTER_SPIN
     MASTER_SPIN = args.master_spin
     if os.geteuid() != 0:
@@ -400,7 +390,9 @@ def main() -> int:
                       f"(x{run['ratio_median']})  lost {run['lost']} wkc-err "
                       f"{run['wkc_errors']}  daemon {run['cpu_per_cycle_us']} us/cycle "
                       f"{run['cpu_percent']} %  enabled {run['drives_enabled']}/{n}  raw frame "
-                      f"x{row['raw_ratio_median']}"
+                      f"x{row['raw_ratio_median']}  daemon reply median "
+                      f"{run['reply_us']['median']} p99.99 {run['reply_us']['p99.99']} max "
+                      f"{run['reply_us']['max']} us"
                       + held)  # fmt: skip
     out = ROOT / "bench" / "results"
     out.mkdir(parents=True, exist_ok=True)
@@ -411,4 +403,6 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from ecatsim.bench_cli import bench
+
+    bench()

@@ -14,6 +14,7 @@ index byte of the first datagram (ETG.1000.4 §5.4.1.2), which the slaves leave 
 
 from __future__ import annotations
 
+import math
 import select
 import socket
 import struct
@@ -31,11 +32,12 @@ End = tuple[str | None, str]  # (network namespace or None, interface)
 
 
 def percentile(sorted_us: list[float], q: float) -> float:
-    """The ``q`` quantile (0..1) of sorted values, nearest rank."""
+    """The ``q`` quantile (0..1) of sorted values by nearest rank: the smallest value with
+    at least ``q`` of the values at or below it."""
     if not sorted_us:
         return float("nan")
-    k = min(len(sorted_us) - 1, max(0, round(q * (len(sorted_us) - 1))))
-    return sorted_us[k]
+    k = min(len(sorted_us), max(1, math.ceil(q * len(sorted_us))))
+    return sorted_us[k - 1]
 
 
 def _open(end: End) -> socket.socket:
@@ -81,7 +83,7 @@ class ReplyTimer:
             s.close()
 
     def _run(self) -> None:
-        master, daemon = self._socks
+        master = self._socks[0]
         while not self._stop.is_set():
             for s in select.select(self._socks, [], [], 0.05)[0]:
                 data, anc, _flags, addr = s.recvmsg(64, socket.CMSG_SPACE(16))
@@ -90,7 +92,9 @@ class ReplyTimer:
                 for lvl, typ, d in anc:
                     if lvl == socket.SOL_SOCKET and typ == SO_TIMESTAMPNS:
                         sec, nsec = struct.unpack("qq", d[:16])
-                        self.events.append((sec * 1_000_000_000 + nsec, s is master, data[IDX_OFFSET]))
+                        self.events.append(
+                            (sec * 1_000_000_000 + nsec, s is master, data[IDX_OFFSET])
+                        )
 
     def reply_us(self) -> tuple[list[float], int]:
         """Reply times in microseconds, and how many requests got no reply (or replies no

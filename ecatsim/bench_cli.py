@@ -1,0 +1,126 @@
+"""``ecatsim bench``: the options of the benchmark (tools/bench.py runs it; root).
+
+The benchmark ships with the source tree, not the wheel: it builds a C echo (the floor),
+runs a pysoem master in one network namespace against the daemon in another, and writes a
+table and bench/results/bench-<time>.json. See docs/performance.md "How to measure".
+"""
+
+from __future__ import annotations
+
+import importlib.util
+from dataclasses import dataclass
+from pathlib import Path
+
+import click
+
+from ecatsim.errors import UserError
+
+TOOL = Path(__file__).resolve().parents[1] / "tools" / "bench.py"
+
+
+@dataclass(frozen=True, slots=True)
+class BenchOptions:
+    """What one benchmark run measures."""
+
+    slaves: tuple[int, ...]
+    seconds: float
+    period_us: int
+    modes: tuple[str, ...]
+    placements: tuple[str, ...]
+    cpu: int | None
+    rt_priority: int | None
+    master_spin: bool
+    max_rate: bool
+    hold: float
+    rates: tuple[int, ...]
+    hold_floor: bool
+
+
+@click.command("bench")
+@click.option(
+    "--slaves",
+    multiple=True,
+    type=int,
+    default=(1, 4, 16, 64),
+    show_default=True,
+    help="Segment sizes to measure (repeat the option: --slaves 1 --slaves 16).",
+)
+@click.option(
+    "--seconds",
+    type=float,
+    default=5.0,
+    show_default=True,
+    help="Cyclic exchange per run, against the daemon and against the floor.",
+)
+@click.option(
+    "--period-us",
+    type=int,
+    default=1000,
+    show_default=True,
+    help="The master's cycle time (SYNC0 runs at the same period).",
+)
+@click.option(
+    "--modes",
+    multiple=True,
+    type=click.Choice(["blocking", "busy-poll"]),
+    default=("blocking",),
+    show_default=True,
+    help="The daemon's wake-up modes to measure.",
+)
+@click.option(
+    "--placements",
+    multiple=True,
+    type=click.Choice(["unpinned", "same-cpu"]),
+    default=("unpinned", "same-cpu"),
+    show_default=True,
+    help="unpinned: the scheduler places master and daemon; same-cpu: both on --cpu (0).",
+)
+@click.option("--cpu", type=int, help="Pin the daemon (and the floor) to this CPU.")
+@click.option(
+    "--rt-priority",
+    type=int,
+    help="The daemon's SCHED_FIFO priority (default: the daemon's own default).",
+)
+@click.option(
+    "--master-spin", is_flag=True, help="The master spins between cycles instead of sleeping."
+)
+@click.option(
+    "--max-rate", is_flag=True, help="Also search the highest cycle rate held with 0 lost frames."
+)
+@click.option(
+    "--hold",
+    type=float,
+    default=60.0,
+    show_default=True,
+    help="Seconds a rate must hold in --max-rate.",
+)
+@click.option(
+    "--rates",
+    multiple=True,
+    type=int,
+    default=(8000, 4000, 2000, 1000, 500),
+    show_default=True,
+    help="Rates in Hz that --max-rate tries, highest first.",
+)
+@click.option(
+    "--hold-floor",
+    is_flag=True,
+    help="Hold each rate against the C floor too (is 0 lost possible here?).",
+)
+def bench(**kw: object) -> None:
+    """Measure the daemon against a real master and a C echo floor. Root.
+
+    \b
+    Per run it prints the master's round trip (median, p99), the floor's, their ratio,
+    lost frames and WKC errors, the daemon's CPU, and the daemon's own reply time (median,
+    p99.99, max) from kernel timestamps on both ends of the link.
+    """
+    opts = BenchOptions(**kw)  # type: ignore[arg-type]
+    if not TOOL.exists():
+        raise UserError(f"bench: {TOOL} not found: the benchmark ships with the source tree")
+    spec = importlib.util.spec_from_file_location("ecatsim_bench_tool", TOOL)
+    if spec is None or spec.loader is None:  # pragma: no cover - a file that exists loads
+        raise UserError(f"bench: cannot load {TOOL}")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    raise SystemExit(module.run(opts))

@@ -1,0 +1,48 @@
+"""``ecatsim bench`` is a click command with help for every option; reply times pair up."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from click.testing import CliRunner
+
+from ecatsim.bench_cli import bench
+from ecatsim.cli import cli
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tools"))
+from reply_time import ReplyTimer, percentile
+
+
+def test_every_option_has_help() -> None:
+    missing = [p.name for p in bench.params if not getattr(p, "help", None)]
+    assert missing == []
+    r = CliRunner().invoke(cli, ["bench", "--help"])
+    assert r.exit_code == 0
+    assert r.output.startswith("Usage: cli bench [OPTIONS]")
+    assert "p99.99" in r.output
+
+
+def test_reply_times_pair_requests_and_replies_by_index() -> None:
+    rt = ReplyTimer((None, "lo"), (None, "lo"))
+    # (stamp ns, is_reply, idx): two requests in flight, one reply lost, one stray reply
+    rt.events = [
+        (1_000, False, 7),
+        (1_500, False, 8),
+        (21_000, True, 7),
+        (41_500, True, 8),
+        (50_000, False, 9),
+        (60_000, True, 3),
+    ]
+    assert rt.reply_us() == ([20.0, 40.0], 2)
+    st = rt.stats()
+    assert (st["frames"], st["unpaired"], st["median"], st["max"]) == (2, 2, 20.0, 40.0)
+
+
+def test_percentile_is_nearest_rank() -> None:
+    us = [float(i) for i in range(1, 10001)]
+    assert (percentile(us, 0.5), percentile(us, 0.9999), percentile(us, 1.0)) == (
+        5000.0,
+        9999.0,
+        10000.0,
+    )
