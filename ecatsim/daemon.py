@@ -15,13 +15,13 @@ import ctypes
 import os
 import select
 import signal
-from types import FrameType, ModuleType
+from types import FrameType
 from typing import Protocol
 
 import structlog
 
 from ecatsim.clock import MonotonicClock
-from ecatsim.compiled import available
+from ecatsim.compiled import load
 from ecatsim.doors import DoorHost
 from ecatsim.faults.engine import FaultEngine
 from ecatsim.link.base import Link
@@ -29,12 +29,7 @@ from ecatsim.recorder import FrameRecorder
 from ecatsim.segment import Segment
 from ecatsim.wire.frame import ecat_offset, mark_processed
 
-_serve: ModuleType | None
-try:  # the compiled responder (optional, decision P9)
-    from ecatsim import _serve
-except ImportError:  # pragma: no cover - built without a C compiler
-    _serve = None
-_serve = available(_serve)  # ECATSIM_PURE_PYTHON=1: the reference only
+_serve = load("ecatsim._serve")  # decision P9; None: Python serves
 
 log = structlog.get_logger("ecatsim.daemon")
 

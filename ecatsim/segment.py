@@ -10,28 +10,17 @@ TMC8460 §5.35 (processing unit error counter).
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from types import ModuleType
 from typing import Protocol
 
 from ecatsim.clock import Clock
-from ecatsim.compiled import available
+from ecatsim.compiled import load
 from ecatsim.esc import regs
 from ecatsim.esc.core import Esc, FrameContext
 from ecatsim.esc.dc import DcUnit
 from ecatsim.wire.datagram import CIRCULATING, LEN_MASK, MORE_FOLLOWS
 
-_logical: ModuleType | None
-try:  # the compiled logical datagram (optional, decision P6)
-    from ecatsim.esc import _logical
-except ImportError:  # pragma: no cover - built without a C compiler
-    _logical = None
-_logical = available(_logical)  # ECATSIM_PURE_PYTHON=1: the reference only
-_dcloop: ModuleType | None
-try:  # the compiled DC loops: an FRMW's time loops, the SYNC0 pulses (decisions P11, P12)
-    from ecatsim.esc import _dcloop
-except ImportError:  # pragma: no cover - built without a C compiler
-    _dcloop = None
-_dcloop = available(_dcloop)
+_logical = load("ecatsim.esc._logical")  # decision P6; None: Python serves
+_dcloop = load("ecatsim.esc._dcloop")  # decisions P11, P12; None: Python serves
 
 #: overdue SYNC0 pulses fired one by one before the rest are skipped (a stall this long,
 #: or a forward jump of the system time, is not caught up). Decision DC2.

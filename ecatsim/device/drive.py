@@ -9,11 +9,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from types import ModuleType
 
 import structlog
 
-from ecatsim.compiled import available
+from ecatsim.compiled import load
 from ecatsim.device import cia402
 from ecatsim.device.cia402 import Command, PdsState
 from ecatsim.device.servo import (
@@ -34,12 +33,7 @@ from ecatsim.slave.od import Entry, ObjectDictionary
 
 log = structlog.get_logger("ecatsim.drive")
 
-_compiled: ModuleType | None
-try:  # the compiled steady cycle (optional, decision P5)
-    from ecatsim.device import _drive as _compiled
-except ImportError:  # pragma: no cover - built without a C compiler
-    _compiled = None
-_compiled = available(_compiled)  # ECATSIM_PURE_PYTHON=1: the reference only
+_compiled = load("ecatsim.device._drive")  # decision P5; None: Python serves
 
 # Modes of operation (6060h). Ref: CiA 402-2 Table 35; TMC8670 §6.1.1.
 PP, PV, HM, CSP, CSV, CST = 1, 3, 6, 8, 9, 10

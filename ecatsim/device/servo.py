@@ -13,19 +13,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from types import ModuleType
 
-from ecatsim.compiled import available
+from ecatsim.compiled import load
 
 TWO_PI = 2.0 * math.pi
 RPM = TWO_PI / 60.0  # rad/s per rpm
 
-_compiled: ModuleType | None
-try:  # the compiled substep loop (optional, decision P2)
-    from ecatsim.device import _servo as _compiled
-except ImportError:  # pragma: no cover - built without a C compiler
-    _compiled = None
-_compiled = available(_compiled)  # ECATSIM_PURE_PYTHON=1: the reference only
+_compiled = load("ecatsim.device._servo")  # decision P2; None: Python serves
 
 # What Servo.run's reference is, and why it stopped early.
 TORQUE, VELOCITY, POSITION = 0, 1, 2

@@ -25,17 +25,11 @@ import socket
 import struct
 import subprocess
 import time
-from types import ModuleType
 
-from ecatsim.compiled import available
+from ecatsim.compiled import load
 from ecatsim.link.errors import LinkError
 
-_rawio: ModuleType | None
-try:  # the compiled receive (optional, decision P4)
-    from ecatsim.link import _rawio
-except ImportError:  # pragma: no cover - built without a C compiler
-    _rawio = None
-_rawio = available(_rawio)  # ECATSIM_PURE_PYTHON=1: the reference only
+_rawio = load("ecatsim.link._rawio")  # decision P4; None: Python serves
 
 ETH_P_ECAT = 0x88A4
 ETH_P_8021Q = 0x8100

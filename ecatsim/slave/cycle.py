@@ -16,22 +16,16 @@ from __future__ import annotations
 
 import re
 import struct
-from types import ModuleType
 from typing import TYPE_CHECKING
 
-from ecatsim.compiled import available
+from ecatsim.compiled import load
 from ecatsim.slave.al import AlState
 from ecatsim.slave.pdo import Codec, PdoImage
 
 if TYPE_CHECKING:
     from ecatsim.slave.firmware import Firmware
 
-compiled: ModuleType | None
-try:  # the compiled DC cycle (optional, decision P3)
-    from ecatsim.slave import _cycle as compiled
-except ImportError:  # pragma: no cover - built without a C compiler: Python serves
-    compiled = None
-compiled = available(compiled)  # ECATSIM_PURE_PYTHON=1: the reference only
+compiled = load("ecatsim.slave._cycle")  # decision P3; None: Python serves
 
 #: one DC cycle's tuple for _cycle.run (layout: the enum in _cycle.c)
 Cycle = tuple[object, ...]

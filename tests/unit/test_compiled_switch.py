@@ -41,3 +41,18 @@ def test_compiled_paths_are_used_where_built() -> None:
             pytest.fail(msg, pytrace=False)
         pytest.skip(msg)
     assert probe(ECATSIM_PURE_PYTHON="0") == got
+
+
+def test_a_free_threaded_interpreter_loads_no_extension(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """On python3.13t the extensions (no Py_mod_gil) are not even imported: one log line."""
+    from ecatsim import compiled
+
+    monkeypatch.setattr(compiled, "free_threaded", lambda: True)
+    monkeypatch.setattr(compiled, "_said_free_threaded", False)
+    monkeypatch.delitem(sys.modules, "ecatsim.esc._dcloop", raising=False)
+    assert compiled.load("ecatsim.esc._dcloop") is None
+    assert compiled.load("ecatsim.esc._logical") is None
+    assert "ecatsim.esc._dcloop" not in sys.modules
+    assert capsys.readouterr().out.count("compiled_paths_off") == 1
