@@ -428,7 +428,7 @@ static int arm(int tfd, long long deadline)
 }
 
 /* Another Python thread exists: the wait releases the GIL for it. The daemon has none,
- * and taking the GIL back after the wake-up cost about 3 us per frame on this VM. No
+ * and taking the GIL back after the wake-up costs microseconds per frame (P9). No
  * thread can start while this one blocks holding the GIL. */
 static int other_threads(void)
 {
@@ -452,7 +452,7 @@ static int wait_fds(struct pollfd *pfd, nfds_t n, const struct timespec *ts)
 /* Wait for a frame (or the deadline, or ``others``) and receive it: n > 0, or -code.
  * pfd: the link, ``others``, then the timer fd if tfd >= 0. With a timer fd the wait has
  * no timeout of its own: ppoll(2) with a timeout arms and cancels a kernel timer on every
- * call, which costs about 10 us per frame in a VM (decision P9). */
+ * call, a timer reprogramming that is costly in a VM (decision P9). */
 static long wait_frame(int fd, struct pollfd *pfd, int nothers, int tfd, uint8_t *buf,
                        long cap, long long deadline, int busy, long long *stamp)
 {

@@ -29,6 +29,7 @@ class BenchOptions:
     placements: tuple[str, ...]
     cpu: int | None
     rt_priority: int | None
+    no_rt: bool
     master_spin: bool
     max_rate: bool
     hold: float
@@ -81,6 +82,7 @@ class BenchOptions:
     type=int,
     help="The daemon's SCHED_FIFO priority (default: the daemon's own default).",
 )
+@click.option("--no-rt", is_flag=True, help="Run the daemon with --no-rt (the ordinary scheduler).")
 @click.option(
     "--master-spin", is_flag=True, help="The master spins between cycles instead of sleeping."
 )

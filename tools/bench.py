@@ -350,6 +350,7 @@ def run(args: BenchOptions) -> int:
             cpu = args.cpu if placement == "unpinned" else (args.cpu or 0)
             pin = ["taskset", "-c", str(cpu)] if cpu is not None else []
             rt = ("--rt-priority", str(args.rt_priority)) if args.rt_priority else ()
+            rt = ("--no-rt",) if args.no_rt else rt
             extra = (*(("--busy-poll",) if busy else ()),
                      *(("--cpu", str(cpu)) if cpu is not None else ()), *rt)  # fmt: skip
             os.sched_setaffinity(0, {cpu} if placement == "same-cpu" else all_cpus)
