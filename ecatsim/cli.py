@@ -39,12 +39,31 @@ def configure_logging(fmt: str, level: int = logging.INFO) -> None:
     )
 
 
+def _print_version(ctx: click.Context, value: bool) -> None:
+    """``ecatsim --version``: the version, then ``core: compiled`` or ``core: pure-python
+    (reason)`` (decision P2)."""
+    if not value or ctx.resilient_parsing:
+        return
+    from ecatsim.compiled import core_line
+
+    click.echo(f"ecatsim, version {__version__}")
+    click.echo(core_line())
+    ctx.exit()
+
+
 class _Ctx:
     debug = False
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
-@click.version_option(__version__, prog_name="ecatsim")
+@click.option(
+    "--version",
+    is_flag=True,
+    expose_value=False,
+    is_eager=True,
+    callback=lambda ctx, _p, value: _print_version(ctx, value),
+    help="Show the version and which core runs (compiled or pure-python), then exit.",
+)
 @click.option("--debug", is_flag=True, help="Show tracebacks for errors.")
 @click.pass_context
 def cli(ctx: click.Context, debug: bool) -> None:

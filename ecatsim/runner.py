@@ -9,7 +9,7 @@ from pathlib import Path
 
 import structlog
 
-from ecatsim import realtime
+from ecatsim import compiled, realtime
 from ecatsim.build import build_segment
 from ecatsim.clock import MonotonicClock
 from ecatsim.config import SegmentConfig, default_segment, load_segment, repeat_default
@@ -143,6 +143,7 @@ def run_daemon(opts: RunOptions) -> None:
     gc.collect()
     gc.freeze()
     realtime.apply(priority, explicit=opts.rt_priority is not None)
+    compiled.say_if_pure()  # one warning line where the pure-Python core serves
     drop_privileges(opts.user)  # sockets and files are open: keep CAP_NET_RAW only
     daemon.install_signal_handlers()
     log.info(

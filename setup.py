@@ -1,0 +1,125 @@
+"""Build of the compiled core (decision P2): the hot modules, compiled by Cython from the
+same ``.py`` files that run as the pure-Python core. The list of modules is ``CORE`` in
+ecatsim/compiled.py (read here as text: the build does not import the package).
+
+Every extension is optional: where Cython, a C compiler or the Python headers are missing,
+``pip install`` goes on and the ``.py`` modules run (ecatsim --version says which).
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+from setuptools import Extension, setup
+
+ROOT = Path(__file__).parent
+#: -ffp-contract=off: no fused multiply-add, so the compiled core's floating-point results
+#: are the pure-Python core's, bit for bit
+CFLAGS = ["-O2", "-ffp-contract=off"]
+
+
+def core_modules() -> list[str]:
+    """``CORE`` from ecatsim/compiled.py, without importing it."""
+    tree = ast.parse((ROOT / "ecatsim" / "compiled.py").read_text())
+    for node in tree.body:
+        if isinstance(node, ast.AnnAssign | ast.Assign):
+            targets = [node.target] if isinstance(node, ast.AnnAssign) else node.targets
+            if any(isinstance(t, ast.Name) and t.id == "CORE" for t in targets):
+                value = ast.literal_eval(node.value)  # type: ignore[arg-type]
+                return list(value)
+    raise SystemExit("setup.py: no CORE tuple in ecatsim/compiled.py")
+
+
+def twins() -> list[Extension]:
+    """The hand-written C paths still in use (decisions P3-P12)."""
+    return [
+        Extension(
+            name,
+            sources,
+            depends=depends,
+            optional=True,
+            extra_compile_args=[*CFLAGS, *extra],
+        )
+        for name, sources, depends, extra in TWINS
+    ]
+
+
+TWINS: list[tuple[str, list[str], list[str], list[str]]] = [
+    ("ecatsim.device._servo", ["ecatsim/device/_servo.c"], ["ecatsim/device/_servo_loop.h"], []),
+    (
+        "ecatsim.device._drive",
+        ["ecatsim/device/_drive.c"],
+        ["ecatsim/device/_servo_loop.h", "ecatsim/_attr.h"],
+        ["-Wall", "-Wextra"],
+    ),
+    (
+        "ecatsim.esc._logical",
+        ["ecatsim/esc/_logical.c"],
+        ["ecatsim/esc/_logical.h", "ecatsim/esc/_sm.h", "ecatsim/esc/_events.h", "ecatsim/_attr.h"],
+        ["-Wall", "-Wextra"],
+    ),
+    (
+        "ecatsim.esc._dcloop",
+        ["ecatsim/esc/_dcloop.c"],
+        ["ecatsim/_attr.h", "ecatsim/esc/_windows.h", "ecatsim/esc/_events.h"],
+        ["-Wall", "-Wextra"],
+    ),
+    (
+        "ecatsim.link._rawio",
+        ["ecatsim/link/_rawio.c"],
+        ["ecatsim/link/_rawio.h"],
+        ["-Wall", "-Wextra"],
+    ),
+    (
+        "ecatsim.slave._cycle",
+        ["ecatsim/slave/_cycle.c"],
+        ["ecatsim/esc/_sm.h", "ecatsim/esc/_events.h", "ecatsim/_attr.h"],
+        ["-Wall", "-Wextra"],
+    ),
+    (
+        "ecatsim._serve",
+        ["ecatsim/_serve.c"],
+        [
+            "ecatsim/esc/_logical.h",
+            "ecatsim/esc/_sm.h",
+            "ecatsim/link/_rawio.h",
+            "ecatsim/_attr.h",
+            "ecatsim/esc/_windows.h",
+            "ecatsim/esc/_events.h",
+        ],
+        ["-Wall", "-Wextra"],
+    ),
+]
+
+
+def core() -> list[Extension]:
+    """The Cython-compiled core, or nothing where Cython is not installed."""
+    try:
+        from Cython.Build import cythonize
+    except ImportError:  # no Cython: the pure-Python core runs
+        return []
+    exts = [
+        Extension(name, [name.replace(".", "/") + ".py"], optional=True, extra_compile_args=CFLAGS)
+        for name in core_modules()
+    ]
+    return list(
+        cythonize(
+            exts,
+            build_dir="build/cython",
+            language_level=3,
+            quiet=True,
+            compiler_directives={
+                # the .py files' annotations are for mypy: stage one compiles them as they are
+                "annotation_typing": False,
+                "binding": True,
+                # the core is not declared safe with the GIL off: a free-threaded
+                # interpreter runs the .py modules (ecatsim/compiled.py)
+                "freethreading_compatible": False,
+            },
+        )
+    )
+
+
+if __name__ == "__main__":  # setuptools runs setup.py as __main__; a test reads CORE
+    setup(ext_modules=[*twins(), *core()])
