@@ -46,13 +46,6 @@ def twins() -> list[Extension]:
 
 
 TWINS: list[tuple[str, list[str], list[str], list[str]]] = [
-    ("ecatsim.device._servo", ["ecatsim/device/_servo.c"], ["ecatsim/device/_servo_loop.h"], []),
-    (
-        "ecatsim.device._drive",
-        ["ecatsim/device/_drive.c"],
-        ["ecatsim/device/_servo_loop.h", "ecatsim/_attr.h"],
-        ["-Wall", "-Wextra"],
-    ),
     (
         "ecatsim.esc._logical",
         ["ecatsim/esc/_logical.c"],

@@ -45,6 +45,7 @@ CORE = (
     "ecatsim.slave.pdo",
     "ecatsim.slave.cycle",
     "ecatsim.slave.firmware",
+    "ecatsim.device.cia402",
     "ecatsim.device.servo",
     "ecatsim.device.drive",
     "ecatsim.link.raw",

@@ -84,19 +84,29 @@ def decode(controlword: int, previous: int) -> Command:
     Ref: TMC8670 Table 77 (bits 7, 3, 2, 1, 0).
     """
     if controlword & 0x80 and not previous & 0x80:
-        return Command.FAULT_RESET
+        return _FAULT_RESET
     if controlword & 0x80:
-        return Command.NONE
+        return _NONE
     low = controlword & 0x0F
     if not low & 0x02:
-        return Command.DISABLE_VOLTAGE
+        return _DISABLE_VOLTAGE
     if not low & 0x04:
-        return Command.QUICK_STOP
+        return _QUICK_STOP
     if low & 0x07 == 0x06:
-        return Command.SHUTDOWN
+        return _SHUTDOWN
     if low == 0x07:
-        return Command.SWITCH_ON  # also "disable operation" from OPERATION_ENABLED
-    return Command.SWITCH_ON_ENABLE  # 0x0F: switch on + enable operation
+        return _SWITCH_ON  # also "disable operation" from OPERATION_ENABLED
+    return _SWITCH_ON_ENABLE  # 0x0F: switch on + enable operation
+
+
+#: the commands as module constants (an enum's attribute lookup costs more than decode)
+_NONE = Command.NONE
+_SHUTDOWN = Command.SHUTDOWN
+_SWITCH_ON = Command.SWITCH_ON
+_SWITCH_ON_ENABLE = Command.SWITCH_ON_ENABLE
+_DISABLE_VOLTAGE = Command.DISABLE_VOLTAGE
+_QUICK_STOP = Command.QUICK_STOP
+_FAULT_RESET = Command.FAULT_RESET
 
 
 def step(state: PdsState, cmd: Command) -> tuple[int, PdsState] | None:

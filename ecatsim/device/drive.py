@@ -12,7 +12,6 @@ from collections.abc import Callable
 
 import structlog
 
-from ecatsim.compiled import load
 from ecatsim.device import cia402
 from ecatsim.device.cia402 import Command, PdsState
 from ecatsim.device.servo import (
@@ -32,8 +31,6 @@ from ecatsim.slave.al import AlState
 from ecatsim.slave.od import Entry, ObjectDictionary
 
 log = structlog.get_logger("ecatsim.drive")
-
-_compiled = load("ecatsim.device._drive")  # decision P5; None: Python serves
 
 # Modes of operation (6060h). Ref: CiA 402-2 Table 35; TMC8670 §6.1.1.
 PP, PV, HM, CSP, CSV, CST = 1, 3, 6, 8, 9, 10
@@ -59,6 +56,23 @@ PUBLISHED = (0x6041, 0x6061, 0x6064, 0x606C, 0x6062, 0x606B, 0x6077, 0x6074, 0x6
 SNAPSHOT = (0x60FF, 0x6083, 0x6084, 0x607A, 0x60B0, 0x60B1, 0x6071, 0x60B2, 0x6065, 0x6085, 0x605A)
 #: closed current loop time constant the default 2041h gains give (s)
 CURRENT_LOOP_TAU = 2.5e-4
+
+#: enum members and tables as module constants: on the per-cycle path an enum's attribute
+#: lookup costs more than the comparison it serves
+_OE = PdsState.OPERATION_ENABLED
+_QSA = PdsState.QUICK_STOP_ACTIVE
+_FRA = PdsState.FAULT_REACTION_ACTIVE
+_FAULT = PdsState.FAULT
+_SOD = PdsState.SWITCH_ON_DISABLED
+_SO = PdsState.SWITCHED_ON
+_NO_VOLTAGE = (PdsState.NOT_READY_TO_SWITCH_ON, PdsState.SWITCH_ON_DISABLED, PdsState.FAULT)
+_AL_OP = AlState.OP
+_POWERED = cia402.POWERED
+_STATUS_BITS = cia402.STATUS_BITS
+_FAULT_RESET = Command.FAULT_RESET
+_SWITCH_ON_ENABLE = Command.SWITCH_ON_ENABLE
+_decode = cia402.decode
+_transition = cia402.step
 
 FAULTS: dict[str, tuple[int, int]] = {
     "overcurrent": (0x2310, 0x02),
@@ -98,7 +112,7 @@ class Drive:
         self.profile = Profile()
         self.emcy = emcy
         self.emcy_clear = emcy_clear
-        self.state = PdsState.SWITCH_ON_DISABLED  # transitions 0 and 1 at power-on
+        self.state = _SOD  # transitions 0 and 1 at power-on
         self.t_ns: int | None = None
         self.prev_cw = 0
         self.mode = 0
@@ -120,9 +134,6 @@ class Drive:
         self.index_output: Callable[[bool, int], None] | None = None
         #: called with (time, trace_row()) after every input update when tracing
         self.tracer: Callable[[int, tuple[int | str, ...]], None] | None = None
-        #: let the compiled steady cycle (_drive.c) serve where it applies; tests compare
-        self.compiled = True
-        self._fast: tuple[object, ...] | None = None
         self._init_od()
         od.refresh = self._publish_sdo_only
 
@@ -221,33 +232,6 @@ class Drive:
         if self.tracer is not None:
             self.tracer(now_ns, self.trace_row())
 
-    def compiled_step(self) -> tuple[Callable[..., bool], tuple[object, ...]] | None:
-        """(step, fast) for the firmware's compiled DC cycle: ``step(fast, now_ns, outputs)``
-        does outputs_applied(now_ns) (if ``outputs``) and update_inputs(now_ns) in the
-        steady csp/csv/cst case and returns True, else changes nothing and returns False.
-        None where the extension was not built or is switched off. Ref: decision P5."""
-        if _compiled is None or not self.compiled:
-            return None
-        if self._fast is None:
-            self._fast = (
-                self,
-                self.servo,
-                self._hit(0x6040),
-                self._hit(0x6060),
-                self._hit(0x607A),
-                tuple(self._hit(i) for i in SNAPSHOT),
-                tuple(self._entry(i, 0) for i in PUBLISHED),
-                PdsState.OPERATION_ENABLED,
-                AlState.OP,
-                self.substep_ns,
-                self.params.ppr,
-            )
-        return _compiled.step, self._fast
-
-    def _hit(self, index: int) -> Entry | None:
-        hit = self._entry(index, 0)
-        return None if hit is None else hit[0]
-
     def trace_row(self) -> tuple[int | str, ...]:
         """Set points and actual values for the trace. Ref: issue "trace and plot"."""
         mode = self.mode
@@ -273,9 +257,9 @@ class Drive:
     def al_state_changed(self, state: AlState, now_ns: int) -> None:
         """Leaving OP stops the motor (TMC8670 §3.2): quick-stop ramp, voltage off."""
         self.advance(now_ns)
-        if self.al_state == AlState.OP and state != AlState.OP:
-            if self.state in cia402.POWERED:
-                self._enter(PdsState.SWITCH_ON_DISABLED, "al_left_op")
+        if self.al_state == _AL_OP and state != _AL_OP:
+            if self.state in _POWERED:
+                self._enter(_SOD, "al_left_op")
             self.prev_cw = 0
         self.al_state = state
         self._publish()
@@ -293,7 +277,7 @@ class Drive:
 
     def _fault(self, kind: str) -> None:
         """Transition 13: fault reaction, then fault (14); EMCY, 603Fh, 1001h."""
-        if self.state in (PdsState.FAULT, PdsState.FAULT_REACTION_ACTIVE):
+        if self.state in (_FAULT, _FRA):
             return
         code, reg = FAULTS[kind]
         self.active_faults.add(kind)
@@ -301,43 +285,43 @@ class Drive:
         log.warning("drive_fault", kind=kind, code=f"0x{code:04X}")
         if self.emcy is not None:
             self.emcy(code, reg, b"")
-        self.state = PdsState.FAULT_REACTION_ACTIVE
+        self.state = _FRA
         self.v_demand_rpm = self.servo.rpm
 
     # ----------------------------------------------------------------- controlword
     def _controlword(self) -> None:
         cw = self._v(0x6040)
-        cmd = cia402.decode(cw, self.prev_cw)
+        cmd = _decode(cw, self.prev_cw)
         self.prev_cw = cw
         mode = self._v(0x6060)
         if mode != self.mode and mode in MODES:
             self._mode_change(mode)
-        if self.al_state != AlState.OP:
+        if self.al_state != _AL_OP:
             return
-        if cmd == Command.FAULT_RESET:
-            if self.state == PdsState.FAULT and not self.injected:
+        if cmd == _FAULT_RESET:
+            if self.state == _FAULT and not self.injected:
                 self.active_faults.clear()
                 self.fault_code = 0
                 if self.emcy_clear is not None:
                     self.emcy_clear()
-                self._enter(PdsState.SWITCH_ON_DISABLED, "t15")
+                self._enter(_SOD, "t15")
             return
-        tr = cia402.step(self.state, cmd)
+        tr = _transition(self.state, cmd)
         if tr is None:
-            if self.state == PdsState.OPERATION_ENABLED and self.mode == PP:
+            if self.state == _OE and self.mode == PP:
                 self._pp_setpoint()
             return
         number, nxt = tr
         if number == 16 and self._v(0x605A) < 5:
             return  # back to enabled only for quick stop option codes 5-8
         self._enter(nxt, f"t{number}")
-        if cmd == Command.SWITCH_ON_ENABLE and self.state == PdsState.SWITCHED_ON:
-            self._enter(PdsState.OPERATION_ENABLED, "t4")
+        if cmd == _SWITCH_ON_ENABLE and self.state == _SO:
+            self._enter(_OE, "t4")
 
     def _enter(self, nxt: PdsState, why: str) -> None:
-        if nxt == PdsState.OPERATION_ENABLED and self.state != PdsState.QUICK_STOP_ACTIVE:
+        if nxt == _OE and self.state != _QSA:
             self._hold_here()
-        if nxt not in cia402.POWERED:
+        if nxt not in _POWERED:
             self.servo.reset_integrators()
         log.info("pds_state", state=nxt.name, why=why)
         self.state = nxt
@@ -358,7 +342,7 @@ class Drive:
     def _mode_change(self, mode: int) -> None:
         self.mode = mode
         self.homing_active = False
-        if self.state == PdsState.OPERATION_ENABLED:
+        if self.state == _OE:
             self._hold_here()
 
     # ----------------------------------------------------------------- time
@@ -373,7 +357,7 @@ class Drive:
             return
         s = self.servo
         if (
-            self.state not in cia402.POWERED
+            self.state not in _POWERED
             and s.omega == 0.0
             and s.iq_ma == 0.0
             and abs(self.params.load) <= self.params.coulomb
@@ -403,13 +387,13 @@ class Drive:
                 self._fault("overcurrent")
             elif why == STOP_INDEX and index is not None:
                 self._index_pulse(index, t)
-        if self.state == PdsState.OPERATION_ENABLED and self.mode not in (PP, CSP):
+        if self.state == _OE and self.mode not in (PP, CSP):
             self.p_demand = s.angle / TWO_PI * self.params.ppr  # follows the actual
         self.t_ns += n * dt_ns if n < 200_000 else now_ns - self.t_ns
 
     def _trip(self) -> float:
         """The current above which a substep ends in an overcurrent fault."""
-        return self.overcurrent_ma if self.state in cia402.POWERED else math.inf
+        return self.overcurrent_ma if self.state in _POWERED else math.inf
 
     def _index_pulse(self, index: Callable[[bool, int], None], t_ns: int) -> None:
         """The encoder's index (N) pulse, once per revolution at angle 0, as wide as one
@@ -424,7 +408,14 @@ class Drive:
         outputs and SDO writes are applied after advancing), so read them once."""
         hits = self._snapshot_hits
         if hits is None:
-            hits = self._snapshot_hits = tuple(self._entry(i, 0) for i in SNAPSHOT)
+            hits = self._snapshot_hits = tuple([self._entry(i, 0) for i in SNAPSHOT])
+        q = [0] * len(hits)
+        for k in range(len(hits)):
+            hit = hits[k]
+            if hit is not None:
+                v = hit[0].value
+                if isinstance(v, int):
+                    q[k] = v
         (
             self.q_60ff,
             self.q_6083,
@@ -437,15 +428,15 @@ class Drive:
             self.q_6065,
             self.q_6085,
             self.q_605a,
-        ) = [v if hit is not None and isinstance(v := hit[0].value, int) else 0 for hit in hits]
+        ) = q
 
     def _steady_demand(self) -> Demand | None:
         """The servo demand if it stays the same over the substeps to come (the OD values
         are fixed until the next advance), else None. Ref: CiA 402-2 §10-§12."""
         st = self.state
-        if st not in cia402.POWERED:
+        if st not in _POWERED:
             return (TORQUE, 0.0, 0.0, 0.0)  # voltage off: the motor coasts
-        if st != PdsState.OPERATION_ENABLED:
+        if st != _OE:
             return None  # quick stop / fault reaction ramps
         mode = self.mode
         if mode == CSP:
@@ -470,14 +461,14 @@ class Drive:
         ramp ends at standstill). Ref: CiA 402-2 §8 (FSA), §12.3 (pp), §12.5 (pv)."""
         s = self.servo
         st = self.state
-        if st in (PdsState.QUICK_STOP_ACTIVE, PdsState.FAULT_REACTION_ACTIVE):
+        if st in (_QSA, _FRA):
             decel = float(self.q_6085 or 2000)
             self.v_demand_rpm = ramp(self.v_demand_rpm, 0.0, decel, decel, dt)
             if self.v_demand_rpm == 0.0 and abs(s.rpm) < 1.0:
-                if st == PdsState.FAULT_REACTION_ACTIVE:
-                    self.state = PdsState.FAULT  # transition 14
+                if st == _FRA:
+                    self.state = _FAULT  # transition 14
                 elif self.q_605a < 5:
-                    self.state = PdsState.SWITCH_ON_DISABLED  # transition 12
+                    self.state = _SOD  # transition 12
             return (VELOCITY, self.v_demand_rpm, 0.0, 0.0)
         halt = bool(self.prev_cw & 0x0100)
         if self.mode == PP:
@@ -570,15 +561,15 @@ class Drive:
         """Actual values and the statusword into the OD. Ref: TMC8670 Tables 80-83."""
         s = self.servo
         st = self.state
-        sw = cia402.STATUS_BITS[st]
-        if st not in (PdsState.NOT_READY_TO_SWITCH_ON, PdsState.SWITCH_ON_DISABLED, PdsState.FAULT):
+        sw = _STATUS_BITS[st]
+        if st not in _NO_VOLTAGE:
             sw |= SW_VOLTAGE
-        if self.al_state == AlState.OP:
+        if self.al_state == _AL_OP:
             sw |= SW_REMOTE
         pos = s.counts
         rpm = s.rpm
         mode = self.mode
-        if st == PdsState.OPERATION_ENABLED:
+        if st == _OE:
             if mode == PP:
                 prof = self.profile
                 window = self._v(0x6067)
@@ -602,7 +593,7 @@ class Drive:
                     sw |= SW_TARGET_REACHED | SW_OMS12
             elif mode in (CSP, CSV, CST):
                 sw |= SW_OMS12  # drive follows the command value
-        if abs(s.iq_ref_ma) >= s.i_limit_ma - 1e-6 and st in cia402.POWERED:
+        if abs(s.iq_ref_ma) >= s.i_limit_ma - 1e-6 and st in _POWERED:
             sw |= SW_INTERNAL_LIMIT
         if "following_error" in self.active_faults:
             sw |= SW_OMS13
@@ -624,11 +615,14 @@ class Drive:
         )
         hits = self._published
         if hits is None:
-            hits = self._published = tuple(self._entry(i, 0) for i in PUBLISHED)
-        for hit, v in zip(hits, values, strict=True):
+            hits = self._published = tuple([self._entry(i, 0) for i in PUBLISHED])
+        for k in range(len(values)):
+            hit = hits[k]
             if hit is not None:
-                e, lo, hi = hit
-                e.value = lo if v < lo else hi if v > hi else v
+                v = values[k]
+                lo = hit[1]
+                hi = hit[2]
+                hit[0].value = lo if v < lo else hi if v > hi else v
 
     def _publish_sdo_only(self) -> None:
         """Values no PDO can carry, refreshed when the OD is read (SDO upload, control

@@ -14,12 +14,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ecatsim.compiled import load
-
 TWO_PI = 2.0 * math.pi
 RPM = TWO_PI / 60.0  # rad/s per rpm
-
-_compiled = load("ecatsim.device._servo")  # decision P2; None: Python serves
 
 # What Servo.run's reference is, and why it stopped early.
 TORQUE, VELOCITY, POSITION = 0, 1, 2
@@ -63,7 +59,6 @@ class Servo:
 
     __slots__ = (
         "angle",
-        "compiled",
         "decay",
         "gains",
         "i_limit_ma",
@@ -74,6 +69,7 @@ class Servo:
         "iq_integ",
         "iq_ma",
         "iq_ref_ma",
+        "motor",
         "omega",
         "p",
         "vel_limit_rpm",
@@ -93,10 +89,20 @@ class Servo:
         self.integ = 0.0
         # R-L winding over one substep: i' = i*decay + (1 - decay) * v / R
         self.decay = math.exp(-params.resistance * params.substep / params.inductance)
+        #: the constants of run()'s loop, from the (frozen) motor parameters
+        self.motor = (
+            params.substep,
+            float(params.ppr),
+            params.kt,
+            params.load,
+            params.viscous,
+            params.coulomb,
+            params.inertia,
+            params.supply_voltage,
+            params.resistance,
+        )
         self.i_limit_ma = float(params.max_current_ma)
         self.vel_limit_rpm = 1e9
-        #: use the compiled loop where it was built (tests compare the two)
-        self.compiled = True
 
     # ----------------------------------------------------------------- feedback
     @property
@@ -163,87 +169,40 @@ class Servo:
         (POSITION, window > 0: STOP_FOLLOWING), after one where |iq| exceeds ``i_trip_ma``
         (STOP_OVERCURRENT) and, with ``index``, after one that crossed angle 0 mod 2 pi
         (STOP_INDEX): the caller acts, then continues.
-        One loop, all state in locals: this is the frame path's largest cost per drive.
-        The compiled copy of this loop (``_servo.c``, the same arithmetic) runs instead
-        where it was built, unless the flux axis carries current.
+        One loop, all state in locals (typed doubles in the compiled core, servo.pxd):
+        this is the frame path's largest cost per drive.
         Ref: TMC8670 §5.1.7-5.1.10; decisions D15, P2.
         """
-        state = (self.angle, self.omega, self.iq_ma, self.iq_integ, self.integ, self.iq_ref_ma)
-        args = (n, kind, ref, v_ff_rpm, window, i_trip_ma, index, state, self._loop_params())
-        if _compiled is not None and self.compiled and not (self.id_ref_ma or self.id_ma):
-            done, why, *after = _compiled.run(*args)
-        else:
-            done, why, *after = self._run(*args)
-        (self.angle, self.omega, self.iq_ma, self.iq_integ, self.integ, self.iq_ref_ma) = after
-        return done, why
-
-    def _loop_params(self) -> tuple[float, ...]:
-        """The loop's constants, in the order run() passes them to either loop."""
-        p = self.p
+        dt, ppr, kt, load, viscous, coulomb, inertia, vmax_v, resistance = self.motor
         g = self.gains
-        return (
-            p.substep,
-            float(p.ppr),
-            p.kt,
-            p.load,
-            p.viscous,
-            p.coulomb,
-            p.inertia,
-            p.supply_voltage,
-            p.resistance,
-            self.decay,
-            self.i_limit_ma,
-            self.vel_limit_rpm,
-            g.vel_kp,
-            g.vel_ki,
-            g.pos_kp,
-            g.cur_kp,
-            g.cur_ki,
-        )
-
-    def _run(
-        self,
-        n: int,
-        kind: int,
-        ref: float,
-        v_ff_rpm: float,
-        window: float,
-        i_trip_ma: float,
-        index: bool,
-        state: tuple[float, float, float, float, float, float],
-        params: tuple[float, ...],
-    ) -> tuple[int, int, float, float, float, float, float, float]:
-        """The loop of run() in Python, with the compiled loop's arguments and result."""
-        (
-            dt,
-            ppr,
-            kt,
-            load,
-            viscous,
-            coulomb,
-            inertia,
-            vmax_v,
-            resistance,
-            decay,
-            lim,
-            vlim,
-            vel_kp,
-            vel_ki,
-            pos_kp,
-            cur_kp,
-            cur_ki,
-        ) = params
-        angle, omega, iq, iq_integ, integ, iq_ref = state
+        decay = self.decay
+        lim = self.i_limit_ma
+        vlim = self.vel_limit_rpm
+        vel_kp = g.vel_kp
+        vel_ki = g.vel_ki
+        pos_kp = g.pos_kp
+        cur_kp = g.cur_kp
+        cur_ki = g.cur_ki
+        angle = self.angle
+        omega = self.omega
+        iq = self.iq_ma
+        iq_integ = self.iq_integ
+        integ = self.integ
+        iq_ref = self.iq_ref_ma
         flux = bool(self.id_ref_ma or self.id_ma)
-        g = self.gains
+        # the module's constants as locals (C constants in the compiled core)
+        two_pi = TWO_PI
+        rpm = RPM
+        torque_kind = TORQUE
+        position_kind = POSITION
         done = 0
         why = STOP_NONE
         while done < n:
-            if kind == TORQUE:
+            if kind == torque_kind:
                 out = ref
             else:
-                if kind == POSITION:
-                    err_p = ref - angle / TWO_PI * ppr
+                if kind == position_kind:
+                    err_p = ref - angle / two_pi * ppr
                     if window and abs(err_p) > window:
                         why = STOP_FOLLOWING
                         break
@@ -252,7 +211,7 @@ class Servo:
                     v_ref = ref
                 # velocity PI, anti-windup by clamping
                 v_ref = -vlim if v_ref < -vlim else vlim if v_ref > vlim else v_ref
-                err = v_ref - omega / RPM
+                err = v_ref - omega / rpm
                 out = vel_kp * err + integ
                 if -lim < out < lim:
                     integ += vel_ki * err * dt
@@ -285,17 +244,23 @@ class Servo:
             new = omega + drive / inertia * dt
             if omega != 0.0 and (new > 0) != (omega > 0) and abs(torque - load) <= coulomb:
                 new = 0.0  # friction stops the motor, it does not reverse it
-            rev = math.floor(angle / TWO_PI) if index else 0
+            rev = math.floor(angle / two_pi) if index else 0
             omega = new
             angle += omega * dt
             done += 1
             if abs(iq) > i_trip_ma:
                 why = STOP_OVERCURRENT
                 break
-            if index and math.floor(angle / TWO_PI) != rev:
+            if index and math.floor(angle / two_pi) != rev:
                 why = STOP_INDEX
                 break
-        return done, why, angle, omega, iq, iq_integ, integ, iq_ref
+        self.angle = angle
+        self.omega = omega
+        self.iq_ma = iq
+        self.iq_integ = iq_integ
+        self.integ = integ
+        self.iq_ref_ma = iq_ref
+        return done, why
 
 
 class Profile:

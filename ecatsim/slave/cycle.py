@@ -56,7 +56,8 @@ def layout(c: Codec) -> bytes:
 
 def _device_step(device: object) -> object:
     """The device's compiled steady cycle, (step, fast), or None: then the C code calls
-    its Python methods outputs_applied() and update_inputs()."""
+    its methods outputs_applied() and update_inputs(). The drive has none since its cycle
+    is part of the compiled core (decision P2); the hook goes with this module."""
     fn = getattr(device, "compiled_step", None)
     return fn() if fn is not None else None
 

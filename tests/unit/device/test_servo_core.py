@@ -1,5 +1,5 @@
-"""The compiled servo loop (_servo.c) against the pure-Python Servo.run: the same state,
-bit for bit, and the same early stops, over random motors, gains and demands.
+"""The compiled core's servo loop against the same source run as Python (servo.py): the
+same state, bit for bit, and the same early stops, over random motors, gains and demands.
 Ref: ecatsim/device/servo.py Servo.run; decision P2."""
 
 from __future__ import annotations
@@ -21,18 +21,20 @@ from ecatsim.device.servo import (
     MotorParams,
     Servo,
 )
-from tests.support.compiled import require_built
+from tests.support.core import require_compiled, source_twin
 
 STATE = ("angle", "omega", "iq_ma", "iq_integ", "integ", "iq_ref_ma")
 
 
 @pytest.fixture(autouse=True)
 def _require_compiled() -> None:
-    require_built(servo._compiled, "ecatsim.device._servo")
+    require_compiled(servo)
 
 
 def pair(rng: random.Random) -> tuple[Servo, Servo]:
-    p = MotorParams(
+    """A servo of the compiled core and one of the same source run as Python."""
+    pure = source_twin(servo)
+    motor = dict(
         kt=rng.uniform(0.01, 0.2),
         inertia=rng.uniform(5e-6, 1e-4),
         viscous=rng.uniform(0.0, 5e-5),
@@ -43,8 +45,8 @@ def pair(rng: random.Random) -> tuple[Servo, Servo]:
         inductance=rng.uniform(2e-4, 5e-3),
         supply_voltage=rng.choice([12.0, 24.0, 48.0]),
     )
-    a, b = Servo(p), Servo(p)
-    b.compiled = False
+    a, b = Servo(MotorParams(**motor)), pure.Servo(pure.MotorParams(**motor))
+    assert type(a) is not type(b)
     gains = {
         "vel_kp": rng.uniform(1.0, 30.0),
         "vel_ki": rng.uniform(0.0, 3000.0),
@@ -67,7 +69,7 @@ def state(s: Servo) -> tuple[float, ...]:
 
 
 @pytest.mark.parametrize("seed", range(60))
-def test_compiled_loop_matches_python_bit_for_bit(seed: int) -> None:
+def test_compiled_loop_matches_its_source_bit_for_bit(seed: int) -> None:
     rng = random.Random(seed)
     a, b = pair(rng)
     for _ in range(40):

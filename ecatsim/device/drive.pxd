@@ -1,0 +1,75 @@
+# The compiled core's declarations for drive.py (Cython, pure-Python mode): the drive's
+# state as typed fields, the servo as a typed Servo (its loop called directly), and the
+# locals of the steady cycle's methods. drive.py stays the one source of the behaviour;
+# this file only gives types. Decision P2.
+cimport cython
+
+from ecatsim.device.servo cimport Servo
+
+
+# the statusword bits as C constants (drive.py uses them only within itself)
+cdef long long SW_VOLTAGE, SW_WARNING, SW_REMOTE, SW_TARGET_REACHED, SW_INTERNAL_LIMIT
+cdef long long SW_OMS12, SW_OMS13, SW_MOTOR_ACTIVE, SW_DIRECTION
+
+
+cdef class Drive:
+    cdef public object od
+    cdef public dict _entries
+    cdef public object _published
+    cdef public object _snapshot_hits
+    cdef public long long q_60ff, q_6083, q_6084, q_607a, q_60b0, q_60b1, q_6071, q_60b2
+    cdef public long long q_6065, q_6085, q_605a
+    cdef public object params
+    cdef public long long substep_ns
+    cdef public Servo servo
+    cdef public object profile
+    cdef public object emcy
+    cdef public object emcy_clear
+    cdef public object state
+    cdef public object t_ns
+    cdef public long long prev_cw
+    cdef public long long mode
+    cdef public object al_state
+    cdef public double v_demand_rpm
+    cdef public double p_demand
+    cdef public double v_ff_rpm
+    cdef public object last_target
+    cdef public object last_t_ns
+    cdef public bint set_point_ack
+    cdef public bint homing_done
+    cdef public bint homing_active
+    cdef public double home_offset_counts
+    cdef public set active_faults
+    cdef public long long fault_code
+    cdef public set injected
+    cdef public double overcurrent_ma
+    cdef public object index_output
+    cdef public object tracer
+
+    cpdef object _entry(self, int index, int sub)
+    cpdef object _v(self, int index, int sub=*)
+
+    @cython.locals(target=double, dt=double)
+    cpdef outputs_applied(self, now_ns)
+
+    cpdef update_inputs(self, now_ns)
+
+    @cython.locals(dt_ns="long long", n="long long", left="long long", t="long long",
+                   done="long long", more="long long", steps="long long", why=int,
+                   kind=int, ref=double, v_ff=double, window=double, s=Servo)
+    cpdef advance(self, now_ns)
+
+    cpdef double _trip(self)
+    cpdef double _window(self)
+    @cython.locals(hits=tuple, hit=tuple, q=list, k=Py_ssize_t)
+    cpdef _snapshot(self)
+
+    @cython.locals(mode="long long", v=double, target=double)
+    cpdef object _steady_demand(self)
+
+    @cython.locals(cw="long long", mode="long long")
+    cpdef _controlword(self)
+
+    @cython.locals(s=Servo, sw="long long", rpm=double, mode="long long", hits=tuple,
+                   values=tuple, k=Py_ssize_t, hit=tuple)
+    cpdef _publish(self)

@@ -1,0 +1,34 @@
+# The compiled core's declarations for servo.py (Cython, pure-Python mode): the servo's
+# state as typed fields and the substep loop's locals as C doubles. servo.py stays the one
+# source of the behaviour; this file only gives types. Decision P2.
+cimport cython
+
+
+cdef class Servo:
+    cdef public object p
+    cdef public object gains
+    cdef public double angle
+    cdef public double omega
+    cdef public double iq_ma
+    cdef public double iq_ref_ma
+    cdef public double id_ma
+    cdef public double id_ref_ma
+    cdef public double iq_integ
+    cdef public double id_integ
+    cdef public double integ
+    cdef public double decay
+    cdef public double i_limit_ma
+    cdef public double vel_limit_rpm
+    cdef public tuple motor
+
+    @cython.locals(
+        dt=double, ppr=double, kt=double, load=double, viscous=double, coulomb=double,
+        inertia=double, vmax_v=double, resistance=double, decay=double, lim=double,
+        vlim=double, vel_kp=double, vel_ki=double, pos_kp=double, cur_kp=double,
+        cur_ki=double, angle=double, omega=double, iq=double, iq_integ=double, integ=double,
+        iq_ref=double, flux=bint, done=long, why=int, out=double, err_p=double, v_ref=double,
+        err=double, emf=double, err_a=double, v=double, torque=double, drive=double,
+        new=double, two_pi=double, rpm=double, torque_kind=int, position_kind=int,
+    )
+    cpdef tuple run(self, long n, int kind, double ref, double v_ff_rpm=*, double window=*,
+                    double i_trip_ma=*, bint index=*)
