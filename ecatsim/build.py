@@ -25,7 +25,9 @@ from ecatsim.errors import UserError
 from ecatsim.esc.core import Esc, FrameContext
 from ecatsim.esc.pdi import Pdi
 from ecatsim.esi import EsiError, read_esi
-from ecatsim.segment import Segment
+from ecatsim.pdi_spi.external import ExternalFirmware
+from ecatsim.pdi_spi.protocol import SpiTiming
+from ecatsim.segment import Segment, Serviceable
 from ecatsim.sii.image import SiiError, build_image
 from ecatsim.sii.store import EepromStore
 from ecatsim.slave.al import AlState
@@ -128,7 +130,7 @@ def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
     ctx = FrameContext()
     cache: dict[Path | None, DeviceDescription] = {}
     escs: list[Esc] = []
-    firmware: list[Firmware] = []
+    firmware: list[Serviceable] = []
     paths: list[Path | None] = []
     for i, sc in enumerate(cfg.slaves):
         desc = _description(sc, cache)
@@ -142,7 +144,10 @@ def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
         )
         pdi = Pdi(esc)
         layout = mailbox_layout(image)
-        if "coe" in desc.mailbox.protocols:
+        fw: Serviceable
+        if sc.firmware == "external" and sc.pdi_socket is not None:
+            fw = ExternalFirmware(pdi, sc.pdi_socket, clock, SpiTiming(), f"slaves[{i}].pdi_socket")
+        elif "coe" in desc.mailbox.protocols:
             base = sc.description.parent if sc.description is not None else None
             try:
                 od = build_od(desc, base)
@@ -156,18 +161,18 @@ def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
                 raise UserError(str(exc)) from exc
             app: Application = PdoImage(od, device)
             foe = desc.mailbox.foe or "foe" in desc.mailbox.protocols
-            fw = Firmware(pdi, app, layout, mbx=mbx, bootstrap_supported=foe)
-            fw.coe = CoeProtocol(mbx, od, fw.al_state_code)
-            fw.od = od
-            fw.emergency = emcy
-            fw.device = device
+            fw = coe_fw = Firmware(pdi, app, layout, mbx=mbx, bootstrap_supported=foe)
+            coe_fw.coe = CoeProtocol(mbx, od, coe_fw.al_state_code)
+            coe_fw.od = od
+            coe_fw.emergency = emcy
+            coe_fw.device = device
             if isinstance(device, Drive):
                 # the board wires the encoder index to LATCH1 (decision D14)
                 device.index_output = partial(pdi.latch_input, INDEX_LATCH_UNIT)
             if foe:
-                server = FoeServer(fw.al_state_code, mbx.max_body, sc.foe_dir, sc.foe_password)
+                server = FoeServer(coe_fw.al_state_code, mbx.max_body, sc.foe_dir, sc.foe_password)
                 mbx.register(MbxType.FOE, server.handle)
-            mbx.accept = _accept_for(fw)
+            mbx.accept = _accept_for(coe_fw)
         else:
             fw = Firmware(pdi, make_device(sc.device, desc), layout)
         esc.on_reset = fw.reset

@@ -11,6 +11,8 @@ slaves:
     alias: 0                 # optional configured station alias (SII word 4)
     serial: 1                # optional serial number (SII words 0x0E/0x0F)
     dc_drift_ppm: 0.0        # optional local clock drift
+    firmware: external       # optional: the slave firmware runs outside ecatsim ...
+    pdi_socket: /run/fw.sock # ... and drives the chip over this PDI SPI socket
 faults:                      # optional: faults injected while running (ecatsim/faults/spec.py)
   - {kind: wkc, value: -1, count: 3, on_state: op}
   - {kind: drop, probability: 0.001, seed: 7}
@@ -47,7 +49,11 @@ _SLAVE_KEYS = {
     "name",
     "foe_dir",
     "foe_password",
+    "firmware",
+    "pdi_socket",
 }
+#: who runs the slave firmware behind the PDI: ecatsim, or a program on the PDI socket
+FIRMWARE_KINDS = ("ecatsim", "external")
 
 
 @dataclass(frozen=True, slots=True)
@@ -64,6 +70,10 @@ class SlaveConfig:
     name: str | None = None
     foe_dir: Path | None = None
     foe_password: int = 0
+    #: ``external``: ecatsim's firmware does not run; a program drives the chip over the
+    #: PDI SPI socket ``pdi_socket`` (TMC8460 §3.5)
+    firmware: str = "ecatsim"
+    pdi_socket: Path | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -152,6 +162,23 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
             raise _err(src, f"{key}.name", f"expected a string, got {name!r}")
         if eeprom is not None and count > 1:
             raise _err(src, f"{key}.eeprom", "one EEPROM file cannot back count > 1 slaves")
+        firmware = s.get("firmware", "ecatsim")
+        if firmware not in FIRMWARE_KINDS:
+            raise _err(
+                src, f"{key}.firmware", f"use one of: {', '.join(FIRMWARE_KINDS)}, got {firmware!r}"
+            )
+        pdi_socket = (
+            _path(src, base, f"{key}.pdi_socket", s["pdi_socket"]) if "pdi_socket" in s else None
+        )
+        if (firmware == "external") != (pdi_socket is not None):
+            raise _err(
+                src,
+                f"{key}.pdi_socket",
+                "firmware: external and pdi_socket: PATH go together (the socket the "
+                "firmware connects to)",
+            )
+        if pdi_socket is not None and count > 1:
+            raise _err(src, f"{key}.pdi_socket", "one PDI socket cannot serve count > 1 slaves")
         for j in range(count):
             out.append(
                 SlaveConfig(
@@ -167,6 +194,8 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
                     if foe_dir is None
                     else (foe_dir / f"slave{len(out)}" if count > 1 else foe_dir),
                     foe_password=foe_pw,
+                    firmware=firmware,
+                    pdi_socket=pdi_socket,
                 )
             )
     if len(out) > MAX_SLAVES:

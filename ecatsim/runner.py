@@ -126,7 +126,7 @@ def run_daemon(opts: RunOptions) -> None:
         except OSError as exc:
             raise UserError(f"--cpu {opts.cpu}: cannot pin ({exc.strerror})") from exc
     faults = arm_faults(cfg, segment)
-    doors = build_doors(cfg)
+    doors = build_doors(cfg, segment)
     where = opts.iface or opts.tap or opts.udp or "ecatsim"
     ctl = ControlSocket(opts.ctl or default_path(where), segment, faults, doors)
     daemon = Daemon(

@@ -297,6 +297,30 @@ class Esc:
             self._set_ecat_event(regs.ECAT_EV_DL_STATUS)
             self.ctx.topology_dirty = True
 
+    def set_pdi_watchdog(self, alive: bool) -> None:
+        """The PDI watchdog: 0x0110 bit 1 (1 = reloaded, 0 = expired), each expiry counted
+        in 0x0443, the change signalled as a DL status event. Ref: TMC8460 §5.19 Table 30,
+        §5.40, §5.44."""
+        m = self.mem
+        if bool(m[regs.DL_STATUS] & 0x02) == alive:
+            return
+        if alive:
+            m[regs.DL_STATUS] |= 0x02
+        else:
+            m[regs.DL_STATUS] &= 0xFD
+            if m[regs.WD_COUNTER_PDI] < 0xFF:
+                m[regs.WD_COUNTER_PDI] += 1
+        self.update_dl_status()
+        self._set_ecat_event(regs.ECAT_EV_DL_STATUS)
+
+    def pdi_interface_error(self, code: int) -> None:
+        """A PDI access with an interface error: 0x030D counts (saturating at 0xFF), 0x030E
+        keeps the code of the last one. Ref: TMC8460 §5.36 Table 50, §5.37 Table 51."""
+        m = self.mem
+        if m[regs.PDI_ERROR_COUNTER] < 0xFF:
+            m[regs.PDI_ERROR_COUNTER] += 1
+        m[regs.PDI_ERROR_CODE] = code & 0xFF
+
     def set_link(self, port: int, up: bool) -> None:
         """A link fault on port 0 or 1: DL status changes; a lost link at an open port in
         Auto loop mode counts in 0x0310+port. Ref: TMC8460 §5.19, §5.38 Table 52."""

@@ -210,6 +210,29 @@ class Pdi:
         """AL event request 0x0220 (reading it has no side effect). Ref: §5.32."""
         return self._esc.al_event()
 
+    # -- the SPI slave interface (TMC8460 §3.5) ------------------------------------------
+
+    def events(self) -> bytes:
+        """AL event request 0x0220:0x0222, as the SPI slave shifts it out during the
+        address phase (no read side effects). Ref: §3.5.1, §5.32."""
+        return bytes(self._esc.mem[regs.AL_EVENT_REQUEST : regs.AL_EVENT_REQUEST + 3])
+
+    def interface_error(self, code: int) -> None:
+        """An SPI access with an interface error (counted in 0x030D, code in 0x030E)."""
+        self._esc.pdi_interface_error(code)
+
+    def watchdog_pdi_ns(self) -> int:
+        """The PDI watchdog time: 0x0410 increments of (0x0400 + 2) x 40 ns; 0 = off.
+        Ref: §5.39 Table 53, §5.40 Table 54."""
+        m = self._esc.mem
+        div = m[regs.WD_DIVIDER] | (m[regs.WD_DIVIDER + 1] << 8)
+        t = m[regs.WD_TIME_PDI] | (m[regs.WD_TIME_PDI + 1] << 8)
+        return t * (div + 2) * 40
+
+    def set_watchdog_pdi(self, alive: bool) -> None:
+        """Reload (True) or expire (False) the PDI watchdog (0x0110 bit 1, 0x0443)."""
+        self._esc.set_pdi_watchdog(alive)
+
     # -- SyncManager PDI side --------------------------------------------------------
 
     def sm_settings(self, n: int) -> SmSettings:

@@ -28,7 +28,7 @@ def _imports(path: Path) -> set[str]:
 
 def test_slave_and_device_use_only_the_pdi_face() -> None:
     offenders = []
-    for pkg in ("slave", "device"):
+    for pkg in ("slave", "device", "pdi_spi"):
         for f in sorted((ROOT / pkg).rglob("*.py")):
             for mod in _imports(f):
                 is_esc = mod == "ecatsim.esc" or mod.startswith("ecatsim.esc.")
