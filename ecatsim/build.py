@@ -141,6 +141,7 @@ def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
             image,
             dc_start_ns=(i + 1) * DC_START_STEP_NS,
             dc_drift_ppm=sc.dc_drift_ppm,
+            pdi_emulation=sc.pdi_emulation,
         )
         pdi = Pdi(esc)
         layout = mailbox_layout(image)

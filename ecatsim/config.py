@@ -13,6 +13,8 @@ slaves:
     dc_drift_ppm: 0.0        # optional local clock drift
     firmware: external       # optional: the slave firmware runs outside ecatsim ...
     pdi_socket: /run/fw.sock # ... and drives the chip over this PDI SPI socket
+    pdi_emulation: false     # optional: the PDI_EMULATION pin (0x0141 bit 0 until the
+                             # EEPROM is loaded)
 faults:                      # optional: faults injected while running (ecatsim/faults/spec.py)
   - {kind: wkc, value: -1, count: 3, on_state: op}
   - {kind: drop, probability: 0.001, seed: 7}
@@ -51,6 +53,7 @@ _SLAVE_KEYS = {
     "foe_password",
     "firmware",
     "pdi_socket",
+    "pdi_emulation",
 }
 #: who runs the slave firmware behind the PDI: ecatsim, or a program on the PDI socket
 FIRMWARE_KINDS = ("ecatsim", "external")
@@ -74,6 +77,8 @@ class SlaveConfig:
     #: PDI SPI socket ``pdi_socket`` (TMC8460 §3.5)
     firmware: str = "ecatsim"
     pdi_socket: Path | None = None
+    #: the PDI_EMULATION pin, 0x0141 bit 0 before the EEPROM loads (TMC8460 §5.26)
+    pdi_emulation: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -177,6 +182,11 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
                 "firmware: external and pdi_socket: PATH go together (the socket the "
                 "firmware connects to)",
             )
+        pdi_emulation = s.get("pdi_emulation", False)
+        if not isinstance(pdi_emulation, bool):
+            raise _err(
+                src, f"{key}.pdi_emulation", f"expected true or false, got {pdi_emulation!r}"
+            )
         if pdi_socket is not None and count > 1:
             raise _err(src, f"{key}.pdi_socket", "one PDI socket cannot serve count > 1 slaves")
         for j in range(count):
@@ -196,6 +206,7 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
                     foe_password=foe_pw,
                     firmware=firmware,
                     pdi_socket=pdi_socket,
+                    pdi_emulation=pdi_emulation,
                 )
             )
     if len(out) > MAX_SLAVES:

@@ -172,6 +172,7 @@ class Esc:
         "link_down",
         "mem",
         "on_reset",
+        "pdi_emulation",
         "pdram_ok",
         "port0_open",
         "port1_closed",
@@ -195,8 +196,11 @@ class Esc:
         dc_start_ns: int = 0,
         dc_drift_ppm: float = 0.0,
         dc_hop_ns: int = 500,
+        pdi_emulation: bool = False,
     ) -> None:
         self.position = position
+        #: the PDI_EMULATION pin: 0x0141 bit 0 until the EEPROM's word 0 is loaded (§5.26)
+        self.pdi_emulation = pdi_emulation
         self.ctx = ctx
         self.mem = bytearray(0x10000)
         self.t = tables()
@@ -236,6 +240,7 @@ class Esc:
         m[:] = bytes(0x10000)
         for addr, size, value in self.t.resets:
             m[addr : addr + size] = value.to_bytes(size, "little")
+        m[regs.ESC_CONFIG] = (m[regs.ESC_CONFIG] & 0xFE) | int(self.pdi_emulation)
         for s in self.sm:
             s.configure(0, 0, 0, False)
         self.fmmus = ()

@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from ecatsim.clock import ManualClock
+from ecatsim.esc.core import Esc, FrameContext
 from ecatsim.pdi_spi.external import ExternalFirmware
 from ecatsim.pdi_spi.protocol import SpiTiming, transfer
 from ecatsim.segment import Segment
@@ -150,3 +151,13 @@ def test_the_pdi_watchdog_expires_without_accesses(chip) -> None:  # type: ignor
     spi(fw, 0x00, 0x00)
     assert fw.deadline_ns() is None
     del seg
+
+
+@pytest.mark.parametrize("pin", [False, True])
+def test_the_pdi_emulation_pin_until_the_eeprom_loads(pin: bool) -> None:
+    """0x0141 bit 0: "1 with PDI_EMULATION pin, later EEPROM ADR 0x0000" (§5.26 Table 38)."""
+    blank = Esc(0, FrameContext(), bytearray(b"\xff" * 256), pdi_emulation=pin)
+    assert not blank.pdram_ok  # no valid EEPROM: the pin's value stands
+    assert blank.mem[0x0141] & 0x01 == int(pin)
+    seg, _ = segment_of(1, pdi_emulation=pin)
+    assert seg.escs[0].mem[0x0141] & 0x01 == 0  # the default SII's word 0: emulation off

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from ecatsim.config import SegmentConfig, SlaveConfig
+from ecatsim.config import SegmentConfig, SlaveConfig, parse_segment
 from ecatsim.doors import DoorHost
 from ecatsim.errors import UserError
 from ecatsim.frontdoors import build_doors
@@ -124,3 +124,31 @@ def test_a_stale_socket_file_is_replaced_and_other_files_are_not(tmp_path: Path)
     path.write_text("not a socket")
     with pytest.raises(UserError, match=r"slaves\[0\]\.pdi_socket: cannot create the socket"):
         segment_of(1, firmware="external", pdi_socket=path)
+
+
+@pytest.mark.parametrize(
+    ("slave", "message"),
+    [
+        ({"firmware": "mcu"}, r"slaves\[0\]\.firmware: use one of: ecatsim, external, got 'mcu'"),
+        ({"firmware": "external"}, r"slaves\[0\]\.pdi_socket: firmware: external and pdi_socket"),
+        ({"pdi_socket": "x.sock"}, r"slaves\[0\]\.pdi_socket: firmware: external and pdi_socket"),
+        (
+            {"firmware": "external", "pdi_socket": "x.sock", "count": 2},
+            r"slaves\[0\]\.pdi_socket: one PDI socket cannot serve count > 1 slaves",
+        ),
+        ({"pdi_emulation": "yes"}, r"slaves\[0\]\.pdi_emulation: expected true or false"),
+    ],
+)
+def test_config_errors_name_the_key(slave: dict[str, object], message: str) -> None:
+    with pytest.raises(UserError, match=r"^seg\.yaml: " + message):
+        parse_segment({"slaves": [{"device": "echo", **slave}]}, "seg.yaml")
+
+
+def test_config_paths_are_relative_to_the_file(tmp_path: Path) -> None:
+    cfg = parse_segment(
+        {"slaves": [{"firmware": "external", "pdi_socket": "fw.sock", "pdi_emulation": True}]},
+        "seg.yaml",
+        tmp_path,
+    )
+    s = cfg.slaves[0]
+    assert (s.firmware, s.pdi_socket, s.pdi_emulation) == ("external", tmp_path / "fw.sock", True)
