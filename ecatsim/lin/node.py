@@ -573,24 +573,8 @@ class Node:
         st = self.state
         if st == State.SLEEP:
             return
-        moving = st in MOVING
-        if self.hs:
-            a = PRIORITY_ENCODER[Event.ELECTRICAL][st]
-            if a == Action.TO_SHUTDOWN:
-                self.state = State.SHUTDOWN
-            elif a == Action.TO_HARDSTOP:
-                self.f["steploss"] |= int(moving)
-                self._hard_stop()
-        st = self.state
-        if self.f["tsd"]:
-            a = PRIORITY_ENCODER[Event.THERMAL][st]
-            if a == Action.TO_SHUTDOWN:
-                self.state = State.SHUTDOWN
-            elif a == Action.TO_SOFTSTOP:
-                self.f["steploss"] |= int(moving)
-                self.state = State.SOFTSTOP
-                self.runinit = None
-        st = self.state
+        if self._internal_events(st):
+            return  # the new state acts from the next tick on
         if st == State.GOTOPOS:
             dx = self.ramp.step(self.effective(self.tagpos), self._profile())
             self.motor.move(dx, self.ram.shaft)
@@ -613,6 +597,31 @@ class Node:
                 self._enter_sleep()
         elif st == State.STOPPED:
             self._stopped_tick()
+
+    def _internal_events(self, st: State) -> bool:
+        """HardStop on <HS>, then thermal shutdown on <TSD>, by Table 8 (the HardStop has
+        the higher priority, §5.1.15). Returns whether the state changed."""
+        moving = st in MOVING
+        if self.hs:
+            a = PRIORITY_ENCODER[Event.ELECTRICAL][st]
+            if a == Action.TO_SHUTDOWN:
+                self.state = State.SHUTDOWN
+                return True
+            if a == Action.TO_HARDSTOP:
+                self.f["steploss"] |= int(moving)
+                self._hard_stop()
+                return True
+        if self.f["tsd"]:
+            a = PRIORITY_ENCODER[Event.THERMAL][st]
+            if a == Action.TO_SHUTDOWN:
+                self.state = State.SHUTDOWN
+                return True
+            if a == Action.TO_SOFTSTOP:
+                self.f["steploss"] |= int(moving)
+                self.state = State.SOFTSTOP
+                self.runinit = None
+                return True
+        return False
 
     def _stopped_tick(self) -> None:
         """State Stopped: <Sleep> (note 9), <Stop> reset (note 11), then the lowest
