@@ -17,6 +17,7 @@ import structlog
 from ecatsim import __version__
 from ecatsim.bench_cli import bench
 from ecatsim.errors import UserError
+from ecatsim.tmcl.cli import tmcl
 
 
 def configure_logging(fmt: str, level: int = logging.INFO) -> None:
@@ -343,3 +344,4 @@ def esi_export(output: Path) -> None:
 
 
 cli.add_command(bench)
+cli.add_command(tmcl)

@@ -63,7 +63,11 @@ class ControlSocket:
     """The daemon side."""
 
     def __init__(
-        self, path: Path, segment: Segment, faults: FaultEngine, doors: DoorHost | None = None
+        self,
+        path: Path,
+        segment: Segment | None,
+        faults: FaultEngine | None,
+        doors: DoorHost | None = None,
     ) -> None:
         self.path = path
         self.segment = segment
@@ -121,6 +125,7 @@ class ControlSocket:
             return {"ok": False, "error": f"internal error: {exc!r}"}
 
     def _inject(self, fault: dict[str, Any]) -> dict[str, Any]:
+        assert self.faults is not None and self.segment is not None
         fid = self.faults.add(parse_fault(fault), self.segment.clock.now_ns())
         return {"ok": True, "id": fid}
 
@@ -135,6 +140,9 @@ class ControlSocket:
 
         Ref: TMC8460 §5.19 (DL status), §5.20 (AL status), §5.34-5.38 (error counters).
         """
+        doors = self.doors.status() if self.doors is not None else {}
+        if self.segment is None or self.faults is None:  # a daemon serving front doors only
+            return {"ok": True, "slaves": [], "faults": [], "doors": doors}
         out = []
         for esc in self.segment.escs:
             m = esc.mem
@@ -163,16 +171,20 @@ class ControlSocket:
             "bad_frames": seg.bad_frames,
             "faults": self.faults.status(),
             "faults_fired": self.faults.fired_total,
-            "doors": self.doors.status() if self.doors is not None else {},
+            "doors": doors,
         }
 
     def handle(self, req: dict[str, Any]) -> dict[str, Any]:
         """One request -> one reply."""
         cmd = req["cmd"]
-        seg = self.segment
-        now = seg.clock.now_ns()
         if cmd == "status":
             return self.status()
+        if cmd == "door":  # a request for a TMCL or LIN front door: its own commands
+            return self._door(str(req["door"]), str(req["command"]), list(req.get("args", [])))
+        seg = self.segment
+        if seg is None or self.faults is None:
+            raise ValueError(f"{cmd}: this daemon serves front doors only (use status or door)")
+        now = seg.clock.now_ns()
         if cmd == "inject":  # any fault, as in the segment YAML's faults: list
             return self._inject(dict(req["fault"]))
         if cmd == "clear":  # one fault by id, or all
@@ -181,8 +193,6 @@ class ControlSocket:
                 "ok": True,
                 "cleared": self.faults.clear(None if fid is None else int(fid), now),
             }
-        if cmd == "door":  # a request for a TMCL or LIN front door: its own commands
-            return self._door(str(req["door"]), str(req["command"]), list(req.get("args", [])))
         if cmd == "wire":  # shorthand: a wire fault on the next N replies
             return self._inject(
                 {"kind": req["kind"], "count": req.get("count", 1), "value": req.get("value")}
