@@ -18,6 +18,7 @@ from ecatsim import __version__
 from ecatsim.bench_cli import bench
 from ecatsim.errors import UserError
 from ecatsim.lin.cli import lin
+from ecatsim.tmcl.cli import tmcl
 
 
 def configure_logging(fmt: str, level: int = logging.INFO) -> None:
@@ -345,3 +346,4 @@ def esi_export(output: Path) -> None:
 
 cli.add_command(bench)
 cli.add_command(lin)
+cli.add_command(tmcl)

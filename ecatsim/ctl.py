@@ -141,9 +141,10 @@ class ControlSocket:
 
         Ref: TMC8460 §5.19 (DL status), §5.20 (AL status), §5.34-5.38 (error counters).
         """
-        if self.segment is None or self.faults is None:  # a doors-only daemon
-            doors = self.doors.status() if self.doors is not None else {}
-            return {"ok": True, "slaves": [], "frames": 0, "bad_frames": 0, "doors": doors}
+        doors = self.doors.status() if self.doors is not None else {}
+        if self.segment is None or self.faults is None:  # a daemon serving front doors only
+            return {"ok": True, "slaves": [], "faults": [], "frames": 0, "bad_frames": 0,
+                    "doors": doors}  # fmt: skip
         out = []
         for esc in self.segment.escs:
             m = esc.mem
@@ -172,7 +173,7 @@ class ControlSocket:
             "bad_frames": seg.bad_frames,
             "faults": self.faults.status(),
             "faults_fired": self.faults.fired_total,
-            "doors": self.doors.status() if self.doors is not None else {},
+            "doors": doors,
         }
 
     def handle(self, req: dict[str, Any]) -> dict[str, Any]:
