@@ -125,7 +125,7 @@ def test_activation_by_the_first_get_full_status(bus: tuple[LinDoor, LinMaster])
     set_position(m, "left", 1000)  # ignored: <VddReset> = 1 (§5.2.3 note)
     m.wait(0.5)
     assert actpos(m, "left") == 0
-    first, second = m.full_status(LEFT)
+    first, _second = m.full_status(LEFT)
     assert first is not None and first[4] == 0x80  # <VddReset> read once
     assert node.state == State.STOPPED
     first, _ = m.full_status(LEFT)
