@@ -457,6 +457,7 @@ def test_ecatsim_lin_command_on_a_real_clock(tmp_path: Path) -> None:
             return out
 
         prep = bytes((0x80, 0x81, 0x83, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF))
+        exchange(header(0x3E), 0)  # wakes the node should it sleep already (N6)
         exchange(lin_frame(0x3C, prep), 0)
         got = exchange(header(0x3D), 9)
         assert got[:8] == bytes((0x83, 0, 0, 0, 0x80, 0x02, 0, 0xFF))
@@ -471,3 +472,43 @@ def test_ecatsim_lin_command_on_a_real_clock(tmp_path: Path) -> None:
         out = proc.communicate(timeout=10)[0].decode()
     assert proc.returncode == 0, out
     assert not link.exists()
+
+
+def test_segment_file_serves_lin_beside_ethercat(tmp_path: Path) -> None:
+    """``ecatsim run`` with ``lin:`` in the segment file: one daemon, both buses."""
+    seg = tmp_path / "seg.yaml"
+    seg.write_text(
+        "slaves:\n  - device: echo\nlin:\n  pty: lin0\n  nodes:\n"
+        "    - {name: a, otp: [0, 0, 3, 0, 0, 0, 0, 0]}\n"
+    )
+    link, sock = tmp_path / "lin0", tmp_path / "ctl.sock"
+    exe = [sys.executable, "-m", "ecatsim"]
+    proc = subprocess.Popen(
+        [*exe, "run", "--udp", "127.0.0.1:0", "--config", str(seg), "--ctl", str(sock), "--no-rt"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+    )
+    try:
+        deadline = time.monotonic() + 10
+        while not (link.exists() and sock.exists()) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        fd = os.open(link, os.O_RDWR | os.O_NOCTTY)
+        tty.setraw(fd)
+        os.write(fd, header(0x3E))  # wake-up
+        time.sleep(0.05)
+        os.write(fd, lin_frame(0x3C, bytes((0x80, 0x80, 0x83, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF))))
+        time.sleep(0.05)
+        os.write(fd, header(0x3D))
+        got = b""
+        while len(got) < 9 and select.select([fd], [], [], 1.0)[0]:
+            got += os.read(fd, 64)
+        assert got[:8] == bytes((0x83, 0, 0, 0x80, 0xFF, 0xFF, 0xFF, 0xFF))  # GetActualPos
+        os.close(fd)
+        status = subprocess.run(
+            [*exe, "ctl", "--socket", str(sock), "status"], capture_output=True, text=True
+        )
+        assert "0x0000   INIT" in status.stdout and "lin: pty" in status.stdout, status.stdout
+    finally:
+        proc.terminate()
+        out = proc.communicate(timeout=10)[0].decode()
+    assert proc.returncode == 0, out
