@@ -304,6 +304,10 @@ def test_several_nodes_broadcast_and_dynamic_ids(bus: tuple[LinDoor, LinMaster])
          GP4_ParamHi=0x03, GP4_ParamLo=0xE8)  # fmt: skip
     m.wait(1.0)
     assert (actpos(m, "left"), actpos(m, "right")) == (2000, 1000)
+    # GetFullStatus prepared by the LDF's type #7 frame, read on 0x3D
+    send(m, "Preparing", PREP_Command="GetFullStatus", PREP_AD=RIGHT, PREP_One=1)
+    first = m.read(SLAVE_RESPONSE)
+    assert first is not None and first[0] == 0x80 | RIGHT and first[2] == 0x51
     # a new identifier for the left node's GetStatus, through 0x3C (§6.8)
     m.assign(LEFT, [(RomPointer.GET_STATUS, 0x05)])
     assert read(m, "GetStatus_left") is None  # 0x01 no longer answers
