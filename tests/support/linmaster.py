@@ -138,7 +138,7 @@ class PtyPort:
             if not select.select([self.door.pty.fd], [], [], 0)[0]:
                 break
         out = b""
-        while select.select([self.fd], [], [], 0.02)[0]:
+        while select.select([self.fd], [], [], 0.005)[0]:
             out += os.read(self.fd, 4096)
         return out
 
