@@ -148,6 +148,8 @@ class Pty:
         except OSError as exc:
             self._close_fds()
             raise UserError(f"--pty {link}: cannot create the link ({exc.strerror})") from exc
+        #: bytes answered, and bytes the pty could not take
+        self.written = 0
         self.dropped = 0
 
     def read(self) -> bytes:
@@ -166,6 +168,7 @@ class Pty:
             n = os.write(self.fd, data)
         except (BlockingIOError, OSError):
             n = 0
+        self.written += n
         self.dropped += len(data) - n
 
     def _close_fds(self) -> None:
