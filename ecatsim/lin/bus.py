@@ -1,8 +1,8 @@
 """The LIN bus: the nodes behind one parser, and the pseudo-terminal a master opens.
 
 Every node sees every frame, as on the single wire (TMC211 §6.2). Two nodes answering
-the same header drive the wire together: the bus carries the wired-AND of their bytes
-(dominant 0 wins), and a node that reads back another byte than it sent stops and records
+the same header drive the wire together: the bus carries the wired-AND of their bits
+(dominant 0 wins), and a node that reads back another bit than it sent stops and records
 a bit error (§6.7). The bus is inactive when no byte moved for 25000 bit times: that is
 the LIN timeout that sends the nodes to their secure position and to sleep (§5.1.12,
 §6.11.15).
@@ -59,21 +59,27 @@ class LinBus:
         return self._arbitrate(ident, sent, now_ns)
 
     def _arbitrate(self, ident: int, sent: list[tuple[Node, bytes]], now_ns: int) -> bytes:
-        """Several nodes answer at once: the wired-AND, losers stop with a bit error."""
+        """Several nodes answer at once. Bit by bit, least significant first (UART order),
+        the wire carries the AND of what they send (dominant 0 wins); a node that sends a
+        recessive 1 and reads a 0 stops with a bit error (LIN 1.3; TMC211 §6.7)."""
         active = list(sent)
         out = bytearray()
         for i in range(max(len(w) for _, w in sent)):
             active = [(n, w) for n, w in active if i < len(w)]
             if not active:
                 break
-            byte = 0xFF
-            for _, w in active:
-                byte &= w[i]
+            byte = 0
+            for bit in range(8):
+                level = 1
+                for _, w in active:
+                    level &= w[i] >> bit & 1
+                byte |= level << bit
+                if not level:
+                    for n, w in active:
+                        if w[i] >> bit & 1:
+                            n.sent(ident, False, now_ns)
+                    active = [(n, w) for n, w in active if not w[i] >> bit & 1]
             out.append(byte)
-            for n, w in active:
-                if w[i] != byte:
-                    n.sent(ident, False, now_ns)
-            active = [(n, w) for n, w in active if w[i] == byte]
         for n, _ in active:
             n.sent(ident, True, now_ns)
         return bytes(out)
@@ -142,6 +148,8 @@ class Pty:
         except OSError as exc:
             self._close_fds()
             raise UserError(f"--pty {link}: cannot create the link ({exc.strerror})") from exc
+        #: bytes answered, and bytes the pty could not take
+        self.written = 0
         self.dropped = 0
 
     def read(self) -> bytes:
@@ -160,6 +168,7 @@ class Pty:
             n = os.write(self.fd, data)
         except (BlockingIOError, OSError):
             n = 0
+        self.written += n
         self.dropped += len(data) - n
 
     def _close_fds(self) -> None:

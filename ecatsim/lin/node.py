@@ -575,17 +575,17 @@ class Node:
             return
         if self._internal_events(st):
             return  # the new state acts from the next tick on
+        before = self.actpos()
         if st == State.GOTOPOS:
-            dx = self.ramp.step(self.effective(self.tagpos), self._profile())
-            self.motor.move(dx, self.ram.shaft)
+            self.ramp.step(self.effective(self.tagpos), self._profile())
+            self._stepped(before)
             if self.ramp.v == 0.0 and self.actpos() == self.effective(self.tagpos):
                 self._finished(PRIORITY_ENCODER[Event.MOTION_FINISHED][st], now_ns)
         elif st == State.RUNINIT:
             self._runinit_tick(now_ns)
         elif st == State.SOFTSTOP:
-            before = self.ramp.x
             done = self.ramp.brake(self._profile())
-            self.motor.move(self.ramp.x - before, self.ram.shaft)
+            self._stepped(before)
             if done:
                 self._finished(PRIORITY_ENCODER[Event.MOTION_FINISHED][st], now_ns)
         elif st == State.HARDSTOP:
@@ -597,6 +597,12 @@ class Node:
                 self._enter_sleep()
         elif st == State.STOPPED:
             self._stopped_tick()
+
+    def _stepped(self, before: int) -> None:
+        """The motor follows the steps the driver made (whole steps of the step mode)."""
+        moved = wrap16(self.actpos() - before)
+        if moved:
+            self.motor.move(moved, self.ram.shaft)
 
     def _internal_events(self, st: State) -> bool:
         """HardStop on <HS>, then thermal shutdown on <TSD>, by Table 8 (the HardStop has
@@ -655,8 +661,9 @@ class Node:
             v2 = vmin_units(ri.vmin, ri.vmax)
             prof = Profile(v2, v2, acc_units(m.acc, ri.vmax), True)
             target = self.effective(ri.pos2)
-        dx = self.ramp.step(target, prof)
-        self.motor.move(dx, m.shaft)
+        before = self.actpos()
+        self.ramp.step(target, prof)
+        self._stepped(before)
         if self.ramp.v != 0.0 or self.actpos() != target:
             return
         if ri.phase == 1:

@@ -131,15 +131,19 @@ class PtyPort:
         os.close(self.fd)
 
     def __call__(self, data: bytes) -> bytes:
-        """Write bytes, let the door read them (the daemon loop's job), read the answer."""
+        """Write bytes, let the door read them (the daemon loop's job), read the answer:
+        as many bytes as the door wrote to its end."""
+        pty = self.door.pty
+        before = pty.written
         os.write(self.fd, data)
-        while select.select([self.door.pty.fd], [], [], 0.2)[0]:
-            self.door.on_ready(self.door.pty.fd)
-            if not select.select([self.door.pty.fd], [], [], 0)[0]:
+        while select.select([pty.fd], [], [], 0.2)[0]:
+            self.door.on_ready(pty.fd)
+            if not select.select([pty.fd], [], [], 0)[0]:
                 break
+        want = pty.written - before
         out = b""
-        while select.select([self.fd], [], [], 0.02)[0]:
-            out += os.read(self.fd, 4096)
+        while len(out) < want and select.select([self.fd], [], [], 2.0)[0]:
+            out += os.read(self.fd, want - len(out))
         return out
 
 
