@@ -52,7 +52,7 @@ class Mechanics:
     #: Coulomb friction, Nm
     friction: float = 0.01
     #: viscous friction and back-EMF damping, Nm per rad/s
-    viscous: float = 0.02
+    viscous: float = 0.002
     #: external load torque, Nm (positive opposes positive rotation)
     load: float = 0.0
 
