@@ -384,7 +384,7 @@ class Axis:
     def driver_errors(self) -> int:
         """Axis parameter 208 (§6)."""
         e = 0
-        if self.sg == 0 and self.vel != 0.0 and not self.closed:
+        if self.stall_flag or (self.sg == 0 and self.vel != 0.0 and not self.closed):
             e |= DE_STALL
         if self.faults.overtemperature:
             e |= DE_OT | DE_OTPW
