@@ -284,6 +284,17 @@ def test_ecatsim_tmcl_over_tcp_and_pty(tmp_path: Path) -> None:
             over_tcp.stop(0)
             over_pty.set_global_parameter(10, 2, 4242)
             assert over_tcp.get_global_parameter(10, 2) == 4242
+            ctl = [sys.executable, "-m", "ecatsim", "ctl", "--socket", str(tmp_path / "ctl.sock")]
+            fault = subprocess.run(
+                [*ctl, "door", "tmcl", "fault", "1", "overtemperature", "on"],
+                capture_output=True,
+                text=True,
+                timeout=10,
+            )
+            assert fault.returncode == 0, fault.stderr
+            assert over_tcp.get_axis_parameter(AP.DriverErrorFlags, 0) & 2
+            status = subprocess.run([*ctl, "status"], capture_output=True, text=True, timeout=10)
+            assert "tmcl: listen" in status.stdout and "'overtemperature'" in status.stdout
         finally:
             serial.close()
             sock.close()
