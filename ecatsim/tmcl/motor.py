@@ -52,7 +52,7 @@ class Mechanics:
     #: Coulomb friction, Nm
     friction: float = 0.01
     #: viscous friction and back-EMF damping, Nm per rad/s
-    viscous: float = 0.02
+    viscous: float = 0.002
     #: external load torque, Nm (positive opposes positive rotation)
     load: float = 0.0
 
@@ -384,7 +384,7 @@ class Axis:
     def driver_errors(self) -> int:
         """Axis parameter 208 (§6)."""
         e = 0
-        if self.sg == 0 and self.vel != 0.0 and not self.closed:
+        if self.stall_flag or (self.sg == 0 and self.vel != 0.0 and not self.closed):
             e |= DE_STALL
         if self.faults.overtemperature:
             e |= DE_OT | DE_OTPW

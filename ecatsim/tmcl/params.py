@@ -89,7 +89,7 @@ AXIS: dict[int, Param] = {
         _p(19, "CL torque mode actual current", -3000, 3000, 0, "RW", "§8.7"),
         _p(20, "CL torque mode slope", 0, I32_MAX, 100_000, "RW", "§6, §8.7"),
         _p(25, "thermal winding time constant", 0, U32_MAX, 4500, "RWE", "§6"),
-        _p(26, "I2t limit", 0, U32_MAX, 211_200, "RWE", "§6"),
+        _p(26, "I2t limit", 0, U32_MAX, 500_000, "RWE", "§6"),
         _p(27, "I2t sum", 0, U32_MAX, 0, "R", "§6"),
         _p(28, "I2t exceed counter", 0, U32_MAX, 0, "RWE", "§6"),
         _p(29, "clear I2t exceeded flag", I32_MIN, U32_MAX, 0, "W", "§6"),

@@ -127,6 +127,9 @@ class Interpreter:
         self.state = STEPPING
         self.wait = None
         self._execute_one(self.m.t_ns)
+        if self.wait is not None:  # a stepped WAIT is done at once (decision T15)
+            self.wait = None
+            self.pc += 1
 
     def start_download(self, address: int) -> None:
         self.download = True

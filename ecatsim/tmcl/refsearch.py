@@ -17,34 +17,39 @@ from ecatsim.tmcl.motor import POSITION, Axis, RefSearchLike
 
 @dataclass(frozen=True, slots=True)
 class Leg:
-    """Drive ``direction`` at the search (fast) or switch (slow) speed until ``switch`` is
-    ``level``; ``note`` keeps the position; ``bounce`` reverses at that stop switch."""
+    """Drive ``direction`` at the search (fast) or switch (slow) speed until ``switch`` has
+    shown each level of ``levels`` in turn (a level already there counts at once); the
+    levels marked in ``note`` keep the position where they came. ``bounce`` reverses the
+    search at that stop switch. After each leg the axis stops with its ramp."""
 
     direction: int
     fast: bool
     switch: str
-    level: bool
-    note: bool = False
+    levels: tuple[bool, ...]
+    note: tuple[bool, ...] = ()
     bounce: str | None = None
+
+    def reversed(self) -> Leg:
+        return Leg(-self.direction, self.fast, self.switch, self.levels, self.note)
 
 
 def _calibrate(switch: str, toward: int) -> list[Leg]:
-    """Find ``switch`` driving ``toward``, leave it slowly, re-enter it slowly: the two
+    """Find a stop switch driving ``toward``, leave it slowly, re-enter it slowly: the two
     switching points (§9 hints)."""
     return [
-        Leg(toward, True, switch, True),
-        Leg(-toward, False, switch, False, note=True),
-        Leg(toward, False, switch, True, note=True),
+        Leg(toward, True, switch, (True,)),
+        Leg(-toward, False, switch, (False,), (True,)),
+        Leg(toward, False, switch, (True,), (True,)),
     ]
 
 
 def _home(toward: int, bounce: str | None) -> list[Leg]:
-    """Find the home switch, then both of its edges slowly: its middle is the reference."""
+    """Find the home switch, back out of it slowly, cross it slowly: its middle is the
+    reference."""
     return [
-        Leg(toward, True, "home", True, bounce=bounce),
-        Leg(toward, False, "home", False, note=True),
-        Leg(-toward, False, "home", True),
-        Leg(-toward, False, "home", False, note=True),
+        Leg(toward, True, "home", (True,), bounce=bounce),
+        Leg(-toward, False, "home", (True, False)),
+        Leg(toward, False, "home", (True, False), (True, True)),
     ]
 
 
@@ -54,7 +59,7 @@ def legs_for(mode: int) -> list[Leg]:
     if m in (1, 4):
         return _calibrate("left", -1)
     if m == 2:
-        return [Leg(1, True, "right", True, note=True), *_calibrate("left", -1)]
+        return [Leg(1, True, "right", (True,), (True,)), *_calibrate("left", -1)]
     if m == 3:
         return [*_calibrate("right", 1), *_calibrate("left", -1)]
     if m == 5:
@@ -72,9 +77,10 @@ class RefSearch(RefSearchLike):
     def __init__(self, mode: int) -> None:
         self.mode = mode
         self.legs = legs_for(mode)
-        self.leg = 0
+        self.leg = -1
+        self.step = 0
         self.notes: list[float] = []
-        self.started = False
+        self.stopping = True
         self.finishing = False
         self.done = False
         #: axis parameter 196 (modes 2 and 3): distance between the end switches
@@ -97,34 +103,39 @@ class RefSearch(RefSearchLike):
                 self.done = True
                 axis.home_search = None
             return
-        if not self.started:
-            self.started = True
-            self._drive(axis, self.legs[0])
+        if self.stopping:  # the ramp stops the axis between legs
+            axis.mode = 1
+            axis.vtarget = 0
+            if axis.vel != 0.0 or abs(axis.rotor_v) > 1.0:
+                return
+            self.stopping = False
+            self.leg += 1
+            self.step = 0
+            if self.leg == len(self.legs):
+                self._finish(axis)
+                return
+            self._drive(axis, self.legs[self.leg])
             return
         leg = self.legs[self.leg]
         if leg.bounce is not None and self._level(axis, leg.bounce):
-            self.legs[self.leg] = Leg(-leg.direction, True, leg.switch, leg.level, leg.note)
-            self.legs = [
-                Leg(-x.direction, x.fast, x.switch, x.level, x.note) if i > self.leg else x
-                for i, x in enumerate(self.legs)
-            ]
+            self.legs = [x.reversed() if i >= self.leg else x for i, x in enumerate(self.legs)]
+            self.legs[self.leg] = Leg(-leg.direction, True, leg.switch, leg.levels)
             self._drive(axis, self.legs[self.leg])
             return
-        if self._level(axis, leg.switch) != leg.level:
-            return
-        if leg.note:
-            self.notes.append(axis.pos)
-        self.leg += 1
-        if self.leg < len(self.legs):
-            axis.vel = 0.0  # the switch stops the search at once (§9)
-            self._drive(axis, self.legs[self.leg])
-            return
-        self._finish(axis)
+        while (
+            self.step < len(leg.levels) and self._level(axis, leg.switch) == leg.levels[self.step]
+        ):
+            if self.step < len(leg.note) and leg.note[self.step]:
+                self.notes.append(axis.pos)
+            self.step += 1
+        if self.step == len(leg.levels):
+            self.stopping = True
 
     def _finish(self, axis: Axis) -> None:
         ref = (self.notes[-1] + self.notes[-2]) / 2
         if len(self.notes) >= 3:
             self.distance = round(abs(self.notes[0] - ref))
+            axis.ap[196] = self.distance
         shift = -round(ref)
         axis.vel = 0.0
         axis.pos += shift

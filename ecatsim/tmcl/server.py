@@ -77,6 +77,7 @@ class TmclDoor:
         self.bad_checksums = 0
         self.frames = 0
         self.disconnects = 0
+        self._closing: list[Line] = []
         #: module index -> the line that asked for the target-reached event (138)
         self._event_line: dict[int, LineState] = {}
         try:
@@ -93,6 +94,12 @@ class TmclDoor:
     # ------------------------------------------------------------- FrontDoor
 
     def fds(self) -> list[int]:
+        # a dropped line's descriptor is closed only now, when the host is about to forget
+        # it: closed earlier, its number could come back from accept() while the host
+        # still thinks it watches it (epoll forgets closed descriptors by itself)
+        for line in self._closing:
+            line.close()
+        self._closing.clear()
         return [x.fileno() for x in self.listeners] + list(self.lines)
 
     def on_ready(self, fd: int) -> None:
@@ -162,6 +169,9 @@ class TmclDoor:
             lst.close()
         for st in self.lines.values():
             st.line.close()
+        for line in self._closing:
+            line.close()
+        self._closing.clear()
         self.lines.clear()
         self.listeners.clear()
 
@@ -176,7 +186,7 @@ class TmclDoor:
     def _drop(self, st: LineState) -> None:
         self.disconnects += 1
         self.lines.pop(st.line.fileno(), None)
-        st.line.close()
+        self._closing.append(st.line)
         for idx, ev in list(self._event_line.items()):
             if ev is st:
                 del self._event_line[idx]
@@ -286,7 +296,7 @@ class TmclDoor:
         while st.queue and st.queue[0][0] <= now_ns:
             st.line.send(st.queue.pop(0)[1])
         st.line.flush()
-        if st.line.closed and not isinstance(st.line, PtyLine):
+        if st.line.dead and st.line.fileno() in self.lines:
             self._drop(st)
 
     def _module_status(self, m: Module) -> dict[str, Any]:

@@ -34,6 +34,8 @@ class Line:
         self.fd = fd
         self.out = bytearray()
         self.closed = False
+        #: the peer is gone or does not read: the server drops the line (and closes it)
+        self.dead = False
         self.dropped_out = 0
 
     def fileno(self) -> int:
@@ -48,7 +50,7 @@ class Line:
         self.flush()
 
     def flush(self) -> None:
-        while self.out and not self.closed:
+        while self.out and not self.closed and not self.dead:
             try:
                 n = self._write(bytes(self.out[:READ_SIZE]))
             except BlockingIOError:
@@ -65,10 +67,11 @@ class Line:
         raise NotImplementedError
 
     def _gone(self) -> None:
-        self.close()
+        self.dead = True
 
     def _backlog(self) -> None:
-        self.close()
+        self.out.clear()
+        self.dead = True
 
     def close(self) -> None:
         raise NotImplementedError

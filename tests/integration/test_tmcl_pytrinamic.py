@@ -32,15 +32,32 @@ def _integration_needs_root() -> None:
     """These tests need no root (overrides the directory's fixture)."""
 
 
-@pytest.fixture
-def srv() -> Iterator[Served]:
-    with served() as s:
+@pytest.fixture(params=["tcp", "pty"])
+def srv(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Served]:
+    listen = ["tcp://127.0.0.1:0"] if request.param == "tcp" else [f"pty:{tmp_path / 'tty'}"]
+    with served(listen=listen) as s:
         yield s
+
+
+def interface(srv: Served) -> SocketTmclInterface | SerialTmclInterface:
+    """pytrinamic's socket_serial_tmcl for tcp://, serial_tmcl for pty:."""
+    if srv.door.listeners:
+        return SocketTmclInterface(srv.url)
+    pty = srv.door.status()["listen"][0].removeprefix("pty:")
+    return SerialTmclInterface(pty, timeout_s=5)
+
+
+@pytest.fixture(params=["tcp", "pty"])
+def lines(request: pytest.FixtureRequest, tmp_path: Path) -> list[str]:
+    """The listen URL of one test, once for each transport."""
+    if request.param == "tcp":
+        return ["tcp://127.0.0.1:0"]
+    return [f"pty:{tmp_path / 'tty'}"]
 
 
 @pytest.fixture
 def module(srv: Served) -> Iterator[TMCM1311]:
-    iface = SocketTmclInterface(srv.url)
+    iface = interface(srv)
     try:
         yield TMCM1311(iface)
     finally:
@@ -118,10 +135,12 @@ def test_errors_reach_pytrinamic_as_status(srv: Served, module: TMCM1311) -> Non
     assert exc.value.status_code == 2
 
 
-def test_stap_persists_across_a_restart_unstored_values_revert(tmp_path: Path) -> None:
+def test_stap_persists_across_a_restart_unstored_values_revert(
+    tmp_path: Path, lines: list[str]
+) -> None:
     eeprom = tmp_path / "tmcm.json"
-    with served(eeprom=eeprom) as s:
-        iface = SocketTmclInterface(s.url)
+    with served(eeprom=eeprom, listen=lines) as s:
+        iface = interface(s)
         m = TMCM1311(iface)
         m.set_axis_parameter(AP.MaxVelocity, 0, 77_777)
         m.store_axis_parameter(AP.MaxVelocity, 0)
@@ -130,8 +149,8 @@ def test_stap_persists_across_a_restart_unstored_values_revert(tmp_path: Path) -
         m.store_global_parameter(3, 2)
         m.set_global_parameter(4, 2, 98)  # not stored
         iface.close()
-    with served(eeprom=eeprom) as s:
-        iface = SocketTmclInterface(s.url)
+    with served(eeprom=eeprom, listen=lines) as s:
+        iface = interface(s)
         m = TMCM1311(iface)
         assert m.get_axis_parameter(AP.MaxVelocity, 0) == 77_777
         assert m.get_axis_parameter(AP.MaxAcceleration, 0) == 51_200
@@ -140,10 +159,10 @@ def test_stap_persists_across_a_restart_unstored_values_revert(tmp_path: Path) -
         iface.close()
 
 
-def test_reference_search_finds_the_home_switch() -> None:
+def test_reference_search_finds_the_home_switch(lines: list[str]) -> None:
     sw = Switches(left=-200_000, right=200_000, home=30_000, home_width=2560)
-    with served([ModuleConfig(switches=sw)]) as s:
-        iface = SocketTmclInterface(s.url)
+    with served([ModuleConfig(switches=sw)], listen=lines) as s:
+        iface = interface(s)
         m = TMCM1311(iface)
         motor = m.motors[0]
         motor.set_axis_parameter(AP.ReferenceSearchMode, 7)  # home, positive direction
@@ -161,9 +180,11 @@ def test_reference_search_finds_the_home_switch() -> None:
         iface.close()
 
 
-def test_closed_loop_positioning_holds_the_encoder_deviation_under_a_load_step() -> None:
-    with served([ModuleConfig(mech=Mechanics(load_inertia=1e-4))]) as s:
-        iface = SocketTmclInterface(s.url)
+def test_closed_loop_positioning_holds_the_encoder_deviation_under_a_load_step(
+    lines: list[str],
+) -> None:
+    with served([ModuleConfig(mech=Mechanics(load_inertia=1e-4))], listen=lines) as s:
+        iface = interface(s)
         m = TMCM1311(iface)
         motor = m.motors[0]
         motor.set_axis_parameter(AP.MaxCurrent, 200)
@@ -263,6 +284,17 @@ def test_ecatsim_tmcl_over_tcp_and_pty(tmp_path: Path) -> None:
             over_tcp.stop(0)
             over_pty.set_global_parameter(10, 2, 4242)
             assert over_tcp.get_global_parameter(10, 2) == 4242
+            ctl = [sys.executable, "-m", "ecatsim", "ctl", "--socket", str(tmp_path / "ctl.sock")]
+            fault = subprocess.run(
+                [*ctl, "door", "tmcl", "fault", "1", "overtemperature", "on"],
+                capture_output=True,
+                text=True,
+                timeout=10,
+            )
+            assert fault.returncode == 0, fault.stderr
+            assert over_tcp.get_axis_parameter(AP.DriverErrorFlags, 0) & 2
+            status = subprocess.run([*ctl, "status"], capture_output=True, text=True, timeout=10)
+            assert "tmcl: listen" in status.stdout and "'overtemperature'" in status.stdout
         finally:
             serial.close()
             sock.close()
