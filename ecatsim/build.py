@@ -193,4 +193,6 @@ def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
         escs.append(esc)
         firmware.append(fw)
         paths.append(sc.eeprom)
-    return Segment(escs, ctx, clock, firmware, _Persist(escs, paths))
+    seg = Segment(escs, ctx, clock, firmware, _Persist(escs, paths))
+    seg.awake = frozenset(i for i, fw in enumerate(firmware) if isinstance(fw, MfcioBlock))
+    return seg

@@ -149,6 +149,7 @@ def run(
             "wire",
             "link",
             "door",
+            "mfcio",
         ]
     ),
 )
@@ -170,6 +171,8 @@ def ctl_cmd(
     al_refuse SLAVE CODE | al_fall SLAVE CODE | mbx_drop SLAVE N | wire KIND N [VALUE]
     link SLAVE PORT up|down | peek SLAVE ADDR LEN | poke SLAVE ADDR HEX | od SLAVE INDEX SUB [V]
     door tmcl|lin COMMAND [ARGS]    a request for a TMCL or LIN front door (door tmcl help)
+    mfcio SLAVE [status|pins|set gpioN 0|1|open|set nes 0|1|read REG|write REG V]
+                                    a TMC8460's MFCIO block (MFC CTRL SPI for read/write)
     """
     import json
 
@@ -209,6 +212,13 @@ def ctl_cmd(
             req["up"] = args[2] == "up"
         elif command == "mbx_drop":
             req = {"cmd": command, "slave": num(args[0]), "count": num(args[1])}
+        elif command == "mfcio":
+            req = {
+                "cmd": "mfcio",
+                "slave": num(args[0]),
+                "op": args[1] if len(args) > 1 else "status",
+                "args": list(args[2:]),
+            }
         elif command == "door":
             req = {"cmd": "door", "door": args[0], "command": args[1], "args": list(args[2:])}
         elif command == "poke":

@@ -33,6 +33,7 @@ from ecatsim.esc.pdi import (
     EV_SYNC1,
     N_SM,
     Pdi,
+    sm_addr,
 )
 from ecatsim.mfcio import irq as irqmod
 from ecatsim.mfcio import regs as R
@@ -91,7 +92,8 @@ class MfcioBlock:
         #: called with (now_ns, block) after every run (the --trace writer)
         self.tracer: Callable[[int, MfcioBlock], None] | None = None
         self.t_ns = now_ns
-        self.shaft = Shaft(wiring.stepper, wiring.encoder) if wiring.stepper is not None else None
+        w = wiring
+        self.shaft = Shaft(w.stepper, w.encoder) if w.stepper or w.encoder else None
         self.nes_pin = wiring.nes
         self.reset()
 
@@ -300,7 +302,8 @@ class MfcioBlock:
             covered[s - lo : e - lo] = b"\x01" * (e - s)
             if not w.ecat_writes:
                 continue
-            if ev & (EV_SM0 << w.n) or self.runs == 1:
+            # a buffer completed since the last read (SM status bit 0, Table 89)
+            if self.pdi.u8(sm_addr(w.n, 5)) & 0x01 or ev & (EV_SM0 << w.n) or self.runs == 1:
                 data = self.pdi.read(w.start, w.end - w.start)
                 self.mb0[s - lo : e - lo] = data[s - w.start : e - w.start]
         i = 0
@@ -578,6 +581,43 @@ class MfcioBlock:
         for r in READABLE:
             if self._trigger(r.num) == trig:
                 self.shadow[r.num] = self.unit_value(r.num)
+
+    # ------------------------------------------------------------------ ecatsim ctl
+
+    def ctl(self, op: str, args: list[str], now_ns: int) -> dict[str, object]:
+        """``ecatsim ctl mfcio SLAVE OP ARGS``: status | pins | set gpioN 0/1/open |
+        set nes 0/1 | set encoder COUNT (turn the shaft) | read REG | write REG VALUE
+        (the MFC CTRL SPI path: register 44 and registers without ECAT access are
+        writable there)."""
+        if op == "status":
+            return self.status(now_ns)
+        if op == "pins":
+            return {"pins": self.pins(now_ns)}
+        if op == "set":
+            pin, level = args[0].lower(), args[1].lower()
+            if pin == "nes" and level in ("0", "1"):
+                self.set_nes(int(level), now_ns)
+            elif pin == "encoder" and self.shaft is not None and self.shaft.encoder:
+                self.advance(now_ns)
+                self.shaft.turn(int(level, 0) - self.shaft.count, self.enc)
+            elif pin.startswith("gpio") and pin[4:].isdigit() and 0 <= int(pin[4:]) <= 7:
+                lvl = None if level == "open" else int(level)
+                if lvl not in (None, 0, 1):
+                    raise ValueError(f"set {pin}: level 0, 1 or open")
+                self.set_gpio_input(int(pin[4:]), lvl, now_ns)
+            else:
+                raise ValueError(f"set {pin}: pins are gpio0..gpio7 and nes")
+            return {"pins": self.pins(now_ns)}
+        if op in ("read", "write"):
+            r = R.BY_NAME.get(args[0].upper())
+            if r is None:
+                raise ValueError(f"{args[0]}: no such MFCIO register (TMC8460 Table 133)")
+            if op == "write":
+                value = int(args[1], 0)
+                self.mfc_write(r.spi_addr(), value.to_bytes(r.size, "little"), now_ns)
+            raw = self.mfc_read(r.spi_addr(), r.size, now_ns)
+            return {"register": r.name, "value": int.from_bytes(raw, "little")}
+        raise ValueError(f"mfcio {op}: use status, pins, set, read or write")
 
     # ------------------------------------------------------------------ reporting
 

@@ -132,19 +132,22 @@ class Shaft:
 
     The motor moves ``microsteps_per_pulse`` microsteps per step pulse, positive while
     DIR is low (TMC8460 Table 145: DIR = 0 is the positive direction). The encoder count
-    is floor(microsteps * counts_per_rev / microsteps_per_rev)."""
+    is floor(microsteps * counts_per_rev / microsteps_per_rev) plus what the shaft was
+    turned by hand (:meth:`turn`; the only way it moves without a stepper)."""
 
-    def __init__(self, stepper: StepperSpec, encoder: EncoderSpec | None) -> None:
+    def __init__(self, stepper: StepperSpec | None, encoder: EncoderSpec | None) -> None:
         self.stepper = stepper
         self.encoder = encoder
         self.microsteps = 0
+        self.turned = 0  # encoder counts turned by hand
         self.count = 0
 
     def count_at(self, microsteps: int) -> int:
-        e = self.encoder
+        e, s = self.encoder, self.stepper
         if e is None:
             return 0
-        return microsteps * e.counts_per_rev // self.stepper.microsteps_per_rev
+        motor = microsteps * e.counts_per_rev // s.microsteps_per_rev if s is not None else 0
+        return motor + self.turned
 
     def levels(self, count: int) -> tuple[int, int, int]:
         """A, B, N at an encoder count: quadrature Gray code, N at count 0 of a turn."""
@@ -155,7 +158,17 @@ class Shaft:
 
     def move(self, pulses: int, unit: Encoder | None) -> None:
         """``pulses`` step pulses (signed); the encoder unit sees every transition."""
+        if self.stepper is None:
+            return
         self.microsteps += pulses * self.stepper.microsteps_per_pulse
+        self._feed(unit)
+
+    def turn(self, counts: int, unit: Encoder | None) -> None:
+        """Turn the encoder by ``counts`` by hand."""
+        self.turned += counts
+        self._feed(unit)
+
+    def _feed(self, unit: Encoder | None) -> None:
         new = self.count_at(self.microsteps)
         old = self.count
         self.count = new
