@@ -63,7 +63,15 @@ EVERY_CYCLE = frozenset(
     }
 )
 READABLE = tuple(r for r in R.REGISTERS if not r.writable)
-WRITABLE = tuple(r for r in R.REGISTERS[: R.N_CONFIGURED] if r.writable)
+#: registers whose write starts something: taken after the settings of the same shadow
+#: cycle, which act together (decision M3)
+ACTIONS = ("ENC_X_W", "SPI_TX_DATA", "SD_SR", "SD_ST", "SD_CFG", "WD_TIME")
+WRITABLE = tuple(
+    sorted(
+        (r for r in R.REGISTERS[: R.N_CONFIGURED] if r.writable),
+        key=lambda r: (r.name in ACTIONS, r.num),
+    )
+)
 #: PWM IRQ sources by mark (IRQ_CFG bits 4-7)
 _MARK_IRQ = {
     MARK_START: irqmod.SRC_PWM_START,
