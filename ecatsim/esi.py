@@ -155,9 +155,9 @@ def export_esi(desc: DeviceDescription, od: ObjectDictionary | None) -> bytes:
          RevisionNo=_hex(desc.identity.revision, 8))  # fmt: skip
     _sub(dev, "Name", desc.name)
     _sub(dev, "GroupType", desc.group)
-    prof = _sub(dev, "Profile")
-    _sub(prof, "ProfileNo", "402")
     if od is not None:
+        prof = _sub(dev, "Profile")
+        _sub(prof, "ProfileNo", "402")
         _dictionary(prof, od)
     for f in desc.fmmus:
         _sub(dev, "Fmmu", FMMU_NAMES.get(f, f))

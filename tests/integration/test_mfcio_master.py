@@ -264,3 +264,24 @@ def test_example_2_step_dir_with_its_esi(
     assert ctl(sock, "status")["pwm_duty"] == [0.25, 0.0, 0.0]
     # SD_SR has ECAT access: the MFC CTRL SPI cannot write it
     assert ctl(sock, "write", "SD_SR", "5")["value"] == -sr_for(20_000) & 0xFFFFFFFF
+
+
+def test_demo_mfcio_beside_the_drive(
+    daemon_factory: Any, master_factory: Any, tmp_path: Path, capsys: Any
+) -> None:
+    """tools/demo_mfcio.py against config/tmc8460-beside-tmc8670.yaml: a TMC8670 and a
+    TMC8460 MFCIO slave in one segment; the demo's own checks decide its exit code."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("demo_mfcio", ROOT / "tools" / "demo_mfcio.py")
+    assert spec is not None and spec.loader is not None
+    demo = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(demo)
+    trace = tmp_path / "trace.csv"
+    daemon_factory(
+        "--config", str(ROOT / "config/tmc8460-beside-tmc8670.yaml"), "--trace", str(trace)
+    )
+    assert demo.run(master_factory()) == 0
+    out = capsys.readouterr().out
+    assert "slave 0: TMC8670" in out and "slave 1: TMC8460 MFCIO" in out
+    assert "SD_SC 2000 -> 2000" in out
