@@ -133,7 +133,8 @@ def test_trace_rows(tmp_path: Path) -> None:
         GPO_OUT_VAL=0x01,
     )
     w.close()
-    rows = list(csv.DictReader(open(w.path, newline="")))
+    with open(w.path, newline="") as f:
+        rows = list(csv.DictReader(f))
     last = rows[-1]
     assert tuple(rows[0]) == mfcio_trace.COLUMNS
     assert last["al_state"] == "8"
