@@ -477,7 +477,7 @@ class MfcioBlock:
     def _emergency_check(self) -> None:
         """MFC_nES low while enabled (IRQ_CFG[15]) sets the latched emergency flag; while
         it is set the outputs take their safe values and step/dir freezes.
-        Ref: TMC8460 §6.13, §6.9.13, §6.10.4; decision M20."""
+        Ref: TMC8460 §6.13, §6.9.13, §6.10.4; decision M19."""
         if self.irq.nes_enabled and not self.nes_pin and not self.irq.flags & irqmod.NES:
             self.irq.emergency()
         em = bool(self.irq.flags & irqmod.NES)

@@ -1,7 +1,7 @@
 """The general-purpose IO unit: eight pins, each an input or an output, with a safe state
 for the outputs while the emergency switch is active.
 
-Ref: TMC8460 §6.10 Table 150, §6.10.1-§6.10.4, §6.13; decision M19.
+Ref: TMC8460 §6.10 Table 150, §6.10.1-§6.10.4, §6.13; decision M18.
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ class Gpio:
         return out
 
     def in_val(self, pins: list[int | None]) -> int:
-        """GPI_IN_VAL: the level on each pin (an open input reads 0, decision M19)."""
+        """GPI_IN_VAL: the level on each pin (an open input reads 0, decision M18)."""
         v = 0
         for i, lvl in enumerate(pins):
             if lvl:

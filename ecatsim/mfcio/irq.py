@@ -1,7 +1,7 @@
 """The MFCIO IRQ unit: IRQ_CFG enables sources (and, bit 15, the nES input), IRQ_FLAGS
 holds the events of the enabled sources; MFCIO_IRQ is their OR.
 
-Ref: TMC8460 §6.12 Table 154, §6.13; decision M20.
+Ref: TMC8460 §6.12 Table 154, §6.13; decisions M19, M20.
 """
 
 from __future__ import annotations

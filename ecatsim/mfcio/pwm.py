@@ -8,7 +8,7 @@ t_PWM = (1 + PWM_MAXCNT) * 10 ns; channel n is on for PWM_VALUE_n clocks per cyc
 PWM_BBM_H clocks after the low side went off and the low side PWM_BBM_L clocks after the
 high side went off.
 
-Ref: TMC8460 §6.9 Tables 146-149, §6.9.1-§6.9.13; decisions M15-M18.
+Ref: TMC8460 §6.9 Tables 146-149, §6.9.1-§6.9.13; decisions M15-M17.
 """
 
 from __future__ import annotations
