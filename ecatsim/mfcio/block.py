@@ -18,6 +18,7 @@ from __future__ import annotations
 import struct
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 from ecatsim.esc.pdi import (
     AL_STATUS,
@@ -31,7 +32,9 @@ from ecatsim.esc.pdi import (
     EV_SM_ACTIVATION,
     EV_SYNC0,
     EV_SYNC1,
+    EV_WATCHDOG_PD,
     N_SM,
+    WD_STATUS_PD,
     Pdi,
     sm_addr,
 )
@@ -82,6 +85,21 @@ _MARK_IRQ = {
 
 
 @dataclass(frozen=True, slots=True)
+class _Plan:
+    """A run's work for one configuration and set of SM windows (see _make_plan)."""
+
+    key: tuple[bytes, tuple[Window, ...] | None]
+    w_in: tuple[tuple[int, int, int, int], ...]  # (register, MB0 offset, size, mask)
+    r_out: tuple[tuple[int, int, int], ...]  # (register, MB1 offset, size)
+    mb0_windows: tuple[tuple[int, int, int, int, int], ...]  # (SM, start, end, s, e)
+    mb0_plain: tuple[tuple[int, int], ...]  # MB0 offsets [i, j) outside any window
+    mb1_windows: tuple[tuple[int, int, int, int, int], ...]
+    mb1_plain: tuple[tuple[int, int], ...]
+    take: tuple[tuple[int, int], ...]  # (writable register, trigger) in taking order
+    read: tuple[tuple[int, int], ...]  # (readable register, trigger)
+
+
+@dataclass(frozen=True, slots=True)
 class Window:
     """An enabled SyncManager window in process RAM."""
 
@@ -127,12 +145,14 @@ class MfcioBlock:
             a, b, n = self.shaft.levels(self.shaft.count)
             self.enc.a, self.enc.b, self.enc.n = a, b, n
         self.cfg = bytes(R.N_CONFIGURED)
+        self._cfg_raw = b""
         self.shadow = [0] * len(R.REGISTERS)  # shadow registers by number
         self.main = [0] * len(R.REGISTERS)  # what the units last took (writable)
         self.override = 0  # AL_STATE_OVERRIDE (register 44)
         self.state = AL_INIT
         self.mb0 = bytearray(R.MB0_SIZE)
         self.windows: tuple[Window, ...] | None = None
+        self._plan: _Plan | None = None
         self.pending: list[tuple[int, int, int]] = []  # (due ns, reg, value): trigger 13
         self.frame_no = self.pdi.frames()[0]
         self._dc = self._dc_marks()
@@ -227,12 +247,17 @@ class MfcioBlock:
         ev = pdi.al_event()
         if ev & EV_SM_ACTIVATION or self.windows is None:
             self.windows = self._read_windows()
+        if ev & EV_WATCHDOG_PD:  # acknowledged for the absent firmware (decision M25)
+            pdi.u8(WD_STATUS_PD)
         if ev & (EV_SYNC0 | EV_SYNC1):  # acknowledge (TMC8460 §5.50.4 Table 106)
             if ev & EV_SYNC0:
                 pdi.u8(DC_SYNC0_STATUS)
             if ev & EV_SYNC1:
                 pdi.u8(DC_SYNC1_STATUS)
-        self.cfg = vector(pdi.read(R.CONFIG_START, R.N_CONFIGURED))
+        raw = pdi.read(R.CONFIG_START, R.N_CONFIGURED)
+        if raw != self._cfg_raw:
+            self._cfg_raw = raw
+            self.cfg = vector(raw)
         self.state = pdi.u16(AL_STATUS) & 0x0F
         events: set[int] = set()
         frame_no, frame_ns = pdi.frames()
@@ -275,9 +300,13 @@ class MfcioBlock:
     def _trigger(self, num: int) -> int:
         return self.cfg[num] & TRIGGER_MASK
 
-    def _fires(self, num: int, events: set[int]) -> bool:
-        trig = self._trigger(num)
-        return trig in EVERY_CYCLE or trig in events
+    @property
+    def plan(self) -> _Plan:
+        """The plan for the current configuration and SM windows."""
+        p = self._plan
+        if p is None or p.key != (self.cfg, self.windows):
+            p = self._plan = self._make_plan()
+        return p
 
     # ------------------------------------------------------------------ MB0 / MB1
 
@@ -290,82 +319,101 @@ class MfcioBlock:
                 out.append(Window(n, s.start, s.start + s.length, ecat_writes))
         return tuple(out)
 
-    def _uses(self, writable: bool) -> bool:
-        regs = WRITABLE if writable else READABLE
-        return any(self._ecat(r.num) for r in regs)
+    def _make_plan(self) -> _Plan:
+        """What each run does with this configuration and these SM windows, worked out
+        once: the windows and plain ranges of MB0/MB1, the ECAT-enabled registers with
+        their offsets, every register's trigger."""
+        cfg = self.cfg
+        assert self.windows is not None
+
+        def split(lo: int, size: int, ecat_writes: bool) -> tuple[list[Any], list[Any]]:
+            covered = bytearray(size)
+            wins = []
+            for w in self.windows or ():
+                if w.end <= lo or w.start >= lo + size:
+                    continue
+                s, e = max(w.start, lo), min(w.end, lo + size)
+                covered[s - lo : e - lo] = b"\x01" * (e - s)
+                if w.ecat_writes == ecat_writes:
+                    wins.append((w.n, w.start, w.end, s - lo, e - lo))
+            plain = []
+            i = 0
+            while i < size:
+                j = covered.find(0, i)
+                if j < 0:
+                    break
+                k = covered.find(1, j)
+                k = size if k < 0 else k
+                plain.append((j, k))
+                i = k
+            return wins, plain
+
+        w_in = tuple(
+            (r.num, r.mb - R.MB0_START, r.size, r.mask)
+            for r in WRITABLE
+            if cfg[r.num] & ECAT_ACCESS and r.mb is not None
+        )
+        r_out = tuple(
+            (r.num, r.mb - R.MB1_START, r.size)
+            for r in READABLE
+            if r.num < R.N_CONFIGURED and cfg[r.num] & ECAT_ACCESS and r.mb is not None
+        )
+        mb0_wins, mb0_plain = split(R.MB0_START, R.MB0_SIZE, True)
+        mb1_wins, mb1_plain = split(R.MB1_START, R.MB1_SIZE, False)
+        return _Plan(
+            key=(cfg, self.windows),
+            w_in=w_in,
+            r_out=r_out,
+            mb0_windows=tuple(mb0_wins),
+            mb0_plain=tuple(mb0_plain),
+            mb1_windows=tuple(mb1_wins),
+            mb1_plain=tuple(mb1_plain),
+            take=tuple((r.num, cfg[r.num] & TRIGGER_MASK) for r in WRITABLE),
+            read=tuple((r.num, cfg[r.num] & TRIGGER_MASK) for r in READABLE if r.num < 44),
+        )
 
     def _intake(self, ev: int) -> None:
         """Read MB0 through the SM windows over it (which acknowledges the master's write)
         and the plain PDRAM beside them; in OP the ECAT-enabled writable registers take
         their shadow values from it. Ref: TMC8460 §5.53.1, §6.1, §6.2."""
-        if not self._uses(True):
+        plan = self.plan
+        if not plan.w_in:
             return
-        lo, hi = R.MB0_START, R.MB0_START + R.MB0_SIZE
-        covered = bytearray(R.MB0_SIZE)
-        assert self.windows is not None
-        for w in self.windows:
-            if w.end <= lo or w.start >= hi:
-                continue
-            s, e = max(w.start, lo), min(w.end, hi)
-            covered[s - lo : e - lo] = b"\x01" * (e - s)
-            if not w.ecat_writes:
-                continue
+        pdi = self.pdi
+        mb0 = self.mb0
+        for n, ws, we, s, e in plan.mb0_windows:
             # a buffer completed since the last read (SM status bit 0, Table 89)
-            if self.pdi.u8(sm_addr(w.n, 5)) & 0x01 or ev & (EV_SM0 << w.n) or self.runs == 1:
-                data = self.pdi.read(w.start, w.end - w.start)
-                self.mb0[s - lo : e - lo] = data[s - w.start : e - w.start]
-        i = 0
-        while i < R.MB0_SIZE:
-            if covered[i]:
-                i += 1
-                continue
-            j = covered.find(1, i)
-            j = R.MB0_SIZE if j < 0 else j
-            self.mb0[i:j] = self.pdi.read(lo + i, j - i)
-            i = j
+            if pdi.u8(sm_addr(n, 5)) & 0x01 or ev & (EV_SM0 << n) or self.runs == 1:
+                data = pdi.read(ws, we - ws)
+                off = R.MB0_START - ws
+                mb0[s:e] = data[s + off : e + off]
+        for i, j in plan.mb0_plain:
+            mb0[i:j] = pdi.read(R.MB0_START + i, j - i)
         if self.state != AL_OP:
             return
-        for r in WRITABLE:
-            if self._ecat(r.num):
-                assert r.mb is not None
-                off = r.mb - lo
-                v = int.from_bytes(self.mb0[off : off + r.size], "little") & r.mask
-                self.shadow[r.num] = v
+        shadow = self.shadow
+        for num, off, size, mask in plan.w_in:
+            shadow[num] = int.from_bytes(mb0[off : off + size], "little") & mask
 
     def _output_mb1(self) -> None:
         """Write the ECAT-enabled readable registers' shadow values into MB1 (padding and
         registers without ECAT access read 0x00), in SAFEOP and OP only.
         Ref: TMC8460 §5.53.2, §6.1."""
-        if self.state not in (AL_SAFEOP, AL_OP) or not self._uses(False):
+        plan = self.plan
+        if self.state not in (AL_SAFEOP, AL_OP) or not plan.r_out:
             return
         img = bytearray(R.MB1_SIZE)
-        for r in READABLE:
-            if self._ecat(r.num):
-                assert r.mb is not None
-                off = r.mb - R.MB1_START
-                img[off : off + r.size] = self.shadow[r.num].to_bytes(r.size, "little")
-        lo, hi = R.MB1_START, R.MB1_START + R.MB1_SIZE
-        covered = bytearray(R.MB1_SIZE)
-        assert self.windows is not None
-        for w in self.windows:
-            if w.end <= lo or w.start >= hi:
-                continue
-            s, e = max(w.start, lo), min(w.end, hi)
-            covered[s - lo : e - lo] = b"\x01" * (e - s)
-            if w.ecat_writes:
-                continue
-            data = bytearray(w.end - w.start)
-            data[s - w.start : e - w.start] = img[s - lo : e - lo]
-            self.pdi.write(w.start, bytes(data))
-        i = 0
-        while i < R.MB1_SIZE:
-            if covered[i]:
-                i += 1
-                continue
-            j = covered.find(1, i)
-            j = R.MB1_SIZE if j < 0 else j
-            self.pdi.write(lo + i, bytes(img[i:j]))
-            i = j
+        shadow = self.shadow
+        for num, off, size in plan.r_out:
+            img[off : off + size] = shadow[num].to_bytes(size, "little")
+        pdi = self.pdi
+        for _n, ws, we, s, e in plan.mb1_windows:
+            data = bytearray(we - ws)
+            off = R.MB1_START - ws
+            data[s + off : e + off] = img[s:e]
+            pdi.write(ws, bytes(data))
+        for i, j in plan.mb1_plain:
+            pdi.write(R.MB1_START + i, bytes(img[i:j]))
         self.mb1_writes += 1
 
     # ------------------------------------------------------------------ shadow transfers
@@ -373,15 +421,15 @@ class MfcioBlock:
     def _transfer_writable(self, events: set[int]) -> None:
         """Shadow -> unit for the writable registers whose trigger fired; trigger 13 waits
         for the next start of a PWM cycle. Ref: TMC8460 §6.4 Table 136."""
-        for r in WRITABLE:
-            n = r.num
-            v = self.shadow[n]
-            if self._trigger(n) == Trigger.PWM_CYCLE:
-                if v != self.main[n] and not any(p[1] == n and p[2] == v for p in self.pending):
+        shadow, main = self.shadow, self.main
+        for n, trig in self.plan.take:
+            v = shadow[n]
+            if trig == Trigger.PWM_CYCLE:
+                if v != main[n] and not any(p[1] == n and p[2] == v for p in self.pending):
                     at = self.pwm.next_start(pwm_ticks(self.t_ns)) * PWM_TICK_NS
                     self.pending = [p for p in self.pending if p[1] != n]
                     self.pending.append((at, n, v))
-            elif self._fires(n, events):
+            elif (trig in EVERY_CYCLE or trig in events) and v != main[n]:
                 self._take(n, v)
 
     def _take(self, num: int, value: int) -> None:
@@ -443,10 +491,10 @@ class MfcioBlock:
     def _transfer_readable(self, events: set[int]) -> None:
         """Unit -> shadow for the readable registers whose trigger fired (trigger 13: at
         a run after a PWM cycle started, i.e. every run). Ref: TMC8460 §6.4."""
-        for r in READABLE:
-            n = r.num
-            if self._fires(n, events) or self._trigger(n) == Trigger.PWM_CYCLE:
-                self.shadow[n] = self.unit_value(n)
+        shadow = self.shadow
+        for n, trig in self.plan.read:
+            if trig in EVERY_CYCLE or trig in events or trig == Trigger.PWM_CYCLE:
+                shadow[n] = self.unit_value(n)
 
     # ------------------------------------------------------------------ pins
 

@@ -142,3 +142,35 @@ def test_trace_rows(tmp_path: Path) -> None:
     assert last["pwm_duty0"] == "0.250000"
     assert last["gpio_pins"] == "ZZ01ZZ01"  # pins 7..0: 4 and 5 wired from outside
     assert rows[0]["pwm_hs0"] == "Z"  # INIT: not driven
+
+
+def test_ctl_mfcio_answers(tmp_path: Path) -> None:
+    """``ecatsim ctl mfcio``: status, pins, inputs, the MFC CTRL SPI; errors as one line."""
+    import json
+
+    from ecatsim.ctl import ControlSocket
+    from ecatsim.faults.engine import FaultEngine
+
+    b = Bench()
+    c = ControlSocket(tmp_path / "ctl.sock", b.seg, FaultEngine(b.seg))
+    try:
+
+        def ask(**req: object) -> dict[str, object]:
+            return c.answer(json.dumps({"cmd": "mfcio", "slave": 0, **req}).encode())
+
+        assert ask(op="status")["sd_sc"] == 0
+        assert ask(op="set", args=["gpio2", "1"])["pins"]["GPO2"] == 1  # type: ignore[index]
+        assert ask(op="write", args=["AL_STATE_OVERRIDE", "0x0F"]) == {
+            "ok": True,
+            "register": "AL_STATE_OVERRIDE",
+            "value": 15,
+        }
+        assert ask(op="read", args=["nope"]) == {
+            "ok": False,
+            "error": "nope: no such MFCIO register (TMC8460 Table 133)",
+        }
+        assert ask(op="set", args=["gpio9", "1"])["ok"] is False
+        reply = c.answer(json.dumps({"cmd": "mfcio", "slave": 5}).encode())
+        assert reply == {"ok": False, "error": "no slave 5"}
+    finally:
+        c.close()
