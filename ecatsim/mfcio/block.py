@@ -22,6 +22,7 @@ from typing import Any
 
 from ecatsim.esc.pdi import (
     AL_STATUS,
+    DC_ACTIVATION,
     DC_LATCH0_POS,
     DC_LATCH1_POS,
     DC_NEXT_SYNC1,
@@ -156,6 +157,7 @@ class MfcioBlock:
         self.pending: list[tuple[int, int, int]] = []  # (due ns, reg, value): trigger 13
         self.frame_no = self.pdi.frames()[0]
         self._dc = self._dc_marks()
+        self._sync_active = False
         self.runs = 0
         self.mb1_writes = 0
         self.emergency = False
@@ -274,6 +276,13 @@ class MfcioBlock:
         ):
             if old != new:
                 events.add(trig)
+        # 0x0990 is also the start time the master writes while the SYNC unit is off
+        active = bool(pdi.u8(DC_ACTIVATION) & 0x01)
+        if not (active and self._sync_active):
+            events.discard(Trigger.SYNC0)
+        if ev & EV_SYNC0:
+            events.add(Trigger.SYNC0)
+        self._sync_active = active
         self._dc = marks
         self._intake(ev)
         self._transfer_writable(events)

@@ -174,3 +174,22 @@ def test_ctl_mfcio_answers(tmp_path: Path) -> None:
         assert reply == {"ok": False, "error": "no slave 5"}
     finally:
         c.close()
+
+
+def test_sync0_trigger_takes_values_at_the_pulse() -> None:
+    """Trigger 1: a value waits in the shadow register until a SYNC0 pulse (seen by the
+    run the pulse starts: SYNC0 is mapped to AL event 0x0220.2 in tmc8460.yaml)."""
+    b = Bench()
+    b.m.fpwr(STATION, 0x0580 + 35, b"\x11")  # GPIO_CONFIG: ECAT, SYNC0
+    b.state(4)
+    b.state(8)
+    b.cycle(3, GPIO_CONFIG=0x0F)
+    assert b.block.gpio.config == 0
+    now = struct.unpack("<Q", b.m.fprd(STATION, 0x0910, 8).data)[0]
+    b.m.fpwr(STATION, 0x09A0, struct.pack("<I", 1_000_000))
+    b.m.fpwr(STATION, 0x0990, struct.pack("<Q", now + 1_500_000))
+    b.m.fpwr(STATION, 0x0981, b"\x03")
+    b.cycle(1)
+    assert b.block.gpio.config == 0  # no pulse yet
+    b.cycle(1)
+    assert b.block.gpio.config == 0x0F
