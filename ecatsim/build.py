@@ -25,6 +25,8 @@ from ecatsim.errors import UserError
 from ecatsim.esc.core import Esc, FrameContext
 from ecatsim.esc.pdi import Pdi
 from ecatsim.esi import EsiError, read_esi
+from ecatsim.mfcio.block import MfcioBlock
+from ecatsim.mfcio.parts import parse_wiring
 from ecatsim.pdi_spi.external import ExternalFirmware
 from ecatsim.pdi_spi.protocol import SpiTiming
 from ecatsim.segment import Segment, Serviceable
@@ -89,17 +91,24 @@ class _Persist:
             log.error("eeprom_persist_failed", slave=pos, path=str(path), error=str(exc))
 
 
-def _description(sc: SlaveConfig, cache: dict[Path | None, DeviceDescription]) -> DeviceDescription:
-    if sc.description not in cache:
+#: the packaged description of a device type without its own ``description:``
+DEFAULT_DESCRIPTIONS = {"tmc8460": "tmc8460.yaml"}
+
+
+def _description(
+    sc: SlaveConfig, cache: dict[tuple[str, Path | None], DeviceDescription]
+) -> DeviceDescription:
+    key = (sc.device if sc.description is None else "", sc.description)
+    if key not in cache:
         try:
-            cache[sc.description] = (
-                default_description()
+            cache[key] = (
+                default_description(DEFAULT_DESCRIPTIONS.get(sc.device, "tmc8670.yaml"))
                 if sc.description is None
                 else load_description(sc.description)
             )
         except DescriptionError as exc:
             raise UserError(str(exc)) from exc
-    return cache[sc.description]
+    return cache[key]
 
 
 def _image(sc: SlaveConfig, desc: DeviceDescription) -> bytearray:
@@ -128,7 +137,7 @@ def _image(sc: SlaveConfig, desc: DeviceDescription) -> bytearray:
 def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
     """Build the ESCs, firmware and devices of a segment."""
     ctx = FrameContext()
-    cache: dict[Path | None, DeviceDescription] = {}
+    cache: dict[tuple[str, Path | None], DeviceDescription] = {}
     escs: list[Esc] = []
     firmware: list[Serviceable] = []
     paths: list[Path | None] = []
@@ -145,6 +154,16 @@ def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
         )
         pdi = Pdi(esc)
         layout = mailbox_layout(image)
+        if sc.device == "tmc8460":
+            # no firmware behind the PDI: the ESC runs in device emulation (SII word 0) and
+            # the MFCIO block serves the memory blocks (TMC8460 §6.1, §6.5)
+            wiring = parse_wiring(sc.mfcio, cfg.source, f"slaves[{i}].mfcio")
+            block = MfcioBlock(pdi, wiring, clock.now_ns())
+            esc.on_reset = block.reset
+            escs.append(esc)
+            firmware.append(block)
+            paths.append(sc.eeprom)
+            continue
         fw: Serviceable
         if sc.firmware == "external" and sc.pdi_socket is not None:
             fw = ExternalFirmware(pdi, sc.pdi_socket, clock, SpiTiming(), f"slaves[{i}].pdi_socket")
@@ -180,4 +199,6 @@ def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
         escs.append(esc)
         firmware.append(fw)
         paths.append(sc.eeprom)
-    return Segment(escs, ctx, clock, firmware, _Persist(escs, paths))
+    seg = Segment(escs, ctx, clock, firmware, _Persist(escs, paths))
+    seg.awake = frozenset(i for i, fw in enumerate(firmware) if isinstance(fw, MfcioBlock))
+    return seg

@@ -4,7 +4,7 @@ Every problem is one line naming the file, the key path and the fix.
 
 ```yaml
 slaves:
-  - device: tmc8670          # device type: tmc8670 | echo
+  - device: tmc8670          # device type: tmc8670 | echo | tmc8460 (MFCIO block, no MCU)
     count: 2                 # optional: this entry repeated (serials counted up)
     description: my.yaml     # optional device description (default: the packaged TMC8670)
     eeprom: drive.bin        # optional SII image file; master writes persist to it
@@ -15,6 +15,7 @@ slaves:
     pdi_socket: /run/fw.sock # ... and drives the chip over this PDI SPI socket
     pdi_emulation: false     # optional: the PDI_EMULATION pin (0x0141 bit 0 until the
                              # EEPROM is loaded)
+    mfcio: {...}             # tmc8460 only: parts on the MFCIO pins (ecatsim/mfcio/parts.py)
 faults:                      # optional: faults injected while running (ecatsim/faults/spec.py)
   - {kind: wkc, value: -1, count: 3, on_state: op}
   - {kind: drop, probability: 0.001, seed: 7}
@@ -34,7 +35,7 @@ import yaml
 from ecatsim.errors import UserError
 from ecatsim.faults.spec import FaultSpec, FaultSpecError, parse_fault
 
-DEVICE_TYPES = ("tmc8670", "echo")
+DEVICE_TYPES = ("tmc8670", "echo", "tmc8460")
 #: the front doors a segment file may list beside its slaves
 DOOR_KEYS = ("tmcl", "lin")
 MAX_SLAVES = 4096
@@ -54,6 +55,7 @@ _SLAVE_KEYS = {
     "firmware",
     "pdi_socket",
     "pdi_emulation",
+    "mfcio",
 }
 #: who runs the slave firmware behind the PDI: ecatsim, or a program on the PDI socket
 FIRMWARE_KINDS = ("ecatsim", "external")
@@ -79,6 +81,8 @@ class SlaveConfig:
     pdi_socket: Path | None = None
     #: the PDI_EMULATION pin, 0x0141 bit 0 before the EEPROM loads (TMC8460 §5.26)
     pdi_emulation: bool = False
+    #: device tmc8460: the parts wired to the MFCIO pins (validated when built)
+    mfcio: dict[str, object] | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -189,6 +193,9 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
             )
         if pdi_socket is not None and count > 1:
             raise _err(src, f"{key}.pdi_socket", "one PDI socket cannot serve count > 1 slaves")
+        mfcio = s.get("mfcio")
+        if mfcio is not None and (dev != "tmc8460" or not isinstance(mfcio, dict)):
+            raise _err(src, f"{key}.mfcio", "a mapping, for device: tmc8460 only")
         for j in range(count):
             out.append(
                 SlaveConfig(
@@ -207,6 +214,7 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
                     firmware=firmware,
                     pdi_socket=pdi_socket,
                     pdi_emulation=pdi_emulation,
+                    mfcio=mfcio,
                 )
             )
     if len(out) > MAX_SLAVES:

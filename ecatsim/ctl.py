@@ -230,6 +230,12 @@ class ControlSocket:
             esc = seg.escs[slave]
             esc.mem[addr : addr + len(data)] = data
             return {"ok": True}
+        if cmd == "mfcio":  # the TMC8460 MFCIO block: status, pins, MFC CTRL SPI access
+            mfcio = getattr(seg.firmware[slave], "ctl", None)
+            if mfcio is None:
+                raise ValueError(f"slave {slave} has no MFCIO block (device: tmc8460)")
+            args = [str(a) for a in req.get("args", [])]
+            return {"ok": True, **mfcio(str(req.get("op", "status")), args, now)}
         if cmd == "od":
             od = getattr(seg.firmware[slave], "od", None)
             if od is None:

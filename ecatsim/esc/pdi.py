@@ -20,14 +20,21 @@ from ecatsim.esc.regs import (  # re-exported for the firmware
     AL_STATUS_CODE,
     DC_ACTIVATION,
     DC_ACTIVATION_STATUS,
+    DC_LATCH0_POS,
+    DC_LATCH1_POS,
+    DC_NEXT_SYNC1,
+    DC_START_TIME,
     DC_SYNC0_STATUS,
+    DC_SYNC1_STATUS,
     DL_STATUS,
     ESC_CONFIG,
     EV_AL_CONTROL,
     EV_SM0,
     EV_SM_ACTIVATION,
     EV_SYNC0,
+    EV_SYNC1,
     EV_WATCHDOG_PD,
+    N_SM,
     SM_CTRL_PDI_IRQ,
     WD_STATUS_PD,
     sm_addr,
@@ -44,14 +51,21 @@ __all__ = [
     "AL_STATUS_CODE",
     "DC_ACTIVATION",
     "DC_ACTIVATION_STATUS",
+    "DC_LATCH0_POS",
+    "DC_LATCH1_POS",
+    "DC_NEXT_SYNC1",
+    "DC_START_TIME",
     "DC_SYNC0_STATUS",
+    "DC_SYNC1_STATUS",
     "DL_STATUS",
     "ESC_CONFIG",
     "EV_AL_CONTROL",
     "EV_SM0",
     "EV_SM_ACTIVATION",
     "EV_SYNC0",
+    "EV_SYNC1",
     "EV_WATCHDOG_PD",
+    "N_SM",
     "SM_CTRL_PDI_IRQ",
     "WD_STATUS_PD",
     "Pdi",
@@ -105,6 +119,13 @@ class Pdi:
         """Drive the LATCH ``unit`` input pin (the application's signal, e.g. an encoder
         index pulse) at host time ``host_ns``. Ref: TMC8460 §5.50.5."""
         self._esc.latch_input(unit, level, host_ns)
+
+    def frames(self) -> tuple[int, int]:
+        """The frames the ESC has seen and the arrival time of the latest: the start/end
+        of frame signals the MFCIO block takes from the ESC beside the PDI (TMC8460 §6.1,
+        §6.4 Table 136 triggers 5/6, §6.11.2 cfg_sof_enable)."""
+        ctx = self._esc.ctx
+        return ctx.frame_no, ctx.t_ns
 
     def operational(self) -> bool:
         """DL status 0x0110.0: EEPROM loaded, PDI operational. Ref: §5.19 Table 30."""

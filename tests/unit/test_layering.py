@@ -28,7 +28,7 @@ def _imports(path: Path) -> set[str]:
 
 def test_slave_and_device_use_only_the_pdi_face() -> None:
     offenders = []
-    for pkg in ("slave", "device", "pdi_spi"):
+    for pkg in ("slave", "device", "pdi_spi", "mfcio"):
         for f in sorted((ROOT / pkg).rglob("*.py")):
             for mod in _imports(f):
                 is_esc = mod == "ecatsim.esc" or mod.startswith("ecatsim.esc.")
@@ -41,7 +41,7 @@ def test_esc_does_not_import_firmware_or_devices() -> None:
     offenders = []
     for f in sorted((ROOT / "esc").rglob("*.py")):
         for mod in _imports(f):
-            if mod.startswith(("ecatsim.slave", "ecatsim.device")):
+            if mod.startswith(("ecatsim.slave", "ecatsim.device", "ecatsim.mfcio")):
                 offenders.append(f"{f.relative_to(ROOT)} imports {mod}")
     assert offenders == []
 

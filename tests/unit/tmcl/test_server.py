@@ -120,7 +120,7 @@ def test_ctl_status_and_door_commands_without_a_segment(tmp_path: Path) -> None:
         bad = ctl.answer(json.dumps({"cmd": "peek", "slave": 0, "addr": 0, "len": 1}).encode())
         assert bad == {
             "ok": False,
-            "error": "peek: this daemon serves front doors only (use status or door)",
+            "error": "'peek': this daemon serves front doors only (use: status, door)",
         }
     finally:
         ctl.close()
