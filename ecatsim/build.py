@@ -25,7 +25,11 @@ from ecatsim.errors import UserError
 from ecatsim.esc.core import Esc, FrameContext
 from ecatsim.esc.pdi import Pdi
 from ecatsim.esi import EsiError, read_esi
-from ecatsim.segment import Segment
+from ecatsim.mfcio.block import MfcioBlock
+from ecatsim.mfcio.parts import parse_wiring
+from ecatsim.pdi_spi.external import ExternalFirmware
+from ecatsim.pdi_spi.protocol import SpiTiming
+from ecatsim.segment import Segment, Serviceable
 from ecatsim.sii.image import SiiError, build_image
 from ecatsim.sii.store import EepromStore
 from ecatsim.slave.al import AlState
@@ -87,17 +91,24 @@ class _Persist:
             log.error("eeprom_persist_failed", slave=pos, path=str(path), error=str(exc))
 
 
-def _description(sc: SlaveConfig, cache: dict[Path | None, DeviceDescription]) -> DeviceDescription:
-    if sc.description not in cache:
+#: the packaged description of a device type without its own ``description:``
+DEFAULT_DESCRIPTIONS = {"tmc8460": "tmc8460.yaml"}
+
+
+def _description(
+    sc: SlaveConfig, cache: dict[tuple[str, Path | None], DeviceDescription]
+) -> DeviceDescription:
+    key = (sc.device if sc.description is None else "", sc.description)
+    if key not in cache:
         try:
-            cache[sc.description] = (
-                default_description()
+            cache[key] = (
+                default_description(DEFAULT_DESCRIPTIONS.get(sc.device, "tmc8670.yaml"))
                 if sc.description is None
                 else load_description(sc.description)
             )
         except DescriptionError as exc:
             raise UserError(str(exc)) from exc
-    return cache[sc.description]
+    return cache[key]
 
 
 def _image(sc: SlaveConfig, desc: DeviceDescription) -> bytearray:
@@ -126,9 +137,9 @@ def _image(sc: SlaveConfig, desc: DeviceDescription) -> bytearray:
 def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
     """Build the ESCs, firmware and devices of a segment."""
     ctx = FrameContext()
-    cache: dict[Path | None, DeviceDescription] = {}
+    cache: dict[tuple[str, Path | None], DeviceDescription] = {}
     escs: list[Esc] = []
-    firmware: list[Firmware] = []
+    firmware: list[Serviceable] = []
     paths: list[Path | None] = []
     for i, sc in enumerate(cfg.slaves):
         desc = _description(sc, cache)
@@ -139,10 +150,24 @@ def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
             image,
             dc_start_ns=(i + 1) * DC_START_STEP_NS,
             dc_drift_ppm=sc.dc_drift_ppm,
+            pdi_emulation=sc.pdi_emulation,
         )
         pdi = Pdi(esc)
         layout = mailbox_layout(image)
-        if "coe" in desc.mailbox.protocols:
+        if sc.device == "tmc8460":
+            # no firmware behind the PDI: the ESC runs in device emulation (SII word 0) and
+            # the MFCIO block serves the memory blocks (TMC8460 §6.1, §6.5)
+            wiring = parse_wiring(sc.mfcio, cfg.source, f"slaves[{i}].mfcio")
+            block = MfcioBlock(pdi, wiring, clock.now_ns())
+            esc.on_reset = block.reset
+            escs.append(esc)
+            firmware.append(block)
+            paths.append(sc.eeprom)
+            continue
+        fw: Serviceable
+        if sc.firmware == "external" and sc.pdi_socket is not None:
+            fw = ExternalFirmware(pdi, sc.pdi_socket, clock, SpiTiming(), f"slaves[{i}].pdi_socket")
+        elif "coe" in desc.mailbox.protocols:
             base = sc.description.parent if sc.description is not None else None
             try:
                 od = build_od(desc, base)
@@ -156,22 +181,24 @@ def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
                 raise UserError(str(exc)) from exc
             app: Application = PdoImage(od, device)
             foe = desc.mailbox.foe or "foe" in desc.mailbox.protocols
-            fw = Firmware(pdi, app, layout, mbx=mbx, bootstrap_supported=foe)
-            fw.coe = CoeProtocol(mbx, od, fw.al_state_code)
-            fw.od = od
-            fw.emergency = emcy
-            fw.device = device
+            fw = coe_fw = Firmware(pdi, app, layout, mbx=mbx, bootstrap_supported=foe)
+            coe_fw.coe = CoeProtocol(mbx, od, coe_fw.al_state_code)
+            coe_fw.od = od
+            coe_fw.emergency = emcy
+            coe_fw.device = device
             if isinstance(device, Drive):
                 # the board wires the encoder index to LATCH1 (decision D14)
                 device.index_output = partial(pdi.latch_input, INDEX_LATCH_UNIT)
             if foe:
-                server = FoeServer(fw.al_state_code, mbx.max_body, sc.foe_dir, sc.foe_password)
+                server = FoeServer(coe_fw.al_state_code, mbx.max_body, sc.foe_dir, sc.foe_password)
                 mbx.register(MbxType.FOE, server.handle)
-            mbx.accept = _accept_for(fw)
+            mbx.accept = _accept_for(coe_fw)
         else:
             fw = Firmware(pdi, make_device(sc.device, desc), layout)
         esc.on_reset = fw.reset
         escs.append(esc)
         firmware.append(fw)
         paths.append(sc.eeprom)
-    return Segment(escs, ctx, clock, firmware, _Persist(escs, paths))
+    seg = Segment(escs, ctx, clock, firmware, _Persist(escs, paths))
+    seg.awake = frozenset(i for i, fw in enumerate(firmware) if isinstance(fw, MfcioBlock))
+    return seg

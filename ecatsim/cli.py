@@ -17,6 +17,8 @@ import structlog
 from ecatsim import __version__
 from ecatsim.bench_cli import bench
 from ecatsim.errors import UserError
+from ecatsim.lin.cli import lin
+from ecatsim.tmcl.cli import tmcl
 
 
 def configure_logging(fmt: str, level: int = logging.INFO) -> None:
@@ -168,6 +170,7 @@ def run(
             "wire",
             "link",
             "door",
+            "mfcio",
         ]
     ),
 )
@@ -189,6 +192,8 @@ def ctl_cmd(
     al_refuse SLAVE CODE | al_fall SLAVE CODE | mbx_drop SLAVE N | wire KIND N [VALUE]
     link SLAVE PORT up|down | peek SLAVE ADDR LEN | poke SLAVE ADDR HEX | od SLAVE INDEX SUB [V]
     door tmcl|lin COMMAND [ARGS]    a request for a TMCL or LIN front door (door tmcl help)
+    mfcio SLAVE [status|pins|set gpioN 0|1|open|set nes 0|1|read REG|write REG V]
+                                    a TMC8460's MFCIO block (MFC CTRL SPI for read/write)
     """
     import json
 
@@ -228,6 +233,13 @@ def ctl_cmd(
             req["up"] = args[2] == "up"
         elif command == "mbx_drop":
             req = {"cmd": command, "slave": num(args[0]), "count": num(args[1])}
+        elif command == "mfcio":
+            req = {
+                "cmd": "mfcio",
+                "slave": num(args[0]),
+                "op": args[1] if len(args) > 1 else "status",
+                "args": list(args[2:]),
+            }
         elif command == "door":
             req = {"cmd": "door", "door": args[0], "command": args[1], "args": list(args[2:])}
         elif command == "poke":
@@ -349,16 +361,40 @@ def esi() -> None:
 
 @esi.command("export")
 @click.option("-o", "--output", required=True, type=click.Path(path_type=Path))
-def esi_export(output: Path) -> None:
-    """Write the ESI XML of the emulated TMC8670 (written atomically)."""
-    from ecatsim.description import default_description
+@click.option(
+    "--device",
+    type=click.Choice(["tmc8670", "tmc8460"]),
+    default="tmc8670",
+    show_default=True,
+    help="Which packaged device: the TMC8670 drive or the TMC8460 MFCIO slave.",
+)
+@click.option(
+    "--description", type=click.Path(path_type=Path), help="Or: a device description YAML."
+)
+def esi_export(output: Path, device: str, description: Path | None) -> None:
+    """Write the ESI XML of an emulated device (written atomically); a TMC8460 MFCIO
+    configuration (SII category 1) is decoded register by register in comments."""
+    from ecatsim.description import DescriptionError, default_description, load_description
     from ecatsim.esi import export_esi
     from ecatsim.files import atomic_write
     from ecatsim.slave.od_build import build_od
 
-    desc = default_description()
-    atomic_write(output, export_esi(desc, build_od(desc)))
+    try:
+        if description is not None:
+            desc = load_description(description)
+        else:
+            desc = default_description(f"{device}.yaml")
+        od = (
+            build_od(desc, description.parent if description else None)
+            if "coe" in desc.mailbox.protocols
+            else None
+        )
+    except DescriptionError as exc:
+        raise UserError(str(exc)) from exc
+    atomic_write(output, export_esi(desc, od))
     click.echo(f"{output}: ESI of {desc.name}")
 
 
 cli.add_command(bench)
+cli.add_command(lin)
+cli.add_command(tmcl)

@@ -4,13 +4,18 @@ Every problem is one line naming the file, the key path and the fix.
 
 ```yaml
 slaves:
-  - device: tmc8670          # device type: tmc8670 | echo
+  - device: tmc8670          # device type: tmc8670 | echo | tmc8460 (MFCIO block, no MCU)
     count: 2                 # optional: this entry repeated (serials counted up)
     description: my.yaml     # optional device description (default: the packaged TMC8670)
     eeprom: drive.bin        # optional SII image file; master writes persist to it
     alias: 0                 # optional configured station alias (SII word 4)
     serial: 1                # optional serial number (SII words 0x0E/0x0F)
     dc_drift_ppm: 0.0        # optional local clock drift
+    firmware: external       # optional: the slave firmware runs outside ecatsim ...
+    pdi_socket: /run/fw.sock # ... and drives the chip over this PDI SPI socket
+    pdi_emulation: false     # optional: the PDI_EMULATION pin (0x0141 bit 0 until the
+                             # EEPROM is loaded)
+    mfcio: {...}             # tmc8460 only: parts on the MFCIO pins (ecatsim/mfcio/parts.py)
 faults:                      # optional: faults injected while running (ecatsim/faults/spec.py)
   - {kind: wkc, value: -1, count: 3, on_state: op}
   - {kind: drop, probability: 0.001, seed: 7}
@@ -30,7 +35,7 @@ import yaml
 from ecatsim.errors import UserError
 from ecatsim.faults.spec import FaultSpec, FaultSpecError, parse_fault
 
-DEVICE_TYPES = ("tmc8670", "echo")
+DEVICE_TYPES = ("tmc8670", "echo", "tmc8460")
 #: the front doors a segment file may list beside its slaves
 DOOR_KEYS = ("tmcl", "lin")
 MAX_SLAVES = 4096
@@ -47,7 +52,13 @@ _SLAVE_KEYS = {
     "name",
     "foe_dir",
     "foe_password",
+    "firmware",
+    "pdi_socket",
+    "pdi_emulation",
+    "mfcio",
 }
+#: who runs the slave firmware behind the PDI: ecatsim, or a program on the PDI socket
+FIRMWARE_KINDS = ("ecatsim", "external")
 
 
 @dataclass(frozen=True, slots=True)
@@ -64,6 +75,14 @@ class SlaveConfig:
     name: str | None = None
     foe_dir: Path | None = None
     foe_password: int = 0
+    #: ``external``: ecatsim's firmware does not run; a program drives the chip over the
+    #: PDI SPI socket ``pdi_socket`` (TMC8460 §3.5)
+    firmware: str = "ecatsim"
+    pdi_socket: Path | None = None
+    #: the PDI_EMULATION pin, 0x0141 bit 0 before the EEPROM loads (TMC8460 §5.26)
+    pdi_emulation: bool = False
+    #: device tmc8460: the parts wired to the MFCIO pins (validated when built)
+    mfcio: dict[str, object] | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -152,6 +171,31 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
             raise _err(src, f"{key}.name", f"expected a string, got {name!r}")
         if eeprom is not None and count > 1:
             raise _err(src, f"{key}.eeprom", "one EEPROM file cannot back count > 1 slaves")
+        firmware = s.get("firmware", "ecatsim")
+        if firmware not in FIRMWARE_KINDS:
+            raise _err(
+                src, f"{key}.firmware", f"use one of: {', '.join(FIRMWARE_KINDS)}, got {firmware!r}"
+            )
+        pdi_socket = (
+            _path(src, base, f"{key}.pdi_socket", s["pdi_socket"]) if "pdi_socket" in s else None
+        )
+        if (firmware == "external") != (pdi_socket is not None):
+            raise _err(
+                src,
+                f"{key}.pdi_socket",
+                "firmware: external and pdi_socket: PATH go together (the socket the "
+                "firmware connects to)",
+            )
+        pdi_emulation = s.get("pdi_emulation", False)
+        if not isinstance(pdi_emulation, bool):
+            raise _err(
+                src, f"{key}.pdi_emulation", f"expected true or false, got {pdi_emulation!r}"
+            )
+        if pdi_socket is not None and count > 1:
+            raise _err(src, f"{key}.pdi_socket", "one PDI socket cannot serve count > 1 slaves")
+        mfcio = s.get("mfcio")
+        if mfcio is not None and (dev != "tmc8460" or not isinstance(mfcio, dict)):
+            raise _err(src, f"{key}.mfcio", "a mapping, for device: tmc8460 only")
         for j in range(count):
             out.append(
                 SlaveConfig(
@@ -167,6 +211,10 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
                     if foe_dir is None
                     else (foe_dir / f"slave{len(out)}" if count > 1 else foe_dir),
                     foe_password=foe_pw,
+                    firmware=firmware,
+                    pdi_socket=pdi_socket,
+                    pdi_emulation=pdi_emulation,
+                    mfcio=mfcio,
                 )
             )
     if len(out) > MAX_SLAVES:

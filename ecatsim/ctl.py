@@ -63,8 +63,13 @@ class ControlSocket:
     """The daemon side."""
 
     def __init__(
-        self, path: Path, segment: Segment, faults: FaultEngine, doors: DoorHost | None = None
+        self,
+        path: Path,
+        segment: Segment | None,
+        faults: FaultEngine | None,
+        doors: DoorHost | None = None,
     ) -> None:
+        """``segment`` and ``faults`` are None for a daemon serving front doors only."""
         self.path = path
         self.segment = segment
         self.faults = faults
@@ -121,6 +126,7 @@ class ControlSocket:
             return {"ok": False, "error": f"internal error: {exc!r}"}
 
     def _inject(self, fault: dict[str, Any]) -> dict[str, Any]:
+        assert self.faults is not None and self.segment is not None  # handle() checked
         fid = self.faults.add(parse_fault(fault), self.segment.clock.now_ns())
         return {"ok": True, "id": fid}
 
@@ -135,6 +141,10 @@ class ControlSocket:
 
         Ref: TMC8460 §5.19 (DL status), §5.20 (AL status), §5.34-5.38 (error counters).
         """
+        doors = self.doors.status() if self.doors is not None else {}
+        if self.segment is None or self.faults is None:  # a daemon serving front doors only
+            return {"ok": True, "slaves": [], "faults": [], "frames": 0, "bad_frames": 0,
+                    "doors": doors}  # fmt: skip
         out = []
         for esc in self.segment.escs:
             m = esc.mem
@@ -163,26 +173,28 @@ class ControlSocket:
             "bad_frames": seg.bad_frames,
             "faults": self.faults.status(),
             "faults_fired": self.faults.fired_total,
-            "doors": self.doors.status() if self.doors is not None else {},
+            "doors": doors,
         }
 
     def handle(self, req: dict[str, Any]) -> dict[str, Any]:
         """One request -> one reply."""
         cmd = req["cmd"]
-        seg = self.segment
-        now = seg.clock.now_ns()
         if cmd == "status":
             return self.status()
+        if cmd == "door":  # a request for a TMCL or LIN front door: its own commands
+            return self._door(str(req["door"]), str(req["command"]), list(req.get("args", [])))
+        seg, faults = self.segment, self.faults
+        if seg is None or faults is None:
+            raise ValueError(f"{cmd!r}: this daemon serves front doors only (use: status, door)")
+        now = seg.clock.now_ns()
         if cmd == "inject":  # any fault, as in the segment YAML's faults: list
             return self._inject(dict(req["fault"]))
         if cmd == "clear":  # one fault by id, or all
             fid = req.get("id")
             return {
                 "ok": True,
-                "cleared": self.faults.clear(None if fid is None else int(fid), now),
+                "cleared": faults.clear(None if fid is None else int(fid), now),
             }
-        if cmd == "door":  # a request for a TMCL or LIN front door: its own commands
-            return self._door(str(req["door"]), str(req["command"]), list(req.get("args", [])))
         if cmd == "wire":  # shorthand: a wire fault on the next N replies
             return self._inject(
                 {"kind": req["kind"], "count": req.get("count", 1), "value": req.get("value")}
@@ -194,7 +206,7 @@ class ControlSocket:
             kind = str(req["kind"])
             if req.get("active", True):
                 return self._inject({"kind": kind, "slave": slave})
-            self.faults.clear(None, now, kind)
+            faults.clear(None, now, kind)
             drive = getattr(seg.firmware[slave], "device", None)
             if isinstance(drive, Drive):
                 drive.inject(kind, False)
@@ -204,7 +216,7 @@ class ControlSocket:
         if cmd == "mbx_drop":  # shorthand: no reply to the next N mailbox requests
             return self._inject({"kind": cmd, "slave": slave, "count": req.get("count", 1)})
         if cmd == "link":  # a cable fault: port 1 of this slave and port 0 of the next
-            self.faults.set_cable(slave, int(req.get("port", 1)), bool(req.get("up", False)))
+            faults.set_cable(slave, int(req.get("port", 1)), bool(req.get("up", False)))
             return {"ok": True}
         if cmd == "peek":
             addr, n = int(req["addr"]), int(req["len"])
@@ -218,6 +230,12 @@ class ControlSocket:
             esc = seg.escs[slave]
             esc.mem[addr : addr + len(data)] = data
             return {"ok": True}
+        if cmd == "mfcio":  # the TMC8460 MFCIO block: status, pins, MFC CTRL SPI access
+            mfcio = getattr(seg.firmware[slave], "ctl", None)
+            if mfcio is None:
+                raise ValueError(f"slave {slave} has no MFCIO block (device: tmc8460)")
+            args = [str(a) for a in req.get("args", [])]
+            return {"ok": True, **mfcio(str(req.get("op", "status")), args, now)}
         if cmd == "od":
             od = getattr(seg.firmware[slave], "od", None)
             if od is None:

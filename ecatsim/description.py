@@ -170,6 +170,9 @@ class DeviceDescription:
     dc: tuple[DcOpMode, ...]
     od_raw: Any = None
     motor_raw: Any = None
+    #: the TMC8460 MFCIO configuration: the data of the SII category of type 1 that is
+    #: written first, at word 0x40 (TMC8460 §6.3); empty: none
+    mfcio_config: bytes = b""
 
     @property
     def rx_bytes(self) -> int:
@@ -285,7 +288,38 @@ _TOP = {
     "dc",
     "od",
     "motor",
+    "mfcio",
 }
+
+
+def _mfcio(r: _Reader, raw: Any) -> bytes:
+    """``mfcio:`` -> the category-1 data: ``{config: HEX}`` as an ESI prints it, or
+    ``{default: BYTE, registers: {NAME: BYTE}}`` (names of TMC8460 §6.2 Table 133)."""
+    if raw is None:
+        return b""
+    from ecatsim.mfcio.config import category_body
+    from ecatsim.mfcio.regs import BY_NAME, N_CONFIGURED
+
+    d = r.mapping(raw, "mfcio", {"config", "default", "registers"})
+    if "config" in d:
+        text = d["config"]
+        try:
+            data = bytes.fromhex(str(text))
+        except ValueError:
+            raise r.err("mfcio.config", f"{text!r} is not hex bytes like 1E0000101E10") from None
+        if len(data) > N_CONFIGURED:
+            raise r.err("mfcio.config", f"{len(data)} bytes: at most {N_CONFIGURED}")
+        return data + b"\x00" if len(data) % 2 else data
+    vec = bytearray([r.int_(d, "default", "mfcio", 0, 0x1F, 0)] * N_CONFIGURED)
+    regs = d.get("registers") or {}
+    if not isinstance(regs, dict):
+        raise r.err("mfcio.registers", "expected a mapping NAME: byte, e.g. {ENC_MODE: 0x1E}")
+    for name in regs:
+        reg = BY_NAME.get(str(name))
+        if reg is None or reg.num >= N_CONFIGURED:
+            raise r.err(f"mfcio.registers.{name}", "unknown MFCIO register (TMC8460 Table 133)")
+        vec[reg.num] = r.int_(regs, name, "mfcio.registers", 0, 0x1F)
+    return category_body(bytes(vec))
 
 
 def parse_description(data: Any, src: str) -> DeviceDescription:
@@ -414,6 +448,7 @@ def parse_description(data: Any, src: str) -> DeviceDescription:
         dc=tuple(dcs),
         od_raw=d.get("od"),
         motor_raw=d.get("motor"),
+        mfcio_config=_mfcio(r, d.get("mfcio")),
     )
     for i, s in enumerate(desc.sync_managers):
         want = {"pd_out": desc.rx_bytes, "pd_in": desc.tx_bytes}.get(s.type)
@@ -439,7 +474,7 @@ def load_description(path: str | Path) -> DeviceDescription:
     return parse_description(data, p.name)
 
 
-def default_description() -> DeviceDescription:
-    """The packaged TMC8670 description (config/tmc8670.yaml)."""
-    text = importlib.resources.files("ecatsim.defaults").joinpath("tmc8670.yaml").read_text()
-    return parse_description(yaml.safe_load(text), "tmc8670.yaml")
+def default_description(name: str = "tmc8670.yaml") -> DeviceDescription:
+    """A packaged description: config/tmc8670.yaml (the default) or config/tmc8460.yaml."""
+    text = importlib.resources.files("ecatsim.defaults").joinpath(name).read_text()
+    return parse_description(yaml.safe_load(text), name)

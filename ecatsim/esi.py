@@ -155,9 +155,9 @@ def export_esi(desc: DeviceDescription, od: ObjectDictionary | None) -> bytes:
          RevisionNo=_hex(desc.identity.revision, 8))  # fmt: skip
     _sub(dev, "Name", desc.name)
     _sub(dev, "GroupType", desc.group)
-    prof = _sub(dev, "Profile")
-    _sub(prof, "ProfileNo", "402")
     if od is not None:
+        prof = _sub(dev, "Profile")
+        _sub(prof, "ProfileNo", "402")
         _dictionary(prof, od)
     for f in desc.fmmus:
         _sub(dev, "Fmmu", FMMU_NAMES.get(f, f))
@@ -203,9 +203,24 @@ def export_esi(desc: DeviceDescription, od: ObjectDictionary | None) -> bytes:
     b = mb.bootstrap_rx, mb.bootstrap_tx
     boot = b"".join(x.to_bytes(2, "little") for a in b for x in (a.offset, a.size))
     _sub(ee, "BootStrap", boot.hex().upper())
+    if desc.mfcio_config:
+        _mfcio_category(ee, desc.mfcio_config)
     ET.indent(root)
     body: bytes = ET.tostring(root, encoding="utf-8", xml_declaration=False)
     return b'<?xml version="1.0" encoding="UTF-8"?>\n' + body
+
+
+def _mfcio_category(ee: ET.Element, data: bytes) -> None:
+    """The TMC8460 MFCIO configuration as the printed examples write it, one comment per
+    register saying what its byte means. Ref: TMC8460 §6.5.1 (Eeprom/Category CatNo 1)."""
+    from ecatsim.mfcio.config import describe
+
+    cat = _sub(ee, "Category")
+    cat.append(ET.Comment(" TMC8460 MFCIO register configuration (loaded into 0x0580) "))
+    for line in describe(data):
+        cat.append(ET.Comment(f" {line.strip()} "))
+    _sub(cat, "CatNo", "1")
+    _sub(cat, "Data", data.hex().upper())
 
 
 # ------------------------------------------------------------------------ reading
@@ -329,6 +344,7 @@ def read_esi(
             if mb.find(tag) is not None:
                 protocols.append(name)
     ee = dev.find("Eeprom")
+    mfcio = b""
     cfg = bytes(14)
     size = 4096
     boot = bytes(8)
@@ -339,6 +355,15 @@ def read_esi(
         except ValueError as exc:
             raise EsiError(f"{where} <Eeprom>: ConfigData/BootStrap is not hex") from exc
         size = _num(_text(ee, "ByteSize", where, "4096"), f"{where} <ByteSize>")
+        for cat in ee.findall("Category"):
+            if _num(_text(cat, "CatNo", where), f"{where} <Category><CatNo>") != 1:
+                continue
+            try:
+                mfcio = bytes.fromhex(_text(cat, "Data", where, ""))
+            except ValueError as exc:
+                raise EsiError(f"{where} <Category> 1: Data is not hex") from exc
+            if len(mfcio) % 2:
+                mfcio += b"\x00"
     w = [int.from_bytes(cfg[i : i + 2], "little") for i in range(0, 14, 2)]
     bw = [int.from_bytes(boot[i : i + 2], "little") for i in range(0, 8, 2)]
     dcs = []
@@ -379,4 +404,5 @@ def read_esi(
         rxpdos=_read_pdos(dev, "RxPdo"),
         txpdos=_read_pdos(dev, "TxPdo"),
         dc=tuple(dcs),
+        mfcio_config=mfcio,
     )

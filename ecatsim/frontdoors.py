@@ -14,6 +14,8 @@ from typing import cast
 
 from ecatsim.config import SegmentConfig
 from ecatsim.doors import DoorHost, FrontDoor
+from ecatsim.pdi_spi.external import ExternalFirmware
+from ecatsim.segment import Segment
 
 DoorFactory = Callable[[dict[str, object], str, Path | None], FrontDoor]
 
@@ -29,11 +31,16 @@ def _factory(key: str) -> DoorFactory:
     return cast(DoorFactory, module.door_from_config)
 
 
-def build_doors(cfg: SegmentConfig) -> DoorHost | None:
-    """The segment file's doors behind one :class:`DoorHost`, or None if it lists none."""
-    if not cfg.doors:
-        return None
+def build_doors(cfg: SegmentConfig, segment: Segment | None = None) -> DoorHost | None:
+    """The segment file's doors, and the PDI sockets of its slaves with external firmware
+    (``pdi<position>``), behind one :class:`DoorHost`; None if there are none."""
     built: dict[str, FrontDoor] = {}
+    if segment is not None:
+        for fw in segment.firmware:
+            if isinstance(fw, ExternalFirmware):
+                built[f"pdi{fw.pdi.position}"] = fw
+    if not cfg.doors and not built:
+        return None
     try:
         for key, data in cfg.doors:
             built[key] = _factory(key)(data, cfg.source, cfg.base)

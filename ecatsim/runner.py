@@ -22,6 +22,8 @@ from ecatsim.faults.spec import FaultSpecError
 from ecatsim.frontdoors import build_doors
 from ecatsim.link.base import Link
 from ecatsim.link.errors import LinkError
+from ecatsim.mfcio import trace as mfcio_trace
+from ecatsim.mfcio.block import MfcioBlock
 from ecatsim.privileges import drop_privileges
 from ecatsim.segment import Segment
 from ecatsim.trace import TraceWriter
@@ -119,6 +121,8 @@ def run_daemon(opts: RunOptions) -> None:
     clock = MonotonicClock()
     segment = build_segment(cfg, clock)
     tracer = attach_trace(segment, opts.trace) if opts.trace is not None else None
+    blocks = [(i, fw) for i, fw in enumerate(segment.firmware) if isinstance(fw, MfcioBlock)]
+    mfcio_tracer = mfcio_trace.attach(blocks, opts.trace) if opts.trace is not None else None
     link = open_link(opts)
     if opts.cpu is not None:
         try:
@@ -126,7 +130,7 @@ def run_daemon(opts: RunOptions) -> None:
         except OSError as exc:
             raise UserError(f"--cpu {opts.cpu}: cannot pin ({exc.strerror})") from exc
     faults = arm_faults(cfg, segment)
-    doors = build_doors(cfg)
+    doors = build_doors(cfg, segment)
     where = opts.iface or opts.tap or opts.udp or "ecatsim"
     ctl = ControlSocket(opts.ctl or default_path(where), segment, faults, doors)
     daemon = Daemon(
@@ -164,6 +168,8 @@ def run_daemon(opts: RunOptions) -> None:
             doors.close()
         if tracer is not None:
             tracer.close()
+        if mfcio_tracer is not None:
+            mfcio_tracer.close()
         log.info(
             "stopped",
             frames=segment.frames,

@@ -57,6 +57,7 @@ class Segment:
         "_pulse_hint",
         "_sync_escs",
         "addr_map",
+        "awake",
         "bad_frames",
         "clock",
         "compiled",
@@ -86,6 +87,9 @@ class Segment:
         self.ctx = ctx
         self.clock = clock
         self.firmware = list(firmware)
+        #: positions whose service runs after every frame, interrupt or not: the TMC8460
+        #: MFCIO blocks, which watch the memory blocks and the frames continuously
+        self.awake: frozenset[int] = frozenset()
         self.persist = persist
         self._sync_escs: list[Esc] = []
         self.reach = len(self.escs)
@@ -398,8 +402,8 @@ class Segment:
             if d and t >= d:  # due (the running watchdogs of a cyclic bus are not)
                 esc.check_timers(t)
         ctx = self.ctx
-        if ctx.pending and self.firmware:
-            for pos in sorted(ctx.pending):
+        if (ctx.pending or self.awake) and self.firmware:
+            for pos in sorted(ctx.pending | self.awake):
                 self.firmware[pos].service(t)
         if ctx.flush and self.persist is not None:
             for pos in sorted(ctx.flush):

@@ -4,6 +4,7 @@
 # as a user with sudo (it asks for it).
 #   tools/demo.sh                 # one TMC8670 drive
 #   tools/demo.sh --slaves 4
+#   tools/demo.sh --mfcio         # a TMC8460 MFCIO slave beside the drive (demo_mfcio.py)
 #   ECATSIM_KEEP_LINKS=1 tools/demo.sh   # leave the veth pair up afterwards
 # A veth pair the demo creates is removed on exit; one that existed before is left as it was
 # found (the master's promiscuous mode switched off again).
@@ -47,6 +48,13 @@ cleanup() {
 }
 trap cleanup EXIT
 
+MASTER=tools/demo_master.py
+if [ "${1:-}" = "--mfcio" ]; then
+    shift
+    set -- --config config/tmc8460-beside-tmc8670.yaml "$@"
+    MASTER=tools/demo_mfcio.py
+fi
+
 OUT=${ECATSIM_DEMO_OUT:-demo-out}
 mkdir -p "$OUT"
 LOG="$OUT/daemon.log"
@@ -59,7 +67,7 @@ for _ in $(seq 100); do
     sleep 0.05
 done
 echo "daemon on $SLAVE_IF (log: $LOG); demo master on $MASTER_IF"
-.venv/bin/python tools/demo_master.py --iface "$MASTER_IF"
+.venv/bin/python "$MASTER" --iface "$MASTER_IF"
 kill "$DAEMON"
 wait "$DAEMON" 2>/dev/null || true
 DAEMON=

@@ -172,6 +172,7 @@ class Esc:
         "link_down",
         "mem",
         "on_reset",
+        "pdi_emulation",
         "pdram_ok",
         "port0_open",
         "port1_closed",
@@ -195,8 +196,11 @@ class Esc:
         dc_start_ns: int = 0,
         dc_drift_ppm: float = 0.0,
         dc_hop_ns: int = 500,
+        pdi_emulation: bool = False,
     ) -> None:
         self.position = position
+        #: the PDI_EMULATION pin: 0x0141 bit 0 until the EEPROM's word 0 is loaded (§5.26)
+        self.pdi_emulation = pdi_emulation
         self.ctx = ctx
         self.mem = bytearray(0x10000)
         self.t = tables()
@@ -236,6 +240,7 @@ class Esc:
         m[:] = bytes(0x10000)
         for addr, size, value in self.t.resets:
             m[addr : addr + size] = value.to_bytes(size, "little")
+        m[regs.ESC_CONFIG] = (m[regs.ESC_CONFIG] & 0xFE) | int(self.pdi_emulation)
         for s in self.sm:
             s.configure(0, 0, 0, False)
         self.fmmus = ()
@@ -296,6 +301,30 @@ class Esc:
         if old != (lo | (hi << 8)):
             self._set_ecat_event(regs.ECAT_EV_DL_STATUS)
             self.ctx.topology_dirty = True
+
+    def set_pdi_watchdog(self, alive: bool) -> None:
+        """The PDI watchdog: 0x0110 bit 1 (1 = reloaded, 0 = expired), each expiry counted
+        in 0x0443, the change signalled as a DL status event. Ref: TMC8460 §5.19 Table 30,
+        §5.40, §5.44."""
+        m = self.mem
+        if bool(m[regs.DL_STATUS] & 0x02) == alive:
+            return
+        if alive:
+            m[regs.DL_STATUS] |= 0x02
+        else:
+            m[regs.DL_STATUS] &= 0xFD
+            if m[regs.WD_COUNTER_PDI] < 0xFF:
+                m[regs.WD_COUNTER_PDI] += 1
+        self.update_dl_status()
+        self._set_ecat_event(regs.ECAT_EV_DL_STATUS)
+
+    def pdi_interface_error(self, code: int) -> None:
+        """A PDI access with an interface error: 0x030D counts (saturating at 0xFF), 0x030E
+        keeps the code of the last one. Ref: TMC8460 §5.36 Table 50, §5.37 Table 51."""
+        m = self.mem
+        if m[regs.PDI_ERROR_COUNTER] < 0xFF:
+            m[regs.PDI_ERROR_COUNTER] += 1
+        m[regs.PDI_ERROR_CODE] = code & 0xFF
 
     def set_link(self, port: int, up: bool) -> None:
         """A link fault on port 0 or 1: DL status changes; a lost link at an open port in

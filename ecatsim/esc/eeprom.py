@@ -29,6 +29,14 @@ ST_ACK_ERROR = 0x2000
 ST_WE_ERROR = 0x4000
 ST_BUSY = 0x8000
 
+#: The MFCIO configuration: a category of type 1 as the first category (word 0x40) is
+#: copied into the parameter RAM 0x0580:0x05AB, one byte per register, bits 4..0.
+#: Ref: TMC8460 §6.3 Table 134, §5.47 Table 74; decision M1.
+MFCIO_CATEGORY_WORD = 0x40
+MFCIO_CATEGORY_TYPE = 1
+MFCIO_CONFIG = 0x0580
+MFCIO_CONFIG_SIZE = 44
+
 #: ESC configuration area words copied into registers on load. Ref: ETG.2010 Table 2.
 CONFIG_WORDS = (
     (0, regs.PDI_CONTROL),
@@ -101,10 +109,25 @@ class EepromUnit:
             w5 = self._word(5)
             fifo = ((~w5 >> 9) & 0x7) if w5 != 0xFFFF else 7
             m[regs.DL_CONTROL + 2] = (m[regs.DL_CONTROL + 2] & 0xF8) | fifo
+        self._load_mfcio_config()
         m[regs.PDI_INFORMATION] = (m[regs.PDI_INFORMATION] & ~0x0E) | 0x06  # configured, active
         m[regs.DL_STATUS] |= 0x01
         self._set_status(st)
         return True
+
+    def _load_mfcio_config(self) -> None:
+        """Category type 1 at word 0x40: its data (the category length is in words, as in
+        every SII category) fills 0x0580 onwards; bytes it leaves out take the reset value
+        0x00, reserved bits 7..5 read 0. Without such a category the parameter RAM keeps
+        its content. Ref: TMC8460 §6.3, §6.4 ("trailing bytes can be omitted"), §5.47."""
+        if self._word(MFCIO_CATEGORY_WORD) != MFCIO_CATEGORY_TYPE:
+            return
+        n = min(2 * self._word(MFCIO_CATEGORY_WORD + 1), MFCIO_CONFIG_SIZE)
+        start = (MFCIO_CATEGORY_WORD + 2) * 2
+        data = bytes(b & 0x1F for b in self.image[start : start + n])
+        self.mem[MFCIO_CONFIG : MFCIO_CONFIG + MFCIO_CONFIG_SIZE] = data.ljust(
+            MFCIO_CONFIG_SIZE, b"\x00"
+        )
 
     # -- ECAT command machine ---------------------------------------------------------
 

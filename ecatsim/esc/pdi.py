@@ -20,14 +20,21 @@ from ecatsim.esc.regs import (  # re-exported for the firmware
     AL_STATUS_CODE,
     DC_ACTIVATION,
     DC_ACTIVATION_STATUS,
+    DC_LATCH0_POS,
+    DC_LATCH1_POS,
+    DC_NEXT_SYNC1,
+    DC_START_TIME,
     DC_SYNC0_STATUS,
+    DC_SYNC1_STATUS,
     DL_STATUS,
     ESC_CONFIG,
     EV_AL_CONTROL,
     EV_SM0,
     EV_SM_ACTIVATION,
     EV_SYNC0,
+    EV_SYNC1,
     EV_WATCHDOG_PD,
+    N_SM,
     SM_CTRL_PDI_IRQ,
     WD_STATUS_PD,
     sm_addr,
@@ -44,14 +51,21 @@ __all__ = [
     "AL_STATUS_CODE",
     "DC_ACTIVATION",
     "DC_ACTIVATION_STATUS",
+    "DC_LATCH0_POS",
+    "DC_LATCH1_POS",
+    "DC_NEXT_SYNC1",
+    "DC_START_TIME",
     "DC_SYNC0_STATUS",
+    "DC_SYNC1_STATUS",
     "DL_STATUS",
     "ESC_CONFIG",
     "EV_AL_CONTROL",
     "EV_SM0",
     "EV_SM_ACTIVATION",
     "EV_SYNC0",
+    "EV_SYNC1",
     "EV_WATCHDOG_PD",
+    "N_SM",
     "SM_CTRL_PDI_IRQ",
     "WD_STATUS_PD",
     "Pdi",
@@ -105,6 +119,13 @@ class Pdi:
         """Drive the LATCH ``unit`` input pin (the application's signal, e.g. an encoder
         index pulse) at host time ``host_ns``. Ref: TMC8460 §5.50.5."""
         self._esc.latch_input(unit, level, host_ns)
+
+    def frames(self) -> tuple[int, int]:
+        """The frames the ESC has seen and the arrival time of the latest: the start/end
+        of frame signals the MFCIO block takes from the ESC beside the PDI (TMC8460 §6.1,
+        §6.4 Table 136 triggers 5/6, §6.11.2 cfg_sof_enable)."""
+        ctx = self._esc.ctx
+        return ctx.frame_no, ctx.t_ns
 
     def operational(self) -> bool:
         """DL status 0x0110.0: EEPROM loaded, PDI operational. Ref: §5.19 Table 30."""
@@ -209,6 +230,29 @@ class Pdi:
     def al_event(self) -> int:
         """AL event request 0x0220 (reading it has no side effect). Ref: §5.32."""
         return self._esc.al_event()
+
+    # -- the SPI slave interface (TMC8460 §3.5) ------------------------------------------
+
+    def events(self) -> bytes:
+        """AL event request 0x0220:0x0222, as the SPI slave shifts it out during the
+        address phase (no read side effects). Ref: §3.5.1, §5.32."""
+        return bytes(self._esc.mem[regs.AL_EVENT_REQUEST : regs.AL_EVENT_REQUEST + 3])
+
+    def interface_error(self, code: int) -> None:
+        """An SPI access with an interface error (counted in 0x030D, code in 0x030E)."""
+        self._esc.pdi_interface_error(code)
+
+    def watchdog_pdi_ns(self) -> int:
+        """The PDI watchdog time: 0x0410 increments of (0x0400 + 2) x 40 ns; 0 = off.
+        Ref: §5.39 Table 53, §5.40 Table 54."""
+        m = self._esc.mem
+        div = m[regs.WD_DIVIDER] | (m[regs.WD_DIVIDER + 1] << 8)
+        t = m[regs.WD_TIME_PDI] | (m[regs.WD_TIME_PDI + 1] << 8)
+        return t * (div + 2) * 40
+
+    def set_watchdog_pdi(self, alive: bool) -> None:
+        """Reload (True) or expire (False) the PDI watchdog (0x0110 bit 1, 0x0443)."""
+        self._esc.set_pdi_watchdog(alive)
 
     # -- SyncManager PDI side --------------------------------------------------------
 

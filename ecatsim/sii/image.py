@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from ecatsim.description import FMMU_TYPES, DeviceDescription
 from ecatsim.sii.crc import crc8
 
+CAT_MFCIO = 1  # TMC8460 MFCIO configuration, first at word 0x40 (TMC8460 §6.3)
 CAT_STRINGS = 10
 CAT_DATATYPES = 20
 CAT_GENERAL = 30
@@ -172,6 +173,8 @@ def build_image(
             )
         cats_after += _cat(CAT_DC, dc)
     cats = _cat(CAT_STRINGS, strings.data()) + cats_after + struct.pack("<H", CAT_END)
+    if desc.mfcio_config:  # the TMC8460 loads it only as the first category (§6.3)
+        cats = _cat(CAT_MFCIO, desc.mfcio_config) + cats
     img = bytes(hdr) + cats
     if len(img) > size_bytes:
         raise SiiError(f"image of {len(img)} bytes does not fit a {e.eeprom_size_kbit} kbit EEPROM")
@@ -335,11 +338,15 @@ def format_image(img: SiiImage) -> str:
         f"  size               {img.size_kbit} kbit, version {img.version}",
     ]
     for typ, w, body in img.categories:
-        lines.append(
-            f"category {CAT_NAMES.get(typ, str(typ))} (type {typ}) at word 0x{w:04X}, "
-            f"{len(body) // 2} words"
-        )
-        if typ == CAT_STRINGS:
+        name = "MFCIO" if typ == CAT_MFCIO else CAT_NAMES.get(typ, str(typ))
+        lines.append(f"category {name} (type {typ}) at word 0x{w:04X}, {len(body) // 2} words")
+        if typ == CAT_MFCIO:
+            from ecatsim.mfcio.config import describe
+
+            if w != FIRST_CATEGORY_WORD:
+                lines.append("  (not at word 0x0040: the TMC8460 does not load it)")
+            lines += describe(body)
+        elif typ == CAT_STRINGS:
             lines += [f"  [{i + 1}] {s!r}" for i, s in enumerate(img.strings)]
         elif typ == CAT_GENERAL:
             g = img.general

@@ -53,7 +53,7 @@ def _sources(pkg: str) -> list[Path]:
 
 def test_slave_and_device_use_only_the_pdi_face() -> None:
     offenders = []
-    for pkg in ("slave", "device"):
+    for pkg in ("slave", "device", "pdi_spi", "mfcio"):
         for f in _sources(pkg):
             for mod in _imports(f):
                 is_esc = mod == "ecatsim.esc" or mod.startswith("ecatsim.esc.")
@@ -70,7 +70,7 @@ def test_esc_does_not_import_firmware_or_devices() -> None:
     offenders = []
     for f in _sources("esc"):
         for mod in _imports(f):
-            if mod.startswith(("ecatsim.slave", "ecatsim.device")):
+            if mod.startswith(("ecatsim.slave", "ecatsim.device", "ecatsim.mfcio")):
                 offenders.append(f"{f.relative_to(ROOT)} imports {mod}")
     assert offenders == []
 

@@ -1,0 +1,92 @@
+"""``ecatsim lin``: a LIN bus of TMC211 nodes on a pseudo-terminal."""
+
+from __future__ import annotations
+
+import signal
+from pathlib import Path
+from types import FrameType
+
+import click
+import structlog
+
+from ecatsim.errors import UserError
+
+log = structlog.get_logger("ecatsim.lin")
+
+
+@click.command("lin")
+@click.option(
+    "--pty",
+    "pty",
+    type=click.Path(path_type=Path),
+    help="Where to link the bus's pty (the master opens it as its serial port). "
+    "Default: the config's 'pty:'.",
+)
+@click.option(
+    "--config",
+    "config_path",
+    type=click.Path(path_type=Path),
+    help="Bus YAML (nodes, HW pins, OTP; see config/lin-bus.yaml). Default: one TMC211, "
+    "HW0..2 = 0, OTP all zero.",
+)
+@click.option(
+    "--ctl",
+    "ctl",
+    type=click.Path(path_type=Path),
+    help="Control socket path (0600; default: the runtime dir, named after the pty).",
+)
+@click.option(
+    "--log-format",
+    type=click.Choice(["auto", "console", "json"]),
+    default="auto",
+    show_default=True,
+)
+def lin(pty: Path | None, config_path: Path | None, ctl: Path | None, log_format: str) -> None:
+    """Serve TMC211 LIN nodes on a pty until SIGINT/SIGTERM.
+
+    The master writes a frame as break (the byte 0x00), sync 0x55, protected identifier
+    and, for frames it publishes, data and classic checksum; for the nodes' frames it
+    writes the header only and reads the answer. `ecatsim ctl door lin help` lists the
+    control commands (temperature, voltage, coil faults, switch, stops).
+    """
+    from ecatsim.cli import configure_logging
+    from ecatsim.clock import MonotonicClock
+    from ecatsim.ctl import ControlSocket, default_path
+    from ecatsim.doors import DoorHost, serve_doors
+    from ecatsim.lin.config import BusConfig, load_bus
+    from ecatsim.lin.server import LinDoor
+
+    configure_logging("console" if log_format == "auto" else log_format)
+    cfg = load_bus(config_path) if config_path is not None else BusConfig()
+    link = pty or cfg.pty
+    if link is None:
+        raise UserError("ecatsim lin: give --pty PATH (or 'pty:' in the --config file)")
+    clock = MonotonicClock()
+    door = LinDoor(cfg, link, clock)
+    host = DoorHost({"lin": door})
+    try:
+        sock = ControlSocket(ctl or default_path(f"lin-{link.name}"), None, None, host)
+    except BaseException:
+        host.close()
+        raise
+    stopping = [False]
+
+    def stop(signum: int, frame: FrameType | None) -> None:
+        stopping[0] = True
+
+    signal.signal(signal.SIGINT, stop)
+    signal.signal(signal.SIGTERM, stop)
+    log.info(
+        "ready",
+        pty=str(link),
+        nodes=[f"{n.name}@0x{n.address:02X}" for n in door.bus.nodes],
+        baud=cfg.baud,
+        ctl=str(sock.path),
+    )
+    try:
+        serve_doors(host, clock.now_ns, lambda: stopping[0], {sock.fileno(): sock.serve})
+    finally:
+        sock.close()
+        host.close()
+        p = door.bus.parser
+        log.info("stopped", frames=p.frames, errors=p.errors, noise=p.noise)

@@ -1,0 +1,163 @@
+"""The axis on simulated time: switches, reference search modes, open-loop step loss and
+the encoder deviation, stallGuard2, I²t, faults, encoder and closed-loop initialisation.
+
+Ref: TMCM-1311 TMCL firmware manual §6, §7, §8.1, §8.3, §9, §9.1.1.
+"""
+
+from __future__ import annotations
+
+from ecatsim.tmcl import protocol as P
+from ecatsim.tmcl.module import ModuleConfig
+from ecatsim.tmcl.motor import DE_OT, DE_STALL, SW_I2T, SW_LEFT, SW_OVERT, Switches
+from tests.unit.tmcl.conftest import Bench
+
+
+def bench_with(**switches: float) -> Bench:
+    return Bench([ModuleConfig(switches=Switches(**switches))])
+
+
+def test_stop_switch_stops_motion_toward_it_unless_disabled() -> None:
+    b = bench_with(left=-10_000)
+    b.value(P.ROL, 0, 0, 20_000)
+    b.advance(2.0)
+    assert b.gap(11) == 1
+    assert b.gap(3) == 0
+    assert b.gap(18) & SW_LEFT
+    stopped = b.gap(1)
+    assert -14_000 < stopped <= -10_000  # soft stop (149): 3906 steps to stop
+    b.value(P.ROL, 0, 0, 20_000)  # still toward the switch: no motion
+    b.advance(0.5)
+    assert b.gap(1) == stopped
+    b.value(P.ROR, 0, 0, 20_000)  # away from it: free
+    b.advance(0.5)
+    assert b.gap(1) > stopped
+    b.sap(13, 1)  # left switch disabled
+    b.value(P.ROL, 0, 0, 20_000)
+    b.advance(2.0)
+    assert b.gap(1) < -20_000
+    b.value(P.SGP, 79, 0, 1)  # end switch polarity reversed: now reads inactive
+    assert b.gap(11) == 0
+    b.door.close()
+
+
+def test_reference_search_mode_1_left_switch_and_mode_2_end_switch_distance() -> None:
+    b = bench_with(left=-20_000, right=40_000)
+    b.sap(194, 25_600)
+    b.sap(195, 5000)
+    b.value(P.RFS, 0)
+    b.advance(10.0)
+    assert b.cmd(P.RFS, 2) == (P.OK, 1)
+    assert b.gap(1) == 0
+    assert abs(b.m.axis.rotor - (-20_000)) < 10
+    b.sap(193, 2)
+    b.value(P.RFS, 0)
+    b.advance(12.0)
+    assert b.cmd(P.RFS, 2) == (P.OK, 1)
+    assert abs(b.gap(196) - 60_000) < 100
+    b.door.close()
+
+
+def test_reference_search_mode_5_reverses_at_the_left_switch() -> None:
+    b = bench_with(left=-5_000, home=20_000, home_width=1000)
+    b.sap(193, 5)  # home in negative direction: not there, the left switch turns it
+    b.sap(194, 25_600)
+    b.sap(195, 5000)
+    b.value(P.RFS, 0)
+    b.advance(8.0)
+    assert b.cmd(P.RFS, 2) == (P.OK, 1)
+    assert abs(b.m.axis.rotor - 20_000) < 10
+    assert b.gap(1) == 0
+    assert b.gap(9) == 1
+    b.door.close()
+
+
+def test_open_loop_loses_steps_under_load_and_the_deviation_stops_it() -> None:
+    b = Bench()
+    b.sap(212, 1000)  # max encoder deviation, microsteps
+    b.value(P.ROR, 0, 0, 25_600)
+    b.advance(1.0)
+    assert b.gap(207) == 0
+    assert abs(b.gap(237)) < 100
+    b.value(P.SGP, 0, 3, 0)
+    b.door.ctl("load", ["1", "0.8"])  # more than the 0.6 Nm run current 128 gives
+    b.advance(0.5)
+    assert b.gap(207) == 1
+    assert b.gap(3) == 0  # stopped
+    b.door.ctl("load", ["1", "0"])
+    b.value(P.ROR, 0, 0, 25_600)  # the next command drives again
+    assert b.gap(207) == 0
+    b.door.close()
+
+
+def test_stallguard_load_value_falls_with_load_and_stop_on_stall() -> None:
+    b = Bench()
+    b.value(P.ROR, 0, 0, 51_200)
+    b.advance(1.5)
+    light = b.gap(206)
+    b.door.ctl("load", ["1", "0.4"])
+    b.advance(0.2)
+    heavy = b.gap(206)
+    assert 0 < heavy < light <= 1023
+    b.sap(181, 10_000)  # stop on stall above 10000 pps
+    b.door.ctl("fault", ["1", "stall", "on"])
+    b.advance(0.05)
+    assert b.gap(3) == 0
+    assert b.gap(208) & DE_STALL
+    b.door.close()
+
+
+def test_i2t_exceed_counter_flag_and_clear() -> None:
+    b = Bench()
+    b.sap(6, 255)  # 3 A RMS: 900000 > the limit of 500000 (mA²/10)
+    b.sap(25, 100)
+    b.value(P.ROR, 0, 0, 10_000)
+    b.advance(1.0)
+    assert b.gap(27) > 500_000
+    assert b.gap(28) == 1
+    assert b.gap(18) & SW_I2T
+    b.sap(29, 0)
+    assert not b.gap(18) & SW_I2T
+    b.door.close()
+
+
+def test_overtemperature_switches_the_driver_off() -> None:
+    b = Bench()
+    b.door.ctl("fault", ["1", "overtemperature", "on"])
+    assert b.gap(208) & DE_OT
+    assert b.gap(18) & SW_OVERT
+    assert b.gap(155) == 125
+    b.value(P.ROR, 0, 0, 20_000)
+    b.advance(0.5)
+    assert b.gap(150) == 0  # no current
+    assert b.m.axis.rotor == 0.0  # the motor does not turn
+    b.door.close()
+
+
+def test_encoder_initialisation_and_closed_loop_need_a_working_encoder() -> None:
+    b = Bench()
+    b.sap(132, 1)
+    b.advance(0.5)
+    assert b.gap(132) == 1
+    b.advance(0.6)
+    assert b.gap(132) == 2
+    b.door.ctl("fault", ["1", "encoder_loss", "on"])
+    b.sap(132, 1)
+    b.advance(1.1)
+    assert b.gap(132) == 3
+    b.sap(129, 1)
+    b.advance(0.5)
+    assert b.gap(133) == 0
+    b.door.close()
+
+
+def test_torque_mode_only_in_closed_loop() -> None:
+    b = Bench()
+    assert b.cmd(P.SAP, 14, 0, 500)[0] == P.INVALID_VALUE
+    b.sap(129, 1)
+    b.advance(0.2)
+    b.sap(14, 500)
+    assert b.gap(128) == 2
+    b.advance(0.5)
+    assert b.gap(19) == 500
+    assert b.gap(131) > 0
+    b.door.close()
