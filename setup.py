@@ -1,6 +1,7 @@
-"""Build of the compiled core (decision P2): the hot modules, compiled by Cython from the
-same ``.py`` files that run as the pure-Python core. The list of modules is ``CORE`` in
-ecatsim/compiled.py (read here as text: the build does not import the package).
+"""Build of the compiled core (decision P2): modules compiled by Cython from the same
+``.py`` files that run as the pure-Python core, typed by the ``.pxd`` files beside them.
+The list of modules is ``CORE`` in ecatsim/compiled.py (read here as text: the build does
+not import the package).
 
 Every extension is optional: where Cython, a C compiler or the Python headers are missing,
 ``pip install`` goes on and the ``.py`` modules run (ecatsim --version says which).
@@ -10,8 +11,10 @@ from __future__ import annotations
 
 import ast
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from setuptools import Extension, setup
+if TYPE_CHECKING:
+    from setuptools import Extension
 
 ROOT = Path(__file__).parent
 #: -ffp-contract=off: no fused multiply-add, so the compiled core's floating-point results
@@ -33,6 +36,8 @@ def core_modules() -> list[str]:
 
 def twins() -> list[Extension]:
     """The hand-written C paths still in use (decisions P3-P12)."""
+    from setuptools import Extension
+
     return [
         Extension(
             name,
@@ -88,6 +93,8 @@ TWINS: list[tuple[str, list[str], list[str], list[str]]] = [
 
 def core() -> list[Extension]:
     """The Cython-compiled core, or nothing where Cython is not installed."""
+    from setuptools import Extension
+
     try:
         from Cython.Build import cythonize
     except ImportError:  # no Cython: the pure-Python core runs
@@ -103,7 +110,8 @@ def core() -> list[Extension]:
             language_level=3,
             quiet=True,
             compiler_directives={
-                # the .py files' annotations are for mypy: stage one compiles them as they are
+                # the .py files' annotations are for mypy; Cython's types come from the
+                # .pxd file beside each module
                 "annotation_typing": False,
                 "binding": True,
                 # the core is not declared safe with the GIL off: a free-threaded
@@ -115,4 +123,6 @@ def core() -> list[Extension]:
 
 
 if __name__ == "__main__":  # setuptools runs setup.py as __main__; a test reads CORE
+    from setuptools import setup
+
     setup(ext_modules=[*twins(), *core()])

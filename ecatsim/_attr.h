@@ -1,4 +1,4 @@
-/* Attribute access shared by the compiled paths (_logical.c, _cycle.c, _drive.c, _serve.c,
+/* Attribute access shared by the compiled paths (_logical.c, _cycle.c, _serve.c,
  * _dcloop.c): the state they work on lives in the Python objects, read and written at
  * their __slots__ offsets where the attribute is a plain slot, by name otherwise
  * (decision P10). Errors are flagged in *err (get_*) or returned as -1 (set_*,

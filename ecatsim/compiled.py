@@ -33,23 +33,14 @@ import structlog
 
 log = structlog.get_logger("ecatsim.compiled")
 
-#: the modules of the compiled core, compiled from their .py by setup.py (read there)
+#: the modules of the compiled core, compiled from their .py by setup.py (read there). A
+#: module joins with its .pxd types: compiled without them, the ESC, segment, firmware and
+#: daemon modules ran no faster than CPython's own interpreter, whose specialised attribute
+#: reads beat Cython's generic ones, and the daemon's CPU rose (docs/decisions.md P2, P13)
 CORE = (
-    "ecatsim.esc.sm",
-    "ecatsim.esc.fmmu",
-    "ecatsim.esc.watchdog",
-    "ecatsim.esc.dc",
-    "ecatsim.esc.core",
-    "ecatsim.esc.pdi",
-    "ecatsim.segment",
-    "ecatsim.slave.pdo",
-    "ecatsim.slave.cycle",
-    "ecatsim.slave.firmware",
     "ecatsim.device.cia402",
     "ecatsim.device.servo",
     "ecatsim.device.drive",
-    "ecatsim.link.raw",
-    "ecatsim.daemon",
 )
 
 _said_free_threaded = False

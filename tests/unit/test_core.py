@@ -88,21 +88,24 @@ def test_a_stale_compiled_module_is_not_used(tmp_path: Path) -> None:
     """In a source checkout a compiled module older than its .py (edited since the last
     install) is passed over for the .py; a current one is imported as usual."""
     suffix = importlib.machinery.EXTENSION_SUFFIXES[0]
-    _touch(tmp_path / "sm.py", 2_000_000_000)
-    _touch(tmp_path / f"sm{suffix}", 1_000_000_000)
-    _touch(tmp_path / "dc.py", 1_000_000_000)
-    _touch(tmp_path / f"dc{suffix}", 2_000_000_000)
+    _touch(tmp_path / "servo.py", 2_000_000_000)
+    _touch(tmp_path / f"servo{suffix}", 1_000_000_000)
+    _touch(tmp_path / "drive.py", 1_000_000_000)
+    _touch(tmp_path / f"drive{suffix}", 2_000_000_000)
+    _touch(tmp_path / "cli.py", 2_000_000_000)
+    _touch(tmp_path / f"cli{suffix}", 1_000_000_000)
+    assert {"ecatsim.device.servo", "ecatsim.device.drive"} <= set(compiled.CORE)
     finder = compiled.PreferSource(always=False)
     before = list(compiled.stale)
     try:
-        spec = finder.find_spec("ecatsim.esc.sm", [str(tmp_path)])
-        assert spec is not None and spec.origin == str(tmp_path / "sm.py")
-        assert compiled.stale[len(before) :] == ["ecatsim.esc.sm"]
-        assert finder.find_spec("ecatsim.esc.dc", [str(tmp_path)]) is None
+        spec = finder.find_spec("ecatsim.device.servo", [str(tmp_path)])
+        assert spec is not None and spec.origin == str(tmp_path / "servo.py")
+        assert compiled.stale[len(before) :] == ["ecatsim.device.servo"]
+        assert finder.find_spec("ecatsim.device.drive", [str(tmp_path)]) is None
         assert finder.find_spec("ecatsim.cli", [str(tmp_path)]) is None  # not in the core
         always = compiled.PreferSource(always=True)
-        spec = always.find_spec("ecatsim.esc.dc", [str(tmp_path)])
-        assert spec is not None and spec.origin == str(tmp_path / "dc.py")
+        spec = always.find_spec("ecatsim.device.drive", [str(tmp_path)])
+        assert spec is not None and spec.origin == str(tmp_path / "drive.py")
     finally:
         compiled.stale[:] = before
 
