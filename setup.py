@@ -103,7 +103,7 @@ def core() -> list[Extension]:
         Extension(name, [name.replace(".", "/") + ".py"], optional=True, extra_compile_args=CFLAGS)
         for name in core_modules()
     ]
-    return list(
+    built = list(
         cythonize(
             exts,
             build_dir="build/cython",
@@ -120,6 +120,9 @@ def core() -> list[Extension]:
             },
         )
     )
+    for ext in built:
+        ext.optional = True  # cythonize makes new Extension objects: no C compiler, no core
+    return built
 
 
 if __name__ == "__main__":  # setuptools runs setup.py as __main__; a test reads CORE

@@ -11,6 +11,7 @@ import runpy
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -114,3 +115,19 @@ def test_setup_py_builds_the_core_list() -> None:
     """setup.py reads CORE from ecatsim/compiled.py as text: both name the same modules."""
     setup = runpy.run_path(str(Path(compiled.__file__).parents[1] / "setup.py"), run_name="probe")
     assert tuple(setup["core_modules"]()) == compiled.CORE
+
+
+def test_every_extension_is_optional(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Where no C compiler exists pip still installs ecatsim, and the pure-Python core runs:
+    every extension setup.py declares is optional, including those cythonize makes anew."""
+    setuptools = pytest.importorskip("setuptools")
+    build = pytest.importorskip("Cython.Build")
+
+    def fake_cythonize(exts: list[Any], **_: Any) -> list[Any]:
+        return [setuptools.Extension(e.name, [e.sources[0][:-3] + ".c"]) for e in exts]
+
+    monkeypatch.setattr(build, "cythonize", fake_cythonize)
+    setup = runpy.run_path(str(Path(compiled.__file__).parents[1] / "setup.py"), run_name="probe")
+    exts = [*setup["twins"](), *setup["core"]()]
+    assert {e.name for e in exts} >= set(compiled.CORE)
+    assert [e.name for e in exts if not e.optional] == []
