@@ -22,6 +22,7 @@ from ecatsim.esc import regs
 from ecatsim.esc.dc import DcUnit
 from ecatsim.esc.eeprom import EepromUnit
 from ecatsim.esc.fmmu import FmmuMap, compile_fmmus, copy_bits
+from ecatsim.esc.mii import MiiUnit
 from ecatsim.esc.sm import SyncManager
 from ecatsim.esc.watchdog import Watchdog
 from ecatsim.spec.tables import load_registers
@@ -44,7 +45,6 @@ PASSIVE_SIDE_EFFECTS = frozenset(
         "ecat_event_request",  # maintained by the event logic (§5.31)
         "al_event_request",  # maintained by the event logic (§5.32)
         "sm_status",  # maintained by the SyncManager (§5.49 Table 89)
-        "mii_management",  # no PHY management emulated; masks only (§5.46)
         "dc_system_time_difference",  # maintained by the time loop (§5.50.2 Table 98)
         "dc_speed_counter_diff",  # maintained by the time loop (Table 100)
         "dc_latch_mode",  # plain value (Table 103)
@@ -171,6 +171,7 @@ class Esc:
         "fmmus",
         "link_down",
         "mem",
+        "mii",
         "on_reset",
         "pdi_emulation",
         "pdram_ok",
@@ -210,6 +211,7 @@ class Esc:
             self.mem, position, start_ns=dc_start_ns, drift_ppm=dc_drift_ppm, hop_ns=dc_hop_ns
         )
         self.wd = Watchdog(self.mem)
+        self.mii = MiiUnit(self.mem)
         self.fmmus: tuple[FmmuMap, ...] = ()
         self.sm_windows: tuple[tuple[int, int, SyncManager], ...] = ()
         self.pdram_ok = False
@@ -251,6 +253,7 @@ class Esc:
         self.wd.deadline_ns = 0
         self.wd.reconfigure()
         m[regs.WD_STATUS_PD] &= 0xFE  # "expired" until first triggered (reset value 0)
+        self.mii.reset()
         self.pdram_ok = self.eeprom.load(first=True)
         if self.pdram_ok:
             m[regs.DL_STATUS] |= 0x02  # PDI watchdog reloaded: the firmware is running
@@ -298,6 +301,8 @@ class Esc:
         m[regs.DL_STATUS] = lo
         m[regs.DL_STATUS + 1] = hi
         self.port1_closed = closed1
+        self.mii.set_link(0, link0)
+        self.mii.set_link(1, link1)
         if old != (lo | (hi << 8)):
             self._set_ecat_event(regs.ECAT_EV_DL_STATUS)
             self.ctx.topology_dirty = True
@@ -814,6 +819,85 @@ class Esc:
     def _ew_eeprom_data(self, ra: int, rs: int, old: bytes) -> None:
         """Ref: TMC8460 §5.45 Table 64."""
         self.eeprom.ecat_data_written(ra, old)
+
+    # -- MII management interface (TMC8460 §5.46) -----------------------------------------
+
+    def _ew_mii_control(self, ra: int, rs: int, old: bytes) -> None:
+        """ECAT writes 0x0510 only while it has MI control. Ref: §5.46 Table 67 r/(w)."""
+        if self.mii.pdi_owns():
+            self.mem[ra : ra + rs] = old
+            return
+        wrote_cmd = self.wr_s <= ra + 1 < self.wr_e
+        self.mii.control_written(old[0] | (old[1] << 8), wrote_cmd, self.ctx.frame_no, False)
+
+    def _pw_mii_control(self, ra: int, rs: int, old: bytes) -> None:
+        """The PDI writes commands only while it has MI control. Ref: Table 67 r/(w)."""
+        if not self.mii.pdi_owns():
+            self.mem[ra : ra + rs] = old
+            return
+        wrote_cmd = self.wr_s <= ra + 1 < self.wr_e
+        self.mii.control_written(old[0] | (old[1] << 8), wrote_cmd, self.ctx.frame_no, True)
+
+    def _er_mii_control(self, ra: int, rs: int) -> None:
+        """Ref: TMC8460 §5.46 Table 67 note * (write enable self-clears at the next SOF)."""
+        self.mii.refresh_write_enable(self.ctx.frame_no)
+
+    def _pr_mii_control(self, ra: int, rs: int) -> None:
+        """Ref: TMC8460 §5.46 Table 67 note *."""
+        self.mii.refresh_write_enable(self.ctx.frame_no)
+
+    def _ew_mii_phy(self, ra: int, rs: int, old: bytes) -> None:
+        """PHY address, register and data: written by the side with MI control.
+        Ref: TMC8460 §5.46 Tables 68-70 r/(w)."""
+        if self.mii.pdi_owns():
+            self.mem[ra : ra + rs] = old
+        elif ra == regs.MII_PHY_ADDRESS:
+            self.mii.show_address()
+
+    def _pw_mii_phy(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.46 Tables 68-70 r/(w)."""
+        if not self.mii.pdi_owns():
+            self.mem[ra : ra + rs] = old
+        elif ra == regs.MII_PHY_ADDRESS:
+            self.mii.show_address()
+
+    def _ew_mii_ecat_access(self, ra: int, rs: int, old: bytes) -> None:
+        """ECAT claims or frees MI access only while 0x0517.0 = 0. Ref: Table 71 note."""
+        if self.mem[regs.MII_PDI_ACCESS] & 0x01:
+            self.mem[ra] = old[0]
+
+    def _ew_mii_pdi_access(self, ra: int, rs: int, old: bytes) -> None:
+        """Bit 1 (force PDI access state) resets 0x0517.0. Ref: TMC8460 §5.46 Table 72."""
+        if self.mem[ra] & 0x02:
+            self.mem[ra] &= 0xFE
+        self.mii.ownership_changed()
+
+    def _pw_mii_pdi_access(self, ra: int, rs: int, old: bytes) -> None:
+        """The PDI takes MI access only if ECAT allows it (0x0516.0 = 0, 0x0517.1 = 0) and
+        the EEPROM is loaded (0x0110.0 = 1); it can always give it back. Ref: Table 72."""
+        m = self.mem
+        take = m[ra] & 0x01 and not old[0] & 0x01
+        if take and (
+            m[regs.MII_ECAT_ACCESS] & 0x01 or old[0] & 0x02 or not m[regs.DL_STATUS] & 0x01
+        ):
+            m[ra] = old[0]
+        self.mii.ownership_changed()
+
+    def _ew_mii_port_status(self, ra: int, rs: int, old: bytes) -> None:
+        """Writing any PHY port status register clears bits 3 and 5 of all four (by the
+        side with MI control). Ref: TMC8460 §5.46 Table 73."""
+        if not self.mii.pdi_owns():
+            self._clear_port_status()
+
+    def _pw_mii_port_status(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.46 Table 73 r/(w/clr)."""
+        if self.mii.pdi_owns():
+            self._clear_port_status()
+
+    def _clear_port_status(self) -> None:
+        m = self.mem
+        for a in range(regs.PHY_PORT_STATUS, regs.PHY_PORT_STATUS + 4):
+            m[a] &= ~0x28 & 0xFF
 
     def _ew_fmmu(self, ra: int, rs: int, old: bytes) -> None:
         """Recompile the FMMU maps when any FMMU register changes. Ref: TMC8460 §5.48."""
