@@ -8,6 +8,7 @@ from __future__ import annotations
 import struct
 
 from ecatsim.esc.pdi import Pdi
+from ecatsim.wire import datagram as dg
 from tests.support.tinymaster import TinyMaster, segment_of
 
 # ================================================================ MII management (§5.46)
@@ -130,3 +131,240 @@ def test_mii_ownership_between_ecat_and_pdi() -> None:
     assert pdi.read(0x0516, 2) == b"\x01\x00"
     t.apwr(0, 0x0518, b"\xff\xff\xff\xff")
     assert t.aprd(0, 0x0518, 4).data == bytes(4)
+
+
+# ================================================================ DC units (§5.50)
+
+MS = 1_000_000
+Q = struct.Struct("<Q")
+
+
+def u64(t: TinyMaster, ado: int) -> int:
+    return int(Q.unpack(t.aprd(0, ado, 8).data)[0])
+
+
+def test_cyclic_unit_control_gives_the_sync_unit_to_the_pdi() -> None:
+    """0x0980.0 = 1: the SYNC out unit's registers (0x0981, 0x0990, 0x09A0, 0x09A4) are
+    written by the PDI only; back at 0 by ECAT only. Ref: Table 104, notes of Tables 105,
+    110, 112, 113."""
+    seg, clock = segment_of(1)
+    t = TinyMaster(seg)
+    esc = seg.escs[0]
+    pdi = Pdi(esc)
+    now = esc.dc.system_time(clock.t)
+    t.apwr(0, 0x0980, b"\x01")
+    assert t.aprd(0, 0x0980, 1).data == b"\x01"
+    t.apwr(0, 0x0990, Q.pack(now + 2 * MS))
+    t.apwr(0, 0x09A0, struct.pack("<II", MS, 300))
+    t.apwr(0, 0x0981, b"\x03")
+    # all ignored (0x0982: the SII's pulse length, 1 us)
+    assert t.aprd(0, 0x0980, 0x30).data == b"\x01\x00\x64" + bytes(0x2D)
+    pdi.access_time(clock.t)
+    assert pdi.write(0x0990, Q.pack(now + 2 * MS))
+    pdi.write(0x09A0, struct.pack("<II", MS, 300))
+    pdi.write(0x0981, b"\x03")
+    assert t.aprd(0, 0x0981, 4).data == b"\x03\x64\x00\x01"  # pulse 1 us, SYNC0 pending
+    assert esc.dc.sync0_deadline() == clock.t + 2 * MS
+    assert t.aprd(0, 0x0990, 0x18).data == Q.pack(now + 2 * MS) + bytes(8) + struct.pack(
+        "<II", MS, 300
+    )
+    t.apwr(0, 0x0980, b"\x00")  # ECAT again: the PDI's writes are ignored
+    pdi.write(0x0981, b"\x00")
+    assert t.aprd(0, 0x0981, 1).data == b"\x03"
+    t.apwr(0, 0x0981, b"\x00")
+    assert t.aprd(0, 0x0981, 4).data == b"\x00\x64\x00\x00"
+    assert esc.dc.sync0_deadline() is None
+
+
+def test_pdi_controlled_latch_unit_raises_the_al_event() -> None:
+    """0x0980.4 = 1: LATCH0 is the PDI's: its control register is written by the PDI,
+    its edges raise AL event 0x0220.1 (not ECAT's 0x0210.0), and the PDI's read of the
+    time clears the event flag and the AL event; an ECAT read clears nothing. LATCH1 stays
+    ECAT's. Ref: Table 104 bits 4/5, Tables 45, 46, 114-121."""
+    seg, clock = segment_of(1)
+    t = TinyMaster(seg)
+    esc = seg.escs[0]
+    pdi = Pdi(esc)
+    t.apwr(0, 0x0980, b"\x10")
+    t.apwr(0, 0x09A8, b"\x03\x03")  # LATCH0 control: the PDI's; LATCH1: single events
+    assert t.aprd(0, 0x09A8, 2).data == b"\x00\x03"
+    pdi.write(0x09A8, b"\x01\x00")  # LATCH0 positive edge: single event
+    assert pdi.read(0x09A8, 2) == b"\x01\x03"
+    clock.t += 1000
+    esc.latch_input(0, True, clock.t)
+    pos = esc.dc.system_time(clock.t)
+    assert pdi.al_event() & 0x02 and not esc.mem[0x0210] & 0x01
+    assert t.aprd(0, 0x09AE, 2).data == b"\x05\x00"
+    assert u64(t, 0x09B0) == pos
+    assert t.aprd(0, 0x09AE, 1).data == b"\x05"  # an ECAT read clears nothing
+    assert Q.unpack(pdi.read(0x09B0, 8))[0] == pos
+    assert pdi.read(0x09AE, 1) == b"\x04" and not pdi.al_event() & 0x02
+    esc.latch_input(1, True, clock.t + 500)  # LATCH1: ECAT's
+    assert esc.mem[0x0210] & 0x01 and not pdi.al_event() & 0x02
+    assert t.aprd(0, 0x09AF, 1).data == b"\x05"
+    pdi.read(0x09C0, 8)  # the PDI's read of an ECAT unit clears nothing
+    assert t.aprd(0, 0x09AF, 1).data == b"\x05"
+    assert u64(t, 0x09C0) == esc.dc.system_time(clock.t + 500)
+    assert t.aprd(0, 0x09AF, 1).data == b"\x04" and not esc.mem[0x0210] & 0x01
+
+
+def test_latch0_works_while_sync0_drives_its_pin() -> None:
+    """0x0151.2 = 1 (SYNC0 output) does not take LATCH0's input: concurrent SYNC outputs
+    and LATCH inputs (Table 42 note *)."""
+    seg, clock = segment_of(1)
+    t = TinyMaster(seg)
+    esc = seg.escs[0]
+    assert t.aprd(0, 0x0151, 1).data == b"\x0e"  # SYNC0 output, mapped to 0x0220.2
+    esc.latch_input(0, True, clock.t + 100)
+    esc.latch_input(0, False, clock.t + 900)
+    assert u64(t, 0x09B0) == esc.dc.system_time(clock.t + 100)
+    assert u64(t, 0x09B8) == esc.dc.system_time(clock.t + 900)
+    assert t.aprd(0, 0x09AE, 1).data == b"\x00" and esc.mem[0x0210] & 0x01 == 0
+
+
+def test_start_time_auto_activation_and_32_bit_extension() -> None:
+    """0x0981.3: writing the start time activates the unit (0x0981.0 set); written as
+    32 bits (0x0981.3 or .4) it is extended to 64 bits, here across a 2^32 boundary of the
+    system time. Ref: Table 105 bits 3/4, Table 110 note."""
+    seg, clock = segment_of(1)
+    t = TinyMaster(seg)
+    esc = seg.escs[0]
+    local = u64(t, 0x0910)
+    t.apwr(0, 0x0920, Q.pack((7 << 32) - MS - local))  # system time 1 ms before 7 x 2^32
+    now = esc.dc.system_time(clock.t)
+    assert now == (7 << 32) - MS
+    t.apwr(0, 0x09A0, struct.pack("<I", MS))
+    t.apwr(0, 0x0981, b"\x0a")  # auto-activation, SYNC0
+    assert t.aprd(0, 0x0981, 4).data == b"\x0a\x64\x00\x00"
+    t.apwr(0, 0x0990, struct.pack("<I", 4 * MS))  # low 32 bits only
+    assert t.aprd(0, 0x0981, 4).data == b"\x0b\x64\x00\x01"  # activated, SYNC0 pending
+    assert u64(t, 0x0990) == (7 << 32) + 4 * MS  # extended upwards: 5 ms ahead
+    assert esc.dc.sync0_deadline() == clock.t + 5 * MS
+    t.apwr(0, 0x0990, Q.pack(123))  # not writable while active
+    assert u64(t, 0x0990) == (7 << 32) + 4 * MS
+    t.apwr(0, 0x0981, b"\x10")  # off; 32-bit start times extended (bit 4)
+    t.apwr(0, 0x0990, struct.pack("<I", (-3 * MS) & 0xFFFFFFFF))
+    assert u64(t, 0x0990) == (7 << 32) - 3 * MS  # 2 ms ago: below the boundary
+    t.apwr(0, 0x0990, Q.pack(5 << 32))  # 8 bytes: taken as written
+    assert u64(t, 0x0990) == 5 << 32
+    t.apwr(0, 0x0981, b"\x00")
+    t.apwr(0, 0x0990, struct.pack("<I", 2 * MS))  # no extension: the upper half stays
+    assert u64(t, 0x0990) == (5 << 32) + 2 * MS
+
+
+def test_start_time_plausibility_check() -> None:
+    """A start time in the past is reached only after the 64-bit system time wraps: no
+    pulse, the first one stays pending. With the plausibility check (0x0981.5) a start
+    time outside the near future (0x0981.6: 2^31 ns, else 2^63 ns) starts the pulses at
+    once (0x0990 = now) and sets 0x0984.2. Ref: Table 105 bits 5/6, Tables 107, 110."""
+    seg, clock = segment_of(1)
+    t = TinyMaster(seg)
+    esc = seg.escs[0]
+    now = esc.dc.system_time(clock.t)
+    t.apwr(0, 0x09A0, struct.pack("<I", MS))
+
+    def activate(start: int, act: int) -> tuple[bytes, int | None]:
+        """Activate and read 0x0984 in one frame (a due pulse fires before the next)."""
+        t.apwr(0, 0x0981, b"\x00")
+        t.apwr(0, 0x0990, Q.pack(start))
+        r = t.frame(
+            [
+                dg.build(dg.Cmd.APWR, 0, 0x0981, bytes([act]), more=True),
+                dg.build(dg.Cmd.APRD, 0, 0x0984, b"\x00"),
+            ],
+            service=False,
+        )
+        assert r is not None
+        return r[1].data, esc.dc.sync0_deadline()
+
+    assert activate(now - MS, 0x03) == (b"\x01", None)  # the past: no pulse
+    assert activate(now + 3000 * MS, 0x03) == (b"\x01", clock.t + 3000 * MS)
+    assert activate(now + 3000 * MS, 0x63) == (b"\x05", clock.t)  # beyond 2^31 ns: now
+    assert u64(t, 0x0990) == now
+    assert activate(now + 2000 * MS, 0x63) == (b"\x01", clock.t + 2000 * MS)
+    assert activate(now - MS, 0x23) == (b"\x05", clock.t)  # the past is beyond 2^63 ns
+    seg.service(clock.t)  # the first pulse fires at once; the next a cycle later
+    assert t.aprd(0, 0x0984, 1).data == b"\x04" and t.aprd(0, 0x098E, 1).data == b"\x01"
+    assert u64(t, 0x0990) == now + MS
+
+
+def test_speed_counter_diff_follows_the_time_loop() -> None:
+    """0x0932 shows the loop's rate correction as the speed counter difference: a slave
+    whose clock runs 20 ppm slow settles near +5 x 20e-6 x (0x1000 + 2)^2 = +1679. Writing
+    0x0930 resets it, 0x092C and the correction; 0x0934 resets 0x092C only.
+    Ref: Tables 99-102."""
+    from ecatsim.build import build_segment
+    from ecatsim.clock import ManualClock
+    from ecatsim.config import SegmentConfig, SlaveConfig
+
+    clock = ManualClock(1_000_000_000)
+    cfg = SegmentConfig(
+        (
+            SlaveConfig(device="echo", serial=1),
+            SlaveConfig(device="echo", serial=2, dc_drift_ppm=-20.0),
+        )
+    )
+    seg = build_segment(cfg, clock)
+    t = TinyMaster(seg)
+    t.apwr(0, 0x0010, b"\x00\x10")
+    for _ in range(3000):
+        clock.advance(MS)
+        t.frame([dg.build(dg.Cmd.FRMW, 0x1000, 0x0910, bytes(8))])
+    esc = seg.escs[1]
+    scd = struct.unpack("<h", t.aprd(1, 0x0932, 2).data)[0]
+    assert scd == int(esc.dc.rate_ppb * 5e-9 * 4098 * 4098)
+    assert abs(scd - 1679) < 84  # within 1 ppm of the drift
+    assert t.aprd(0, 0x0932, 2).data == b"\x00\x00"  # the reference: no correction
+    t.apwr(1, 0x0934, b"\x04")
+    assert t.aprd(1, 0x092C, 4).data == bytes(4) and t.aprd(1, 0x0932, 2).data != bytes(2)
+    t.apwr(1, 0x0930, b"\x00\x10")
+    assert t.aprd(1, 0x092C, 4).data == bytes(4) and t.aprd(1, 0x0932, 2).data == bytes(2)
+    assert esc.dc.rate_ppb == 0.0
+
+
+def test_sm_event_times() -> None:
+    """SM latch events (0x0806+8n): bit 6 stamps 0x09F0 with the local time of the frame
+    in which ECAT exchanged the buffer (its last byte), bit 7 stamps 0x09F8 when the PDI
+    accesses the buffer start and 0x09FC when it exchanges the buffer. An SM without them
+    stamps nothing. Ref: §5.49 Table 90, §5.50.6 Tables 122-124."""
+    seg, clock = segment_of(1)
+    t = TinyMaster(seg)
+    esc = seg.escs[0]
+    pdi = Pdi(esc)
+    U = struct.Struct("<I")
+
+    def local(at: int) -> bytes:
+        return U.pack(esc.dc.local_time(at) & 0xFFFFFFFF)
+
+    t.apwr(0, 0x0810, struct.pack("<HHBBBB", 0x1100, 4, 0x64, 0, 0x01, 0))  # no events
+    t.apwr(0, 0x0818, struct.pack("<HHBBBB", 0x1200, 4, 0x20, 0, 0xC1, 0))
+    pdi.sm_deactivate(2, False)  # the firmware locked them in INIT ...
+    pdi.sm_deactivate(3, False)
+    seg.firmware = []  # ... and stays out of the way: the PDI accesses are the test's
+    t.apwr(0, 0x1100, b"\x01\x02\x03\x04")
+    pdi.access_time(clock.t)
+    assert pdi.sm_read(2) == b"\x01\x02\x03\x04"
+    assert t.aprd(0, 0x09F0, 16).data == bytes(16)
+    t.apwr(0, 0x0816, b"\xc1")  # SM2: both latch events
+    clock.advance(1000)
+    t.apwr(0, 0x1100, b"\x05\x06")  # not the last byte: no exchange
+    assert t.aprd(0, 0x09F0, 4).data == bytes(4)
+    clock.advance(1000)
+    t1 = clock.t
+    t.apwr(0, 0x1102, b"\x07\x08")
+    assert t.aprd(0, 0x09F0, 4).data == local(t1)
+    clock.advance(1000)
+    pdi.access_time(clock.t + 10)
+    assert pdi.read(0x1100, 2) == b"\x05\x06"  # the start: a buffer start event only
+    assert t.aprd(0, 0x09F8, 8).data == local(clock.t + 10) + bytes(4)
+    pdi.access_time(clock.t + 20)
+    assert pdi.read(0x1102, 2) == b"\x07\x08"  # the last byte: a buffer change event
+    assert t.aprd(0, 0x09F8, 8).data == local(clock.t + 10) + local(clock.t + 20)
+    clock.advance(1000)
+    pdi.access_time(clock.t)  # SM3: the PDI writes, ECAT reads
+    assert pdi.sm_write(3, b"\x11\x12\x13\x14")
+    assert t.aprd(0, 0x09F8, 8).data == local(clock.t) * 2
+    clock.advance(1000)
+    t2 = clock.t
+    assert t.aprd(0, 0x1200, 4).data == b"\x11\x12\x13\x14"
+    assert t.aprd(0, 0x09F0, 4).data == local(t2)
