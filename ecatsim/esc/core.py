@@ -247,6 +247,7 @@ class Esc:
         for addr, size, value in self.t.resets:
             m[addr : addr + size] = value.to_bytes(size, "little")
         m[regs.ESC_CONFIG] = (m[regs.ESC_CONFIG] & 0xFE) | int(self.pdi_emulation)
+        m[regs.DL_STATUS] |= 0x04  # enhanced link detection: 1 until the first EEPROM load
         for s in self.sm:
             s.configure(0, 0, 0, False)
         self.fmmus = ()
@@ -815,6 +816,18 @@ class Esc:
         o = old[0] | (old[1] << 8)
         wrote_cmd = self.wr_s <= ra + 1 < self.wr_e
         self.eeprom.ecat_control_written(o, self.ctx.frame_no, wrote_cmd)
+        self._esc_config_loaded()
+
+    def _esc_config_loaded(self) -> None:
+        """After an EEPROM reload: a SYNC out unit that 0x0141.2 now disables stops.
+        Ref: TMC8460 §5.26 Table 38 bit 2."""
+        dc = self.dc
+        if not self.mem[regs.ESC_CONFIG] & regs.ESC_CFG_SYNC_OUT and (
+            dc.next_sync0 is not None or dc.next_sync1 is not None
+        ):
+            dc.next_sync0 = dc.next_sync1 = None
+            self.mem[regs.DC_ACTIVATION_STATUS] &= 0xFC
+            self.ctx.timers_dirty = True
 
     def _er_eeprom_control(self, ra: int, rs: int) -> None:
         """Ref: TMC8460 §5.45 Table 62 note * (write enable self-clears)."""

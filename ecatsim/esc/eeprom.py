@@ -89,8 +89,12 @@ class EepromUnit:
         """Load the ESC configuration area into the registers (power-on or reload).
 
         Returns True if the checksum was good. On a checksum error nothing is taken
-        over, 0x0502.11 and .12 are set and the PD RAM stays inaccessible.
-        Ref: TMC8460 §5.45 Table 62 bits 11/12, §5.19 Table 30 bit 0, §5.10.
+        over, 0x0502.11 and .12 are set and the PD RAM stays inaccessible. Word 0 goes to
+        0x0140/0x0141 at every load; the alias (word 4), enhanced link detection 0x0110.2
+        (word 0 bit 9 or bits 15:12) and the FIFO size (word 5) only at the ``first`` one
+        (the first good load since power-on or reset).
+        Ref: TMC8460 §5.45 Table 62 bits 11/12, §5.19 Table 30 bits 0/2, §5.10, §5.17,
+        §5.26 Table 38.
         """
         st = self._status() & ~(ST_CHECKSUM_ERROR | ST_NOT_LOADED | CMD_MASK | ST_BUSY)
         if len(self.image) > 2048:  # more than 16 kbit: two address bytes
@@ -104,11 +108,13 @@ class EepromUnit:
             v = self._word(word)
             m[reg] = v & 0xFF
             m[reg + 1] = v >> 8
-        _U16.pack_into(m, regs.STATION_ALIAS, self._word(4))
         if first:
+            _U16.pack_into(m, regs.STATION_ALIAS, self._word(4))
             w5 = self._word(5)
             fifo = ((~w5 >> 9) & 0x7) if w5 != 0xFFFF else 7
             m[regs.DL_CONTROL + 2] = (m[regs.DL_CONTROL + 2] & 0xF8) | fifo
+            enhanced = self._word(0) & 0xF200
+            m[regs.DL_STATUS] = (m[regs.DL_STATUS] & 0xFB) | (0x04 if enhanced else 0)
         self._load_mfcio_config()
         m[regs.PDI_INFORMATION] = (m[regs.PDI_INFORMATION] & ~0x0E) | 0x06  # configured, active
         m[regs.DL_STATUS] |= 0x01
@@ -182,7 +188,7 @@ class EepromUnit:
         elif cmd == CMD_RELOAD:
             st &= ~ST_WE_ERROR
             self._set_status(st)
-            self.load(first=False)
+            self.load(first=bool(old & ST_NOT_LOADED))  # the first good load since reset
             st = self._status()
         else:
             st |= ST_ACK_ERROR

@@ -7,7 +7,9 @@ from __future__ import annotations
 
 import struct
 
+from ecatsim.esc.core import Esc
 from ecatsim.esc.pdi import Pdi
+from ecatsim.sii.crc import crc8
 from ecatsim.wire import datagram as dg
 from tests.support.tinymaster import TinyMaster, segment_of
 
@@ -368,3 +370,88 @@ def test_sm_event_times() -> None:
     t2 = clock.t
     assert t.aprd(0, 0x1200, 4).data == b"\x11\x12\x13\x14"
     assert t.aprd(0, 0x09F0, 4).data == local(t2)
+
+
+# ================================================ ESC configuration from the EEPROM (§5.26)
+
+
+def set_word0(esc: Esc, word0: int, alias: int | None = None) -> None:
+    """Put another ESC configuration word 0 (and alias) into the EEPROM chip, checksum
+    fixed (ETG.2010: CRC-8 of words 0-6 in word 7's low byte)."""
+    img = esc.eeprom.image
+    struct.pack_into("<H", img, 0, word0)
+    if alias is not None:
+        struct.pack_into("<H", img, 8, alias)
+    img[14] = crc8(bytes(img[0:14]))
+
+
+def reload(t: TinyMaster) -> int:
+    t.apwr(0, 0x0502, b"\x00\x04")
+    return int(struct.unpack("<H", t.aprd(0, 0x0502, 2).data)[0])
+
+
+def test_sync_out_and_latch_in_units_follow_0x0141() -> None:
+    """0x0141 is EEPROM word 0's high byte at every load: with bits 2/3 clear the SYNC out
+    unit does not start (and a running one stops at the reload that clears the bit) and
+    the latch in unit captures nothing. The shipped TMC8670 SII enables both (0x0C).
+    Ref: §5.26 Table 38 bits 2/3."""
+    seg, clock = segment_of(1)
+    t = TinyMaster(seg)
+    esc = seg.escs[0]
+    assert t.aprd(0, 0x0140, 2).data == b"\x05\x0c"
+    now = esc.dc.system_time(clock.t)
+    t.apwr(0, 0x09A0, struct.pack("<I", MS))
+    t.apwr(0, 0x0990, Q.pack(now + 2 * MS))
+    t.apwr(0, 0x0981, b"\x03")
+    assert esc.dc.sync0_deadline() == clock.t + 2 * MS
+    set_word0(esc, 0x0005)  # DC units off
+    assert reload(t) == 0x0080
+    assert t.aprd(0, 0x0140, 2).data == b"\x05\x00"
+    assert esc.dc.sync0_deadline() is None and t.aprd(0, 0x0984, 1).data == b"\x00"
+    clock.advance(5 * MS)
+    seg.service()
+    assert t.aprd(0, 0x098E, 1).data == b"\x00"  # no pulse
+    t.apwr(0, 0x0981, b"\x00")
+    t.apwr(0, 0x0990, Q.pack(now + 10 * MS))
+    t.apwr(0, 0x0981, b"\x03")
+    assert esc.dc.sync0_deadline() is None and t.aprd(0, 0x0984, 1).data == b"\x00"
+    esc.latch_input(1, True, clock.t)
+    assert t.aprd(0, 0x09AF, 1).data == b"\x00" and u64(t, 0x09C0) == 0
+    set_word0(esc, 0x0805)  # the latch in unit only
+    reload(t)
+    esc.latch_input(1, True, clock.t + 100)
+    assert t.aprd(0, 0x09AF, 1).data == b"\x04"
+    assert u64(t, 0x09C0) == esc.dc.system_time(clock.t + 100)
+    t.apwr(0, 0x0981, b"\x00")
+    t.apwr(0, 0x0981, b"\x03")
+    assert esc.dc.sync0_deadline() is None
+
+
+def test_enhanced_link_detection_and_alias_at_the_first_load_only() -> None:
+    """0x0110.2 reads 1 until the first EEPROM load, then word 0 bit 9 or bits 15:12
+    (0x0141 bit 1 or bits 7:4); a reload changes 0x0141 but neither 0x0110.2 nor the
+    alias 0x0012. The first good load after a checksum error is the first load.
+    Ref: §5.19 Table 30 bit 2, §5.10 Table 21, §5.26 Table 38, Table 62 bits 11/12."""
+    seg, _ = segment_of(1, device="tmc8460", alias=0x0123)
+    t = TinyMaster(seg)
+    esc = seg.escs[0]
+    assert t.aprd(0, 0x0140, 2).data == b"\x00\x0f"  # device emulation, link, DC units
+    assert t.aprd(0, 0x0110, 1).data[0] & 0x05 == 0x05  # loaded, enhanced link detection
+    assert t.aprd(0, 0x0012, 2).data == b"\x23\x01"
+    set_word0(esc, 0x0C00, alias=0x0456)  # no enhanced link detection
+    assert reload(t) == 0x0080
+    assert t.aprd(0, 0x0140, 2).data == b"\x00\x0c"  # device emulation off
+    assert t.aprd(0, 0x0110, 1).data[0] & 0x04 == 0x04  # kept
+    assert t.aprd(0, 0x0012, 2).data == b"\x23\x01"  # kept
+    esc.eeprom.image[14] ^= 0xFF  # a checksum error at the next reset
+    esc.pdi_emulation = True
+    esc.hardware_reset()
+    assert t.aprd(0, 0x0502, 2).data == b"\x80\x18"  # checksum error, not loaded
+    assert t.aprd(0, 0x0140, 2).data == b"\x05\x0d"  # reset values; the emulation pin
+    assert t.aprd(0, 0x0110, 1).data[0] & 0x05 == 0x04  # not loaded, enhanced link: 1
+    assert t.aprd(0, 0x0012, 2).data == b"\x00\x00"
+    set_word0(esc, 0x0C00)  # repaired: the next reload is the first good load
+    assert reload(t) == 0x0080
+    assert t.aprd(0, 0x0140, 2).data == b"\x00\x0c"
+    assert t.aprd(0, 0x0110, 1).data[0] & 0x05 == 0x01  # loaded, enhanced link: 0
+    assert t.aprd(0, 0x0012, 2).data == b"\x56\x04"
