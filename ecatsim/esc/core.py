@@ -51,7 +51,7 @@ PASSIVE_SIDE_EFFECTS = frozenset(
         "dc_next_sync1",  # maintained by the SYNC unit (Table 111)
         "dc_latch_status",  # maintained by the latch unit (Tables 116, 117)
         "dc_event_time",  # maintained by the SM event-time logic (§5.50.6, sm_event_time)
-        "mfcio_parameter_ram",  # plain RAM until the MFCIO block lands (§5.47)
+        "mfcio_parameter_ram",  # plain RAM the MFCIO block reads at its runs (§5.47)
         "user_ram",  # plain RAM (§5.52)
     }
 )
@@ -615,7 +615,23 @@ class Esc:
         e = min(end, regs.PDRAM_END)
         if e > ado:
             self.mem[ado:e] = data[: e - ado]
+            for sm in self.sm:  # an SM of length 1 is not activated: the watchdog trigger
+                if sm.length == 1 and ado <= sm.start < e and self._wd_tap(sm):
+                    self.wd_pd_trigger()
+                    break
         return True
+
+    @staticmethod
+    def _wd_tap(sm: SyncManager) -> bool:
+        """An enabled write SM of length 1 with the watchdog trigger bit: a write of its
+        byte (plain memory) triggers the process-data watchdog. Ref: TMC8460 §5.49
+        Table 87 ("if set to 1, only Watchdog Trigger is generated if configured")."""
+        return (
+            sm.enabled
+            and not sm.locked
+            and sm.ecat_side_writes
+            and bool(sm.control & regs.SM_CTRL_WATCHDOG)
+        )
 
     def _plain_read(self, ado: int, out: memoryview) -> bool:
         end = ado + len(out)
@@ -803,20 +819,29 @@ class Esc:
 
     def _ew_eeprom_config(self, ra: int, rs: int, old: bytes) -> None:
         """Ref: TMC8460 §5.45 Table 60."""
-        self.eeprom.ecat_config_written()
+        self.eeprom.ecat_config_written(self.ctx.frame_no)
 
     def _pw_eeprom_pdi_access(self, ra: int, rs: int, old: bytes) -> None:
         """PDI may take the EEPROM only if offered (0x0500.0=1, .1=0). Ref: Table 61."""
         cfg = self.mem[regs.EEPROM_CONFIG]
         if not (cfg & 0x01) or cfg & 0x02:
             self.mem[ra] = old[0]
+        self.eeprom.ownership_changed(self.ctx.frame_no)
+
+    def _eeprom_control(self, ra: int, old: bytes, pdi: bool) -> None:
+        o = old[0] | (old[1] << 8)
+        wrote_cmd = self.wr_s <= ra + 1 < self.wr_e
+        self.eeprom.control_written(o, self.ctx.frame_no, wrote_cmd, pdi)
+        self._esc_config_loaded()
 
     def _ew_eeprom_control(self, ra: int, rs: int, old: bytes) -> None:
         """Ref: TMC8460 §5.45 Table 62."""
-        o = old[0] | (old[1] << 8)
-        wrote_cmd = self.wr_s <= ra + 1 < self.wr_e
-        self.eeprom.ecat_control_written(o, self.ctx.frame_no, wrote_cmd)
-        self._esc_config_loaded()
+        self._eeprom_control(ra, old, False)
+
+    def _pw_eeprom_control(self, ra: int, rs: int, old: bytes) -> None:
+        """The PDI runs the command machine while it has EEPROM control (0x0500.0 or
+        0x0501.0). Ref: TMC8460 §5.45 Tables 59-62."""
+        self._eeprom_control(ra, old, True)
 
     def _esc_config_loaded(self) -> None:
         """After an EEPROM reload: a SYNC out unit that 0x0141.2 now disables stops.
@@ -835,11 +860,19 @@ class Esc:
 
     def _ew_eeprom_address(self, ra: int, rs: int, old: bytes) -> None:
         """Ref: TMC8460 §5.45 Table 63."""
-        self.eeprom.ecat_data_written(ra, old)
+        self.eeprom.data_written(ra, old, False)
+
+    def _pw_eeprom_address(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.45 Table 63."""
+        self.eeprom.data_written(ra, old, True)
 
     def _ew_eeprom_data(self, ra: int, rs: int, old: bytes) -> None:
         """Ref: TMC8460 §5.45 Table 64."""
-        self.eeprom.ecat_data_written(ra, old)
+        self.eeprom.data_written(ra, old, False)
+
+    def _pw_eeprom_data(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.45 Table 64."""
+        self.eeprom.data_written(ra, old, True)
 
     # -- MII management interface (TMC8460 §5.46) -----------------------------------------
 

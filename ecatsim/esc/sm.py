@@ -103,7 +103,8 @@ class SyncManager:
         self.control = control
         self.mailbox = (control & regs.SM_MODE_MASK) == regs.SM_MODE_MAILBOX
         self.ecat_side_writes = (control & regs.SM_DIR_MASK) == regs.SM_DIR_WRITE
-        self.active = active and length > 0
+        # a length of 1 does not activate the SM (only its watchdog trigger: Esc)
+        self.active = active and length > 1
         self.mbx_full = False
         self.w = 0
         self.l = -1

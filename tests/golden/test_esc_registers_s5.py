@@ -7,10 +7,16 @@ from __future__ import annotations
 
 import struct
 
+import pytest
+
+from ecatsim import segment as segment_mod
+from ecatsim.clock import ManualClock
 from ecatsim.esc.core import Esc
 from ecatsim.esc.pdi import Pdi
+from ecatsim.segment import Segment
 from ecatsim.sii.crc import crc8
 from ecatsim.wire import datagram as dg
+from tests.support.compiled import record_results
 from tests.support.tinymaster import TinyMaster, segment_of
 
 # ================================================================ MII management (§5.46)
@@ -455,3 +461,105 @@ def test_enhanced_link_detection_and_alias_at_the_first_load_only() -> None:
     assert t.aprd(0, 0x0140, 2).data == b"\x00\x0c"
     assert t.aprd(0, 0x0110, 1).data[0] & 0x05 == 0x01  # loaded, enhanced link: 0
     assert t.aprd(0, 0x0012, 2).data == b"\x56\x04"
+
+
+# ============================================= SM length 1, PDI EEPROM, parameter RAM
+
+
+def bare(device: str = "echo") -> tuple[Segment, ManualClock, TinyMaster, Pdi]:
+    """One slave whose firmware stays out of the way (the PDI accesses are the test's):
+    it locked SM0-SM3 at its start (INIT); they are unlocked."""
+    seg, clock = segment_of(1, device=device)
+    pdi = Pdi(seg.escs[0])
+    seg.firmware = []
+    for n in range(4):
+        pdi.sm_deactivate(n, False)
+    return seg, clock, TinyMaster(seg), pdi
+
+
+def test_sm_of_length_1_is_not_activated(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Length 1: the SM is not activated (no buffer, no status change, no SM event): its
+    byte is plain memory for ECAT and the PDI, and a write of it only triggers the
+    process-data watchdog (control bit 6). Length 2 activates. The compiled walk leaves
+    an FMMU over such a byte to the Python path. Ref: §5.49 Table 87."""
+    walked = record_results(monkeypatch, segment_mod, "_logical", "run")
+    seg, _, t, pdi = bare()
+    esc = seg.escs[0]
+    t.apwr(0, 0x0810, struct.pack("<HHBBBB", 0x1100, 1, 0x64, 0, 1, 0))
+    assert t.aprd(0, 0x0810, 8).data == bytes.fromhex("0011 0100 64 30 01 00")
+    assert esc.sm_windows == () and not esc.sm[2].active
+    assert t.aprd(0, 0x0440, 2).data == b"\x00\x00"
+    assert t.apwr(0, 0x1100, b"\x5a").wkc == 1
+    assert t.aprd(0, 0x0440, 2).data == b"\x01\x00"  # watchdog triggered
+    assert t.aprd(0, 0x0815, 1).data == b"\x30" and pdi.al_event() & 0x0400 == 0
+    assert pdi.read(0x1100, 1) == b"\x5a" and pdi.sm_read(2) is None
+    assert pdi.write(0x1100, b"\xa5") and t.aprd(0, 0x1100, 1).data == b"\xa5"
+    # an FMMU mapping logical 0x10000 onto the byte: written, not routed to the SM
+    t.apwr(0, 0x0600, struct.pack("<IHBBHBBBxxx", 0x10000, 1, 0, 7, 0x1100, 0, 2, 1))
+    assert esc.fmmus[0].sm is None
+    r = t.frame([dg.build_logical(dg.Cmd.LWR, 0x10000, b"\x77")])
+    assert r is not None and r[0].wkc == 1
+    assert walked[-1] == -1 and t.aprd(0, 0x1100, 1).data == b"\x77"
+    # the watchdog bit off: no trigger; length 2: an SM
+    esc.mem[0x0440] = 0
+    t.apwr(0, 0x0816, b"\x00")
+    t.apwr(0, 0x0814, b"\x24")
+    t.apwr(0, 0x0816, b"\x01")
+    t.apwr(0, 0x1100, b"\x01")
+    assert t.aprd(0, 0x0440, 1).data == b"\x00"
+    t.apwr(0, 0x0816, b"\x00")
+    t.apwr(0, 0x0812, b"\x02\x00")
+    t.apwr(0, 0x0816, b"\x01")
+    assert esc.sm[2].active and esc.sm_windows[0][:2] == (0x1100, 0x1102)
+    t.apwr(0, 0x1100, b"\x01\x02")
+    assert t.aprd(0, 0x0815, 1).data == b"\x01" and pdi.sm_read(2) == b"\x01\x02"
+
+
+def test_pdi_runs_eeprom_commands_when_it_owns_the_eeprom() -> None:
+    """ECAT offers the EEPROM (0x0500.0), the PDI takes it (0x0501.0): the PDI writes
+    address, data and commands and the same command machine runs (write enable always 1,
+    no write enable needed); ECAT's writes of 0x0502-0x050F are ignored then. ECAT's
+    0x0500.1 takes it back. The PDI cannot set the acknowledge error (bit 13: EEPROM
+    emulation only). Ref: §5.45 Tables 59-64."""
+    seg, _, t, pdi = bare()
+    esc = seg.escs[0]
+    pdi.write(0x0504, struct.pack("<I", 8))  # not the owner: ignored
+    pdi.write(0x0502, b"\x00\x01")
+    assert pdi.read(0x0500, 16) == bytes.fromhex("00 00 8000 00000000") + bytes(8)
+    t.apwr(0, 0x0500, b"\x01")  # offered: the PDI has control
+    assert t.aprd(0, 0x0502, 2).data == b"\x81\x00"  # write enable always 1
+    pdi.write(0x0501, b"\x01")
+    pdi.write(0x0504, struct.pack("<I", 0x0008))
+    pdi.write(0x0502, b"\x00\x01")  # read: vendor id
+    assert pdi.read(0x0502, 10) == bytes.fromhex("8100 08000000 86020000")
+    t.apwr(0, 0x0504, struct.pack("<I", 0x000A))  # ECAT: ignored
+    t.apwr(0, 0x0502, b"\x01\x01")
+    assert t.aprd(0, 0x0502, 10).data == bytes.fromhex("8100 08000000 86020000")
+    pdi.write(0x0504, struct.pack("<IH", 0x0030, 0xBEEF))
+    pdi.write(0x0502, b"\x00\x02")  # write: no write enable needed
+    assert esc.eeprom.image[0x60:0x62] == b"\xef\xbe" and 0 in seg.ctx.flush
+    pdi.write(0x0508, b"\x00\x00")
+    pdi.write(0x0502, b"\x00\x21")  # read, and bit 13: not the PDI's to write
+    assert pdi.read(0x0502, 8) == bytes.fromhex("8100 30000000 efbe")
+    pdi.write(0x0502, b"\x00\x07")  # reserved command: acknowledge error
+    assert pdi.read(0x0502, 2) == b"\x81\x20"
+    pdi.write(0x0502, b"\x00\x00")  # 000 clears the error bits
+    assert pdi.read(0x0502, 2) == b"\x81\x00"
+    t.apwr(0, 0x0500, b"\x02")  # force ECAT access
+    assert t.aprd(0, 0x0500, 4).data == bytes.fromhex("02 00 8000")
+    pdi.write(0x0502, b"\x00\x01")  # the PDI: ignored again
+    assert pdi.read(0x0502, 2) == b"\x80\x00"
+    t.apwr(0, 0x0502, struct.pack("<HI", 0x0100, 0x000A))
+    assert t.aprd(0, 0x0508, 4).data == struct.pack("<I", 8670)
+
+
+def test_parameter_ram_is_128_bytes() -> None:
+    """0x0580:0x05FF is the ESC parameter RAM (Table 11): the 44 MFCIO configuration
+    bytes 0x0580:0x05AB keep bits 4..0 (bits 7..5 reserved, Table 74), the rest is RAM
+    for ECAT and the PDI; 0x0600 is the FMMUs'. Ref: §4 Table 11, §5.47."""
+    _, _, t, pdi = bare()
+    t.apwr(0, 0x0580, b"\xff" * 128)
+    assert t.aprd(0, 0x0580, 128).data == b"\x1f" * 44 + b"\xff" * 84
+    pdi.write(0x05AA, bytes(range(0xE0, 0xE6)))
+    assert pdi.read(0x05A8, 8) == bytes.fromhex("1f1f 0001 e2e3e4e5")
+    assert t.aprd(0, 0x05FE, 4).data == b"\xff\xff\x00\x00"
