@@ -166,7 +166,8 @@ def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
             continue
         fw: Serviceable
         if sc.firmware == "external" and sc.pdi_socket is not None:
-            fw = ExternalFirmware(pdi, sc.pdi_socket, clock, SpiTiming(), f"slaves[{i}].pdi_socket")
+            what = f"{cfg.source}: slaves[{i}].pdi_socket"
+            fw = ExternalFirmware(pdi, sc.pdi_socket, clock, SpiTiming(), what)
         elif "coe" in desc.mailbox.protocols:
             base = sc.description.parent if sc.description is not None else None
             try:

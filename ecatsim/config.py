@@ -16,6 +16,7 @@ slaves:
     pdi_emulation: false     # optional: the PDI_EMULATION pin (0x0141 bit 0 until the
                              # EEPROM is loaded)
     mfcio: {...}             # tmc8460 only: parts on the MFCIO pins (ecatsim/mfcio/parts.py)
+    mfc_socket: /run/mfc.sock  # tmc8460 only: the MFC CTRL SPI on a socket (TMC8460 §3.6)
 faults:                      # optional: faults injected while running (ecatsim/faults/spec.py)
   - {kind: wkc, value: -1, count: 3, on_state: op}
   - {kind: drop, probability: 0.001, seed: 7}
@@ -56,6 +57,7 @@ _SLAVE_KEYS = {
     "pdi_socket",
     "pdi_emulation",
     "mfcio",
+    "mfc_socket",
 }
 #: who runs the slave firmware behind the PDI: ecatsim, or a program on the PDI socket
 FIRMWARE_KINDS = ("ecatsim", "external")
@@ -83,6 +85,8 @@ class SlaveConfig:
     pdi_emulation: bool = False
     #: device tmc8460: the parts wired to the MFCIO pins (validated when built)
     mfcio: dict[str, object] | None = None
+    #: device tmc8460: the MFC CTRL SPI on this socket (TMC8460 §3.6)
+    mfc_socket: Path | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -196,6 +200,11 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
         mfcio = s.get("mfcio")
         if mfcio is not None and (dev != "tmc8460" or not isinstance(mfcio, dict)):
             raise _err(src, f"{key}.mfcio", "a mapping, for device: tmc8460 only")
+        mfc_socket = (
+            _path(src, base, f"{key}.mfc_socket", s["mfc_socket"]) if "mfc_socket" in s else None
+        )
+        if mfc_socket is not None and (dev != "tmc8460" or count > 1):
+            raise _err(src, f"{key}.mfc_socket", "one socket, for one device: tmc8460 slave")
         for j in range(count):
             out.append(
                 SlaveConfig(
@@ -215,6 +224,7 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
                     pdi_socket=pdi_socket,
                     pdi_emulation=pdi_emulation,
                     mfcio=mfcio,
+                    mfc_socket=mfc_socket,
                 )
             )
     if len(out) > MAX_SLAVES:

@@ -34,7 +34,11 @@ MAX_REQUEST = 4096
 
 
 def run_dir() -> Path:
-    """Where control sockets live: /run/ecatsim for root, else the user's runtime dir."""
+    """Where control sockets live: ``ECATSIM_RUN_DIR`` if set, else /run/ecatsim for root,
+    else the user's runtime dir."""
+    override = os.environ.get("ECATSIM_RUN_DIR")
+    if override:
+        return Path(override)
     if os.geteuid() == 0:
         return Path("/run/ecatsim")
     base = os.environ.get("XDG_RUNTIME_DIR") or f"/tmp/ecatsim-{os.getuid()}"

@@ -67,7 +67,11 @@ class DoorHost:
         return self._ep.fileno()
 
     def _sync(self) -> None:
-        """Register the descriptors the doors want now; forget the ones they closed."""
+        """Register the descriptors the doors want now; forget the ones they closed.
+
+        A door may close a descriptor and get the same number back for a new one before
+        this runs: closing removed the old one from epoll, so every wanted descriptor is
+        registered again (an existing registration is left as it is)."""
         want: dict[int, FrontDoor] = {}
         for door in self.doors.values():
             for fd in door.fds():
@@ -77,8 +81,11 @@ class DoorHost:
                 self._ep.unregister(fd)
             except OSError:  # closed already: epoll dropped it
                 pass
-        for fd in set(want) - set(self._owner):
-            self._ep.register(fd, select.EPOLLIN)
+        for fd in want:
+            try:
+                self._ep.register(fd, select.EPOLLIN)
+            except FileExistsError:
+                pass
         self._owner = want
 
     def serve(self) -> None:

@@ -14,7 +14,9 @@ from typing import cast
 
 from ecatsim.config import SegmentConfig
 from ecatsim.doors import DoorHost, FrontDoor
+from ecatsim.mfcio.block import MfcioBlock
 from ecatsim.pdi_spi.external import ExternalFirmware
+from ecatsim.pdi_spi.mfc import MfcSpi
 from ecatsim.segment import Segment
 
 DoorFactory = Callable[[dict[str, object], str, Path | None], FrontDoor]
@@ -32,16 +34,21 @@ def _factory(key: str) -> DoorFactory:
 
 
 def build_doors(cfg: SegmentConfig, segment: Segment | None = None) -> DoorHost | None:
-    """The segment file's doors, and the PDI sockets of its slaves with external firmware
-    (``pdi<position>``), behind one :class:`DoorHost`; None if there are none."""
+    """The segment file's doors, the PDI sockets of its slaves with external firmware
+    (``pdi<position>``) and the MFC CTRL sockets of its TMC8460s (``mfc<position>``),
+    behind one :class:`DoorHost`; None if there are none."""
     built: dict[str, FrontDoor] = {}
-    if segment is not None:
-        for fw in segment.firmware:
-            if isinstance(fw, ExternalFirmware):
-                built[f"pdi{fw.pdi.position}"] = fw
-    if not cfg.doors and not built:
-        return None
     try:
+        if segment is not None:
+            for pos, fw in enumerate(segment.firmware):
+                if isinstance(fw, ExternalFirmware):
+                    built[f"pdi{pos}"] = fw
+                sock = cfg.slaves[pos].mfc_socket if pos < len(cfg.slaves) else None
+                if sock is not None and isinstance(fw, MfcioBlock):
+                    what = f"{cfg.source}: slaves[{pos}].mfc_socket"
+                    built[f"mfc{pos}"] = MfcSpi(fw, sock, segment.clock, what)
+        if not cfg.doors and not built:
+            return None
         for key, data in cfg.doors:
             built[key] = _factory(key)(data, cfg.source, cfg.base)
     except BaseException:

@@ -403,6 +403,7 @@ class Segment:
                 esc.check_timers(t)
         ctx = self.ctx
         if (ctx.pending or self.awake) and self.firmware:
+            ctx.pdi_ns = t
             for pos in sorted(ctx.pending | self.awake):
                 self.firmware[pos].service(t)
         if ctx.flush and self.persist is not None:
@@ -444,6 +445,7 @@ class Segment:
                 if t - d > self.sync0_late_ns:
                     self.sync0_late_ns = t - d
                 if fw is not None and esc.position in ctx.pending:
+                    ctx.pdi_ns = d
                     fw.service(d)
             else:
                 d, d1 = dc.sync0_deadline(), dc.sync1_deadline()

@@ -26,6 +26,9 @@ def main() -> int:
     ap.add_argument("--runs", type=int, default=20)
     ap.add_argument("--idle", action="store_true", help="no busy processes")
     ap.add_argument("--daemon-arg", action="append", default=[], help="extra daemon flag")
+    ap.add_argument(
+        "--master-rt", type=int, help="run KickCAT SCHED_FIFO at this priority (default: nice 0)"
+    )
     args = ap.parse_args()
     results = []
     for i in range(args.runs):
@@ -34,10 +37,10 @@ def main() -> int:
             d.start()
             try:
                 if args.idle:
-                    r = kickcat_trial(pair)
+                    r = kickcat_trial(pair, master_rt=args.master_rt)
                 else:
                     with busy_cpus(os.cpu_count() or 2):
-                        r = kickcat_trial(pair)
+                        r = kickcat_trial(pair, master_rt=args.master_rt)
             finally:
                 d.stop()
         results.append(r)
@@ -52,6 +55,7 @@ def main() -> int:
                 "ok": ok,
                 "load": load,
                 "daemon_args": args.daemon_arg,
+                "master": f"SCHED_FIFO {args.master_rt}" if args.master_rt else "nice 0",
                 "results": results,
             },
             indent=1,

@@ -52,6 +52,7 @@
 #define DC_SYSTEM_TIME_DELAY 0x0928
 #define DC_SYSTEM_TIME_DIFF 0x092C
 #define DC_SPEED_COUNTER_START 0x0930
+#define DC_SPEED_COUNTER_DIFF 0x0932
 #define MOVE_NS 50000
 #define FAR_NS 1000000
 #define MEM_SIZE 0x10000
@@ -70,7 +71,7 @@ static PyObject *s_escs, *s_ctx, *s_t_ns, *s_timers_dirty, *s_dc_pending, *s_dc_
     *s_ecat_w_hooked, *s_ecat_w, *s_mem, *s_dc, *s_wr_s, *s_wr_e, *s_position, *s_hop_ns,
     *s_local_ref, *s_t_ref, *s_spd, *s_rate_ppb, *s_drift_ppm, *s_moved_ns, *s_sync_escs,
     *s_firmware, *s_pending, *s_next_sync0, *s_next_sync1, *s_service, *s_sync0_ticks,
-    *s_sync0_late_ns, *s_next_sync, *s_pulse_hint, *two64;
+    *s_sync0_late_ns, *s_next_sync, *s_pulse_hint, *s_pdi_ns, *two64;
 
 static inline uint64_t rd(const uint8_t *m, long a, int n)
 {
@@ -295,6 +296,13 @@ static int write_system_time(PyObject *esc, const uint8_t *data, long n, long lo
     i128 new_ref = (i128)local_now - step;
     uint64_t mag = adiff < 0x7FFFFFFF ? (uint64_t)adiff : 0x7FFFFFFF;
     wr(m, DC_SYSTEM_TIME_DIFF, mag | (diff < 0 ? 0x80000000u : 0), 4);
+    /* DcUnit._speed_counter_diff: the rate correction (new or kept) as 0x0932 */
+    long long lim = (long long)start - 0x7F;
+    lim = lim > 0 ? lim : 0;
+    long long scd = (long long)(rate * 5e-9 * (double)(start + 2) * (double)(start + 2));
+    scd = scd < lim ? scd : lim;
+    scd = scd > -lim ? scd : -lim;
+    wr(m, DC_SPEED_COUNTER_DIFF, (uint64_t)scd & 0xFFFF, 2);
     wr(m, DC_SYSTEM_TIME, (uint64_t)new_ref + offset, 8); /* the corrected local copy */
     moved += step < 0 ? -step : step;
     int jumped = moved > MOVE_NS;
@@ -551,6 +559,11 @@ static int pulse_esc(PyObject *esc, PyObject *firmware, PyObject *seg_ctx, i128 
                 goto done;
             if (in) {
                 PyObject *dobj = from_i128(d);
+                /* Segment.sync_until: ctx.pdi_ns = d, the PDI work's time */
+                if (dobj != NULL && set_attr(seg_ctx, s_pdi_ns, dobj) < 0) {
+                    Py_DECREF(dobj);
+                    goto done;
+                }
                 PyObject *r = dobj == NULL ? NULL : PyObject_CallMethodOneArg(fw, s_service, dobj);
                 Py_XDECREF(dobj);
                 if (r == NULL)
@@ -680,7 +693,7 @@ PyMODINIT_FUNC PyInit__dcloop(void)
         {&s_pending, "pending"}, {&s_next_sync0, "next_sync0"}, {&s_next_sync1, "next_sync1"},
         {&s_service, "service"}, {&s_sync0_ticks, "sync0_ticks"},
         {&s_sync0_late_ns, "sync0_late_ns"}, {&s_next_sync, "_next_sync"},
-        {&s_pulse_hint, "_pulse_hint"},
+        {&s_pulse_hint, "_pulse_hint"}, {&s_pdi_ns, "pdi_ns"},
     };
     if (intern_names(names, sizeof names / sizeof names[0]) < 0)
         return NULL;
@@ -697,6 +710,7 @@ PyMODINIT_FUNC PyInit__dcloop(void)
         PyModule_AddIntConstant(m, "DC_SYSTEM_TIME_DELAY", DC_SYSTEM_TIME_DELAY) < 0 ||
         PyModule_AddIntConstant(m, "DC_SYSTEM_TIME_DIFF", DC_SYSTEM_TIME_DIFF) < 0 ||
         PyModule_AddIntConstant(m, "DC_SPEED_COUNTER_START", DC_SPEED_COUNTER_START) < 0 ||
+        PyModule_AddIntConstant(m, "DC_SPEED_COUNTER_DIFF", DC_SPEED_COUNTER_DIFF) < 0 ||
         PyModule_AddIntConstant(m, "SYNC_LATCH_CONFIG", SYNC_LATCH_CONFIG) < 0 ||
         PyModule_AddIntConstant(m, "DC_START_TIME", DC_START_TIME) < 0 ||
         PyModule_AddIntConstant(m, "DC_SYNC0_CYCLE", DC_SYNC0_CYCLE) < 0 ||

@@ -22,6 +22,7 @@ from ecatsim.esc import regs
 from ecatsim.esc.dc import DcUnit
 from ecatsim.esc.eeprom import EepromUnit
 from ecatsim.esc.fmmu import FmmuMap, compile_fmmus, copy_bits
+from ecatsim.esc.mii import MiiUnit
 from ecatsim.esc.sm import SyncManager
 from ecatsim.esc.watchdog import Watchdog
 from ecatsim.spec.tables import load_registers
@@ -44,14 +45,13 @@ PASSIVE_SIDE_EFFECTS = frozenset(
         "ecat_event_request",  # maintained by the event logic (§5.31)
         "al_event_request",  # maintained by the event logic (§5.32)
         "sm_status",  # maintained by the SyncManager (§5.49 Table 89)
-        "mii_management",  # no PHY management emulated; masks only (§5.46)
         "dc_system_time_difference",  # maintained by the time loop (§5.50.2 Table 98)
         "dc_speed_counter_diff",  # maintained by the time loop (Table 100)
         "dc_latch_mode",  # plain value (Table 103)
         "dc_next_sync1",  # maintained by the SYNC unit (Table 111)
         "dc_latch_status",  # maintained by the latch unit (Tables 116, 117)
-        "dc_event_time",  # maintained by the SM event-time logic (§5.50.6)
-        "mfcio_parameter_ram",  # plain RAM until the MFCIO block lands (§5.47)
+        "dc_event_time",  # maintained by the SM event-time logic (§5.50.6, sm_event_time)
+        "mfcio_parameter_ram",  # plain RAM the MFCIO block reads at its runs (§5.47)
         "user_ram",  # plain RAM (§5.52)
     }
 )
@@ -69,6 +69,7 @@ class FrameContext:
         "frame_no",
         "irq_dirty",
         "logical_dirty",
+        "pdi_ns",
         "pending",
         "t_ns",
         "timers_dirty",
@@ -78,6 +79,9 @@ class FrameContext:
     def __init__(self) -> None:
         self.frame_no = 0
         self.t_ns = 0
+        #: host time of the PDI work in progress (the firmware's service, a PDI access):
+        #: the time base of PDI-side DC event times (0x09F8, 0x09FC) and activations
+        self.pdi_ns = 0
         self.irq_dirty = True
         self.addr_dirty = True
         self.logical_dirty = True
@@ -171,6 +175,7 @@ class Esc:
         "fmmus",
         "link_down",
         "mem",
+        "mii",
         "on_reset",
         "pdi_emulation",
         "pdram_ok",
@@ -210,6 +215,7 @@ class Esc:
             self.mem, position, start_ns=dc_start_ns, drift_ppm=dc_drift_ppm, hop_ns=dc_hop_ns
         )
         self.wd = Watchdog(self.mem)
+        self.mii = MiiUnit(self.mem)
         self.fmmus: tuple[FmmuMap, ...] = ()
         self.sm_windows: tuple[tuple[int, int, SyncManager], ...] = ()
         self.pdram_ok = False
@@ -241,6 +247,7 @@ class Esc:
         for addr, size, value in self.t.resets:
             m[addr : addr + size] = value.to_bytes(size, "little")
         m[regs.ESC_CONFIG] = (m[regs.ESC_CONFIG] & 0xFE) | int(self.pdi_emulation)
+        m[regs.DL_STATUS] |= 0x04  # enhanced link detection: 1 until the first EEPROM load
         for s in self.sm:
             s.configure(0, 0, 0, False)
         self.fmmus = ()
@@ -251,6 +258,7 @@ class Esc:
         self.wd.deadline_ns = 0
         self.wd.reconfigure()
         m[regs.WD_STATUS_PD] &= 0xFE  # "expired" until first triggered (reset value 0)
+        self.mii.reset()
         self.pdram_ok = self.eeprom.load(first=True)
         if self.pdram_ok:
             m[regs.DL_STATUS] |= 0x02  # PDI watchdog reloaded: the firmware is running
@@ -298,6 +306,8 @@ class Esc:
         m[regs.DL_STATUS] = lo
         m[regs.DL_STATUS + 1] = hi
         self.port1_closed = closed1
+        self.mii.set_link(0, link0)
+        self.mii.set_link(1, link1)
         if old != (lo | (hi << 8)):
             self._set_ecat_event(regs.ECAT_EV_DL_STATUS)
             self.ctx.topology_dirty = True
@@ -575,7 +585,9 @@ class Esc:
 
     def _route_fmmus(self) -> None:
         """Give each byte-aligned FMMU the SM whose window holds its whole physical range
-        (exactly one window may touch it), compiled when FMMUs or SM windows change."""
+        (exactly one window may touch it), compiled when FMMUs or SM windows change. An
+        SM with the ECAT latch event (0x0806+8n bit 6) is not given: its event time 0x09F0
+        is kept by the window path (the compiled walk serves routed FMMUs only)."""
         for f in self.fmmus:
             f.sm = None
             if f.aligned:
@@ -583,7 +595,9 @@ class Esc:
                 pe = ps + (f.lstop - f.lstart)
                 hits = self._hits(ps, pe)
                 if len(hits) == 1 and hits[0][0] <= ps and pe <= hits[0][1]:
-                    f.sm = hits[0][2]
+                    sm = hits[0][2]
+                    if not self.mem[sm.status_addr + 1] & regs.SM_ACT_LATCH_ECAT:
+                        f.sm = sm
 
     # -- plain memory ------------------------------------------------------------------
 
@@ -601,7 +615,23 @@ class Esc:
         e = min(end, regs.PDRAM_END)
         if e > ado:
             self.mem[ado:e] = data[: e - ado]
+            for sm in self.sm:  # an SM of length 1 is not activated: the watchdog trigger
+                if sm.length == 1 and ado <= sm.start < e and self._wd_tap(sm):
+                    self.wd_pd_trigger()
+                    break
         return True
+
+    @staticmethod
+    def _wd_tap(sm: SyncManager) -> bool:
+        """An enabled write SM of length 1 with the watchdog trigger bit: a write of its
+        byte (plain memory) triggers the process-data watchdog. Ref: TMC8460 §5.49
+        Table 87 ("if set to 1, only Watchdog Trigger is generated if configured")."""
+        return (
+            sm.enabled
+            and not sm.locked
+            and sm.ecat_side_writes
+            and bool(sm.control & regs.SM_CTRL_WATCHDOG)
+        )
 
     def _plain_read(self, ado: int, out: memoryview) -> bool:
         end = ado + len(out)
@@ -789,19 +819,40 @@ class Esc:
 
     def _ew_eeprom_config(self, ra: int, rs: int, old: bytes) -> None:
         """Ref: TMC8460 §5.45 Table 60."""
-        self.eeprom.ecat_config_written()
+        self.eeprom.ecat_config_written(self.ctx.frame_no)
 
     def _pw_eeprom_pdi_access(self, ra: int, rs: int, old: bytes) -> None:
         """PDI may take the EEPROM only if offered (0x0500.0=1, .1=0). Ref: Table 61."""
         cfg = self.mem[regs.EEPROM_CONFIG]
         if not (cfg & 0x01) or cfg & 0x02:
             self.mem[ra] = old[0]
+        self.eeprom.ownership_changed(self.ctx.frame_no)
+
+    def _eeprom_control(self, ra: int, old: bytes, pdi: bool) -> None:
+        o = old[0] | (old[1] << 8)
+        wrote_cmd = self.wr_s <= ra + 1 < self.wr_e
+        self.eeprom.control_written(o, self.ctx.frame_no, wrote_cmd, pdi)
+        self._esc_config_loaded()
 
     def _ew_eeprom_control(self, ra: int, rs: int, old: bytes) -> None:
         """Ref: TMC8460 §5.45 Table 62."""
-        o = old[0] | (old[1] << 8)
-        wrote_cmd = self.wr_s <= ra + 1 < self.wr_e
-        self.eeprom.ecat_control_written(o, self.ctx.frame_no, wrote_cmd)
+        self._eeprom_control(ra, old, False)
+
+    def _pw_eeprom_control(self, ra: int, rs: int, old: bytes) -> None:
+        """The PDI runs the command machine while it has EEPROM control (0x0500.0 or
+        0x0501.0). Ref: TMC8460 §5.45 Tables 59-62."""
+        self._eeprom_control(ra, old, True)
+
+    def _esc_config_loaded(self) -> None:
+        """After an EEPROM reload: a SYNC out unit that 0x0141.2 now disables stops.
+        Ref: TMC8460 §5.26 Table 38 bit 2."""
+        dc = self.dc
+        if not self.mem[regs.ESC_CONFIG] & regs.ESC_CFG_SYNC_OUT and (
+            dc.next_sync0 is not None or dc.next_sync1 is not None
+        ):
+            dc.next_sync0 = dc.next_sync1 = None
+            self.mem[regs.DC_ACTIVATION_STATUS] &= 0xFC
+            self.ctx.timers_dirty = True
 
     def _er_eeprom_control(self, ra: int, rs: int) -> None:
         """Ref: TMC8460 §5.45 Table 62 note * (write enable self-clears)."""
@@ -809,11 +860,98 @@ class Esc:
 
     def _ew_eeprom_address(self, ra: int, rs: int, old: bytes) -> None:
         """Ref: TMC8460 §5.45 Table 63."""
-        self.eeprom.ecat_data_written(ra, old)
+        self.eeprom.data_written(ra, old, False)
+
+    def _pw_eeprom_address(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.45 Table 63."""
+        self.eeprom.data_written(ra, old, True)
 
     def _ew_eeprom_data(self, ra: int, rs: int, old: bytes) -> None:
         """Ref: TMC8460 §5.45 Table 64."""
-        self.eeprom.ecat_data_written(ra, old)
+        self.eeprom.data_written(ra, old, False)
+
+    def _pw_eeprom_data(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.45 Table 64."""
+        self.eeprom.data_written(ra, old, True)
+
+    # -- MII management interface (TMC8460 §5.46) -----------------------------------------
+
+    def _ew_mii_control(self, ra: int, rs: int, old: bytes) -> None:
+        """ECAT writes 0x0510 only while it has MI control. Ref: §5.46 Table 67 r/(w)."""
+        if self.mii.pdi_owns():
+            self.mem[ra : ra + rs] = old
+            return
+        wrote_cmd = self.wr_s <= ra + 1 < self.wr_e
+        self.mii.control_written(old[0] | (old[1] << 8), wrote_cmd, self.ctx.frame_no, False)
+
+    def _pw_mii_control(self, ra: int, rs: int, old: bytes) -> None:
+        """The PDI writes commands only while it has MI control. Ref: Table 67 r/(w)."""
+        if not self.mii.pdi_owns():
+            self.mem[ra : ra + rs] = old
+            return
+        wrote_cmd = self.wr_s <= ra + 1 < self.wr_e
+        self.mii.control_written(old[0] | (old[1] << 8), wrote_cmd, self.ctx.frame_no, True)
+
+    def _er_mii_control(self, ra: int, rs: int) -> None:
+        """Ref: TMC8460 §5.46 Table 67 note * (write enable self-clears at the next SOF)."""
+        self.mii.refresh_write_enable(self.ctx.frame_no)
+
+    def _pr_mii_control(self, ra: int, rs: int) -> None:
+        """Ref: TMC8460 §5.46 Table 67 note *."""
+        self.mii.refresh_write_enable(self.ctx.frame_no)
+
+    def _ew_mii_phy(self, ra: int, rs: int, old: bytes) -> None:
+        """PHY address, register and data: written by the side with MI control.
+        Ref: TMC8460 §5.46 Tables 68-70 r/(w)."""
+        if self.mii.pdi_owns():
+            self.mem[ra : ra + rs] = old
+        elif ra == regs.MII_PHY_ADDRESS:
+            self.mii.show_address()
+
+    def _pw_mii_phy(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.46 Tables 68-70 r/(w)."""
+        if not self.mii.pdi_owns():
+            self.mem[ra : ra + rs] = old
+        elif ra == regs.MII_PHY_ADDRESS:
+            self.mii.show_address()
+
+    def _ew_mii_ecat_access(self, ra: int, rs: int, old: bytes) -> None:
+        """ECAT claims or frees MI access only while 0x0517.0 = 0. Ref: Table 71 note."""
+        if self.mem[regs.MII_PDI_ACCESS] & 0x01:
+            self.mem[ra] = old[0]
+
+    def _ew_mii_pdi_access(self, ra: int, rs: int, old: bytes) -> None:
+        """Bit 1 (force PDI access state) resets 0x0517.0. Ref: TMC8460 §5.46 Table 72."""
+        if self.mem[ra] & 0x02:
+            self.mem[ra] &= 0xFE
+        self.mii.ownership_changed()
+
+    def _pw_mii_pdi_access(self, ra: int, rs: int, old: bytes) -> None:
+        """The PDI takes MI access only if ECAT allows it (0x0516.0 = 0, 0x0517.1 = 0) and
+        the EEPROM is loaded (0x0110.0 = 1); it can always give it back. Ref: Table 72."""
+        m = self.mem
+        take = m[ra] & 0x01 and not old[0] & 0x01
+        if take and (
+            m[regs.MII_ECAT_ACCESS] & 0x01 or old[0] & 0x02 or not m[regs.DL_STATUS] & 0x01
+        ):
+            m[ra] = old[0]
+        self.mii.ownership_changed()
+
+    def _ew_mii_port_status(self, ra: int, rs: int, old: bytes) -> None:
+        """Writing any PHY port status register clears bits 3 and 5 of all four (by the
+        side with MI control). Ref: TMC8460 §5.46 Table 73."""
+        if not self.mii.pdi_owns():
+            self._clear_port_status()
+
+    def _pw_mii_port_status(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.46 Table 73 r/(w/clr)."""
+        if self.mii.pdi_owns():
+            self._clear_port_status()
+
+    def _clear_port_status(self) -> None:
+        m = self.mem
+        for a in range(regs.PHY_PORT_STATUS, regs.PHY_PORT_STATUS + 4):
+            m[a] &= ~0x28 & 0xFF
 
     def _ew_fmmu(self, ra: int, rs: int, old: bytes) -> None:
         """Recompile the FMMU maps when any FMMU register changes. Ref: TMC8460 §5.48."""
@@ -835,6 +973,8 @@ class Esc:
         new = self.mem[ra]
         if (new ^ old[0]) & 0x01:
             self._sm_restart(n)
+        elif (new ^ old[0]) & regs.SM_ACT_LATCH_ECAT:
+            self._route_fmmus()  # an SM with ECAT event times is left to the Python path
         if new != old[0]:
             self.set_al_event(regs.EV_SM_ACTIVATION)
 
@@ -907,25 +1047,47 @@ class Esc:
 
     def _ew_dc_speed_counter_start(self, ra: int, rs: int, old: bytes) -> None:
         """Writing 0x0930 resets 0x092C and 0x0932. Ref: TMC8460 §5.50.2 Table 99."""
-        self.dc.reset_filters()
+        self.dc.reset_speed_counter()
 
     def _ew_dc_filter_depth(self, ra: int, rs: int, old: bytes) -> None:
-        """Writing 0x0934 resets 0x092C. Ref: TMC8460 §5.50.2 Tables 101, 102."""
-        self.dc.reset_filters()
+        """Writing 0x0934 resets 0x092C; 0x0935 resets the internal speed counter filter
+        only. Ref: TMC8460 §5.50.2 Tables 101, 102."""
+        if ra == regs.DC_TIME_DIFF_FILTER:
+            self.dc.reset_time_difference()
 
     def _ew_dc_cyclic_unit_control(self, ra: int, rs: int, old: bytes) -> None:
-        """Ref: TMC8460 §5.50.3 Table 104."""
+        """Bit 0: the SYNC out unit, bits 4/5: the latch units, 1 = PDI controlled; the
+        owner writes the unit's registers and gets its events (read where they are
+        used). Ref: TMC8460 §5.50.3 Table 104."""
 
-    def _ew_dc_activation(self, ra: int, rs: int, old: bytes) -> None:
-        """Ref: TMC8460 §5.50.4 Table 105 (bit 7 self-clearing)."""
-        self.mem[ra] &= 0x7F
+    def _ecat_sys_now(self) -> int:
+        """The system time at which the frame being processed reaches this ESC."""
+        return self.dc.system_time(self.dc.arrival_ns(self.ctx.t_ns))
+
+    def _sync_owner_is(self, pdi: bool) -> bool:
+        """0x0980.0: the SYNC out unit's registers are written by its owner only.
+        Ref: TMC8460 Table 104, notes of Tables 105, 110, 112, 113."""
+        return bool(self.mem[regs.DC_CYCLIC_UNIT_CONTROL] & regs.CUC_SYNC_PDI) == pdi
+
+    def _activation(self, ra: int, old: bytes, now_sys: int) -> None:
+        self.mem[ra] &= 0x7F  # bit 7 (debug pulse) self-clearing
         if self.mem[ra] != old[0]:
-            self.dc.activation_written()
+            self.dc.activation_written(now_sys)
             self.ctx.timers_dirty = True
 
+    def _ew_dc_activation(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.50.4 Table 105 (written by the SYNC unit's owner, 0x0980.0)."""
+        if not self._sync_owner_is(False):
+            self.mem[ra] = old[0]
+            return
+        self._activation(ra, old, self._ecat_sys_now())
+
     def _pw_dc_activation(self, ra: int, rs: int, old: bytes) -> None:
-        """The PDI may run the SYNC unit too. Ref: TMC8460 §5.50.4 Table 105."""
-        self._ew_dc_activation(ra, rs, old)
+        """The PDI runs the SYNC unit when it owns it (0x0980.0 = 1). Ref: Table 105."""
+        if not self._sync_owner_is(True):
+            self.mem[ra] = old[0]
+            return
+        self._activation(ra, old, self.dc.system_time(self.ctx.pdi_ns))
 
     def sync0_tick(self, now_ns: int) -> None:
         """A due SYNC0 pulse: status, and AL event 0x0220.2 if mapped. Ref: §5.32 bit 2."""
@@ -947,33 +1109,112 @@ class Esc:
         if not (m[regs.DC_PULSE_LENGTH] | m[regs.DC_PULSE_LENGTH + 1]):
             m[ra] &= 0xFE
 
+    def _start_time(self, ra: int, rs: int, old: bytes, pdi: bool, now_sys: int) -> None:
+        """Start time: written by the SYNC unit's owner while the unit is off. Written as
+        32 bits it is extended to 64 (0x0981.4, or auto-activation 0x0981.3); with
+        auto-activation the write starts the unit. Ref: TMC8460 Tables 105, 110."""
+        m = self.mem
+        act = m[regs.DC_ACTIVATION]
+        if act & 0x01 or not self._sync_owner_is(pdi):
+            m[ra : ra + rs] = old
+            return
+        if act & 0x18 and self.wr_e <= ra + 4:
+            self.dc.extend_start_time(now_sys)
+        if act & 0x08:
+            m[regs.DC_ACTIVATION] = act | 0x01
+            self._activation(regs.DC_ACTIVATION, bytes([act]), now_sys)
+
     def _ew_dc_start_time(self, ra: int, rs: int, old: bytes) -> None:
-        """Start time is writable only while the SYNC unit is off. Ref: Table 110."""
-        if self.mem[regs.DC_ACTIVATION] & 0x01:
-            self.mem[ra : ra + rs] = old
+        """Ref: TMC8460 §5.50.4 Table 110."""
+        self._start_time(ra, rs, old, False, self._ecat_sys_now())
+
+    def _pw_dc_start_time(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.50.4 Table 110."""
+        self._start_time(ra, rs, old, True, self.dc.system_time(self.ctx.pdi_ns))
 
     def _ew_dc_cycle_time(self, ra: int, rs: int, old: bytes) -> None:
+        """Written by the SYNC unit's owner (0x0980.0). Ref: TMC8460 Tables 112, 113."""
+        if not self._sync_owner_is(False):
+            self.mem[ra : ra + rs] = old
+
+    def _pw_dc_cycle_time(self, ra: int, rs: int, old: bytes) -> None:
         """Ref: TMC8460 §5.50.4 Tables 112, 113."""
+        if not self._sync_owner_is(True):
+            self.mem[ra : ra + rs] = old
+
+    def _latch_pdi(self, unit: int) -> bool:
+        """0x0980.4/.5: latch unit ``unit`` is PDI controlled. Ref: TMC8460 Table 104."""
+        return bool(self.mem[regs.DC_CYCLIC_UNIT_CONTROL] & (regs.CUC_LATCH0_PDI << unit))
 
     def _ew_dc_latch_control(self, ra: int, rs: int, old: bytes) -> None:
+        """Written by the latch unit's owner (0x0980.4/.5). Ref: Tables 114, 115."""
+        if self._latch_pdi(ra - regs.DC_LATCH0_CONTROL):
+            self.mem[ra] = old[0]
+
+    def _pw_dc_latch_control(self, ra: int, rs: int, old: bytes) -> None:
         """Ref: TMC8460 §5.50.5 Tables 114, 115."""
+        if not self._latch_pdi(ra - regs.DC_LATCH0_CONTROL):
+            self.mem[ra] = old[0]
+
+    def _latch_time_read(self, ra: int, pdi: bool) -> bool:
+        """The owner's read of a latch time clears its event flag; True if no unit of that
+        owner has an event flag left. Ref: TMC8460 Tables 116-121."""
+        idx = (ra - regs.DC_LATCH0_POS) // 8
+        unit = idx >> 1
+        if self._latch_pdi(unit) != pdi:
+            return False
+        m = self.mem
+        m[regs.DC_LATCH0_STATUS + unit] &= ~(1 << (idx & 1)) & 0xFF
+        for u in (0, 1):
+            if self._latch_pdi(u) == pdi and m[regs.DC_LATCH0_STATUS + u] & 0x03:
+                return False
+        return True
 
     def _er_dc_latch_time(self, ra: int, rs: int) -> None:
-        """ECAT read of a latch time clears its status flag and the DC latch event.
-        Ref: Tables 118-121 note; §5.24 Table 35 (0x0210.0)."""
-        idx = (ra - regs.DC_LATCH0_POS) // 8
-        status = regs.DC_LATCH0_STATUS + (idx >> 1)
-        self.mem[status] &= ~(1 << (idx & 1)) & 0xFF
-        self._clr_ecat_event(regs.ECAT_EV_DC_LATCH)
+        """ECAT read of an ECAT-controlled latch time clears its status flag, and the DC
+        latch event 0x0210.0 once no such flag is left. Ref: Tables 118-121; Table 45."""
+        if self._latch_time_read(ra, False):
+            self._clr_ecat_event(regs.ECAT_EV_DC_LATCH)
+
+    def _pr_dc_latch_time(self, ra: int, rs: int) -> None:
+        """PDI read of a PDI-controlled latch time clears its status flag, and AL event
+        0x0220.1 once no such flag is left. Ref: Tables 118-121 note *; Table 46 bit 1."""
+        if self._latch_time_read(ra, True):
+            self.clr_al_event(regs.EV_DC_LATCH)
 
     def latch_input(self, unit: int, level: bool, host_ns: int) -> None:
-        """The LATCH ``unit`` pin is driven to ``level`` at host time ``host_ns``. The pin
-        is a latch input only when 0x0151 says so (bit 2: SYNC0/LATCH0, bit 6:
-        SYNC1/LATCH1; 0 = latch input). Ref: TMC8460 §5.28.2 Table 42, §5.50.5."""
+        """The LATCH ``unit`` pin is driven to ``level`` at host time ``host_ns``. The
+        latch inputs work beside the SYNC outputs whatever 0x0151 bits 2/6 say (Table 42
+        note *), while 0x0141.3 has the latch in unit enabled. A captured edge raises the
+        DC latch event of the unit's owner: ECAT 0x0210.0 or AL 0x0220.1 (0x0980.4/.5).
+        Ref: TMC8460 §5.28.2 Table 42, §5.26 Table 38, §5.50.3 Table 104, §5.50.5."""
         m = self.mem
-        if m[regs.SYNC_LATCH_CONFIG] & (0x04 if unit == 0 else 0x40):
-            return  # the pin is a SYNC output
+        if not m[regs.ESC_CONFIG] & regs.ESC_CFG_LATCH_IN:
+            return  # the latch in unit is disabled (power saving)
         if bool(m[regs.DC_LATCH0_STATUS + unit] & 0x04) == level:
             return  # no edge
         if self.dc.latch_edge(unit, level, host_ns):
-            self._set_ecat_event(regs.ECAT_EV_DC_LATCH)
+            if self._latch_pdi(unit):
+                self.set_al_event(regs.EV_DC_LATCH)
+            else:
+                self._set_ecat_event(regs.ECAT_EV_DC_LATCH)
+
+    # -- SyncManager event times (TMC8460 §5.50.6) ----------------------------------------
+
+    def sm_event_time(self, reg: int) -> None:
+        """An SM with a latch event bit (0x0806+8n bit 6/7) exchanged a buffer: 0x09F0
+        takes the local time of the frame's beginning (ECAT), 0x09F8/0x09FC the local time
+        of the PDI access. Ref: TMC8460 §5.50.6 Tables 122-124, §5.49 Table 90."""
+        ctx = self.ctx
+        t = self.dc.arrival_ns(ctx.t_ns) if reg == regs.DC_ECAT_EVENT_TIME else ctx.pdi_ns
+        _U32.pack_into(self.mem, reg, self.dc.local_time(t) & 0xFFFFFFFF)
+
+    def pdi_buffer_event(self, sm: SyncManager, first: bool, last: bool) -> None:
+        """A PDI access of SM ``sm``'s buffer: its start address is a PDI buffer start
+        event, its last byte a PDI buffer change event, if 0x0806+8n bit 7 asks for them.
+        Ref: TMC8460 §5.49 Table 90 bit 7, §5.50.6 Tables 123, 124."""
+        if self.mem[sm.status_addr + 1] & regs.SM_ACT_LATCH_PDI:
+            if first:
+                self.sm_event_time(regs.DC_PDI_START_EVENT_TIME)
+            if last:
+                self.sm_event_time(regs.DC_PDI_CHANGE_EVENT_TIME)

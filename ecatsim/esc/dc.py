@@ -18,6 +18,9 @@ MASK64 = (1 << 64) - 1
 #: a local-clock correction larger than this invalidates cached SYNC deadlines (ns); the
 #: segment's pulse hint keeps a larger margin (segment.PULSE_HINT_MARGIN_NS)
 MOVE_NS = 50_000
+#: the near future of the start time plausibility check (0x0981.6 = 1 / 0). Ref: Table 105
+NEAR_FUTURE_SHORT = 1 << 31
+NEAR_FUTURE_LONG = 1 << 63
 
 
 class DcUnit:
@@ -143,6 +146,7 @@ class DcUnit:
         self.local_ref -= step
         mag = min(abs(diff), 0x7FFFFFFF)
         _U32.pack_into(m, regs.DC_SYSTEM_TIME_DIFF, mag | (0x80000000 if diff < 0 else 0))
+        self._speed_counter_diff(start)
         # 0x0910 reads back the corrected local copy (refresh_system_time at time t)
         _U64.pack_into(m, regs.DC_SYSTEM_TIME, (self.local_ref + offset) & MASK64)
         self.moved_ns += abs(step)
@@ -160,25 +164,51 @@ class DcUnit:
 
     # -- SYNC out unit ---------------------------------------------------------------
 
-    def activation_written(self) -> None:
-        """0x0981 bit 0 starts the SYNC unit at the start time 0x0990; bit 1 enables SYNC0.
+    def activation_written(self, now_sys: int) -> None:
+        """0x0981 bit 0 starts the SYNC unit at the start time 0x0990; bits 1/2 enable
+        SYNC0/SYNC1. ``now_sys`` is the system time of the write.
 
-        Ref: TMC8460 §5.50.4 Tables 105, 107, 110.
+        The unit waits for the start time; one in the past is reached only after the system
+        time wraps (no pulse), unless the plausibility check (bit 5) is on: a start time
+        outside the near future (bit 6: 2^31 ns, else 2^63 ns) then starts the pulses at
+        once (0x0990 = ``now_sys``) and sets 0x0984.2. Nothing runs while 0x0141.2 has
+        the SYNC out unit disabled.
+        Ref: TMC8460 §5.50.4 Tables 105, 107, 110; §5.26 Table 38 bit 2; decision R5-5.
         """
         m = self.mem
         act = m[regs.DC_ACTIVATION]
         self.next_sync1 = None
         self.sync1_countdown = 1
-        m[regs.DC_ACTIVATION_STATUS] &= 0xFC
-        if act & 0x01 and act & 0x06:
-            start = int(_U64.unpack_from(m, regs.DC_START_TIME)[0])
-            self.next_sync0 = start
-            if act & 0x02:
-                m[regs.DC_ACTIVATION_STATUS] |= 0x01  # first SYNC0 pulse pending
-            if act & 0x04:
-                m[regs.DC_ACTIVATION_STATUS] |= 0x02  # first SYNC1 pulse pending
-        else:
-            self.next_sync0 = None
+        self.next_sync0 = None
+        m[regs.DC_ACTIVATION_STATUS] &= 0xF8
+        if not (act & 0x01 and act & 0x06 and m[regs.ESC_CONFIG] & regs.ESC_CFG_SYNC_OUT):
+            return
+        if act & 0x02:
+            m[regs.DC_ACTIVATION_STATUS] |= 0x01  # first SYNC0 pulse pending
+        if act & 0x04:
+            m[regs.DC_ACTIVATION_STATUS] |= 0x02  # first SYNC1 pulse pending
+        start = int(_U64.unpack_from(m, regs.DC_START_TIME)[0])
+        ahead = (start - now_sys) & MASK64
+        near = NEAR_FUTURE_SHORT if act & 0x40 else NEAR_FUTURE_LONG
+        if act & 0x20 and ahead >= near:
+            m[regs.DC_ACTIVATION_STATUS] |= 0x04  # start time out of the near future
+            start = now_sys & MASK64
+            _U64.pack_into(m, regs.DC_START_TIME, start)
+        elif ahead >= NEAR_FUTURE_LONG:
+            return  # in the past: reached after the wrap of the 64-bit system time
+        self.next_sync0 = start
+
+    def extend_start_time(self, now_sys: int) -> None:
+        """A start time written as 32 bits gets the upper 32 bits that put it nearest to
+        ``now_sys`` (within +-2^31 ns). Ref: TMC8460 Table 105 bit 4, Table 110 note."""
+        low = int(_U32.unpack_from(self.mem, regs.DC_START_TIME)[0])
+        v = (now_sys & ~0xFFFFFFFF) | low
+        d = ((v - now_sys + (1 << 63)) & MASK64) - (1 << 63)
+        if d >= 1 << 31:
+            v -= 1 << 32
+        elif d < -(1 << 31):
+            v += 1 << 32
+        _U64.pack_into(self.mem, regs.DC_START_TIME, v & MASK64)
 
     def sync0_deadline(self) -> int | None:
         """Host time of the next SYNC0 pulse."""
@@ -271,7 +301,24 @@ class DcUnit:
             m[status] |= bit
         return True
 
-    def reset_filters(self) -> None:
-        """Writing 0x0930/0x0934 resets the difference and speed counter diff. Ref: Table 99."""
+    def _speed_counter_diff(self, start: int) -> None:
+        """0x0932: the loop's rate correction as the speed counter shows it, solving
+        Table 100's deviation = diff / (5 (start + diff + 2)(start - diff + 2)) to first
+        order (diff = 5 x deviation x (start + 2)^2), in range +-(start - 0x7F); positive
+        when the local clock period is the longer one (the loop speeds it up).
+        Ref: TMC8460 §5.50.2 Tables 99, 100; decision R5-7."""
+        lim = max(0, start - 0x7F)
+        x = int(self.rate_ppb * 5e-9 * (start + 2) * (start + 2))
+        x = max(-lim, min(lim, x))
+        struct.pack_into("<H", self.mem, regs.DC_SPEED_COUNTER_DIFF, x & 0xFFFF)
+
+    def reset_speed_counter(self) -> None:
+        """Writing 0x0930 resets the difference 0x092C and the speed counter: 0x0932 and
+        the rate correction it shows. Ref: TMC8460 §5.50.2 Table 99."""
         _U32.pack_into(self.mem, regs.DC_SYSTEM_TIME_DIFF, 0)
         struct.pack_into("<H", self.mem, regs.DC_SPEED_COUNTER_DIFF, 0)
+        self._set_rate(0.0)
+
+    def reset_time_difference(self) -> None:
+        """Writing 0x0934 resets the system time difference 0x092C. Ref: Table 101."""
+        _U32.pack_into(self.mem, regs.DC_SYSTEM_TIME_DIFF, 0)

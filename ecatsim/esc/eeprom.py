@@ -89,8 +89,12 @@ class EepromUnit:
         """Load the ESC configuration area into the registers (power-on or reload).
 
         Returns True if the checksum was good. On a checksum error nothing is taken
-        over, 0x0502.11 and .12 are set and the PD RAM stays inaccessible.
-        Ref: TMC8460 §5.45 Table 62 bits 11/12, §5.19 Table 30 bit 0, §5.10.
+        over, 0x0502.11 and .12 are set and the PD RAM stays inaccessible. Word 0 goes to
+        0x0140/0x0141 at every load; the alias (word 4), enhanced link detection 0x0110.2
+        (word 0 bit 9 or bits 15:12) and the FIFO size (word 5) only at the ``first`` one
+        (the first good load since power-on or reset).
+        Ref: TMC8460 §5.45 Table 62 bits 11/12, §5.19 Table 30 bits 0/2, §5.10, §5.17,
+        §5.26 Table 38.
         """
         st = self._status() & ~(ST_CHECKSUM_ERROR | ST_NOT_LOADED | CMD_MASK | ST_BUSY)
         if len(self.image) > 2048:  # more than 16 kbit: two address bytes
@@ -104,11 +108,13 @@ class EepromUnit:
             v = self._word(word)
             m[reg] = v & 0xFF
             m[reg + 1] = v >> 8
-        _U16.pack_into(m, regs.STATION_ALIAS, self._word(4))
         if first:
+            _U16.pack_into(m, regs.STATION_ALIAS, self._word(4))
             w5 = self._word(5)
             fifo = ((~w5 >> 9) & 0x7) if w5 != 0xFFFF else 7
             m[regs.DL_CONTROL + 2] = (m[regs.DL_CONTROL + 2] & 0xF8) | fifo
+            enhanced = self._word(0) & 0xF200
+            m[regs.DL_STATUS] = (m[regs.DL_STATUS] & 0xFB) | (0x04 if enhanced else 0)
         self._load_mfcio_config()
         m[regs.PDI_INFORMATION] = (m[regs.PDI_INFORMATION] & ~0x0E) | 0x06  # configured, active
         m[regs.DL_STATUS] |= 0x01
@@ -129,28 +135,39 @@ class EepromUnit:
             MFCIO_CONFIG_SIZE, b"\x00"
         )
 
-    # -- ECAT command machine ---------------------------------------------------------
+    # -- the command machine (ECAT's or the PDI's) -------------------------------------
 
-    def ecat_config_written(self) -> None:
+    def ecat_config_written(self, frame_no: int) -> None:
         """0x0500 bit 1 forces ECAT access: clears 0x0501.0. Ref: §5.45 Table 60."""
         if self.mem[regs.EEPROM_CONFIG] & 0x02:
             self.mem[regs.EEPROM_PDI_ACCESS] &= 0xFE
+        self.ownership_changed(frame_no)
+
+    def ownership_changed(self, frame_no: int) -> None:
+        """0x0502.0 is always 1 while the PDI has EEPROM control; with ECAT in control it
+        is ECAT's write enable of this frame. Ref: TMC8460 §5.45 Table 62 bit 0."""
+        if self.pdi_owns():
+            self.mem[regs.EEPROM_CONTROL] |= ST_WRITE_ENABLE
+        else:
+            self.ecat_refresh_status(frame_no)
 
     def ecat_refresh_status(self, frame_no: int) -> None:
         """Write enable self-clears at the start of the next frame. Ref: §5.45 Table 62 note *."""
-        if self.we_frame != frame_no:
+        if self.we_frame != frame_no and not self.pdi_owns():
             self.mem[regs.EEPROM_CONTROL] &= ~ST_WRITE_ENABLE & 0xFF
 
-    def ecat_control_written(self, old: int, frame_no: int, wrote_cmd: bool) -> bool:
-        """Run the command written to 0x0502; return True if the image changed.
+    def control_written(self, old: int, frame_no: int, wrote_cmd: bool, pdi: bool) -> bool:
+        """Run the command written to 0x0502 by ECAT or, while it has EEPROM control, by
+        the PDI (its write enable is always 1); return True if the image changed.
 
-        Ref: TMC8460 §5.45 Table 62 (commands 000/001/010/100, error bits, write enable).
+        Ref: TMC8460 §5.45 Table 62 (commands 000/001/010/100, error bits, write enable,
+        r/(w): write access depends upon the assignment of the EEPROM interface).
         """
         new = self._status()
-        if self.pdi_owns():
+        if self.pdi_owns() != pdi:
             self._set_status(old)
             return False
-        if new & ST_WRITE_ENABLE:
+        if pdi or new & ST_WRITE_ENABLE:
             self.we_frame = frame_no
         if not wrote_cmd:
             return False
@@ -169,7 +186,7 @@ class EepromUnit:
             _U16.pack_into(m, regs.EEPROM_DATA + 2, self._word(addr + 1))
             m[regs.EEPROM_DATA + 4 : regs.EEPROM_DATA + 8] = b"\x00\x00\x00\x00"
         elif cmd == CMD_WRITE:
-            if self.we_frame != frame_no:
+            if self.we_frame != frame_no and not pdi:
                 st |= ST_WE_ERROR
             else:
                 st &= ~ST_WE_ERROR
@@ -182,7 +199,7 @@ class EepromUnit:
         elif cmd == CMD_RELOAD:
             st &= ~ST_WE_ERROR
             self._set_status(st)
-            self.load(first=False)
+            self.load(first=bool(old & ST_NOT_LOADED))  # the first good load since reset
             st = self._status()
         else:
             st |= ST_ACK_ERROR
@@ -191,8 +208,8 @@ class EepromUnit:
             self.on_write()
         return changed
 
-    def ecat_data_written(self, reg: int, old: bytes) -> None:
-        """Address and data registers are writable by ECAT only while ECAT owns the
-        interface. Ref: §5.45 Tables 63, 64 (r/(w))."""
-        if self.pdi_owns():
+    def data_written(self, reg: int, old: bytes, pdi: bool) -> None:
+        """Address and data registers are writable by the side that owns the interface
+        (ECAT or the PDI). Ref: §5.45 Tables 63, 64 (r/(w))."""
+        if self.pdi_owns() != pdi:
             self.mem[reg : reg + len(old)] = old

@@ -127,6 +127,11 @@ class Pdi:
         ctx = self._esc.ctx
         return ctx.frame_no, ctx.t_ns
 
+    def access_time(self, now_ns: int) -> None:
+        """The host time of the PDI accesses that follow (an external microcontroller's
+        SPI transfer): the time base of PDI-side DC event times (§5.50.6) and activations."""
+        self._esc.ctx.pdi_ns = now_ns
+
     def operational(self) -> bool:
         """DL status 0x0110.0: EEPROM loaded, PDI operational. Ref: §5.19 Table 30."""
         return bool(self._esc.mem[regs.DL_STATUS] & 0x01)
@@ -144,6 +149,7 @@ class Pdi:
                         return bytes(n)
                     out = bytearray(n)
                     sm.reader_read(addr - ws, memoryview(out))
+                    esc.pdi_buffer_event(sm, addr == ws, end - ws >= sm.length)
                     return bytes(out)
             if not esc.pdram_ok:
                 return bytes(n)
@@ -172,6 +178,7 @@ class Pdi:
                 if not sm.pdi_may_write():
                     return False
                 sm.writer_write(addr - ws, data)
+                esc.pdi_buffer_event(sm, addr == ws, end - ws >= sm.length)
                 return True
         if addr >= regs.REGISTER_END:
             if not esc.pdram_ok:
@@ -269,6 +276,7 @@ class Pdi:
             return None
         out = bytearray(sm.length)
         sm.reader_read(0, memoryview(out))
+        self._esc.pdi_buffer_event(sm, True, True)
         return bytes(out)
 
     def sm_write(self, n: int, data: bytes) -> bool:
@@ -279,6 +287,7 @@ class Pdi:
         if len(data) != sm.length:
             data = bytes(data[: sm.length]).ljust(sm.length, b"\x00")
         sm.writer_write(0, data)
+        self._esc.pdi_buffer_event(sm, True, True)
         return True
 
     def sm_deactivate(self, n: int, off: bool) -> None:

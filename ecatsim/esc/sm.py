@@ -26,6 +26,10 @@ class SmHost(Protocol):
 
     def wd_pd_trigger(self) -> None: ...
 
+    def sm_event_time(self, reg: int) -> None:
+        """Take the SyncManager event time ``reg`` (0x09F0, 0x09F8 or 0x09FC) now."""
+        ...
+
 
 class SyncManager:
     """One SyncManager channel (state machine and redirection)."""
@@ -99,7 +103,8 @@ class SyncManager:
         self.control = control
         self.mailbox = (control & regs.SM_MODE_MASK) == regs.SM_MODE_MAILBOX
         self.ecat_side_writes = (control & regs.SM_DIR_MASK) == regs.SM_DIR_WRITE
-        self.active = active and length > 0
+        # a length of 1 does not activate the SM (only its watchdog trigger: Esc)
+        self.active = active and length > 1
         self.mbx_full = False
         self.w = 0
         self.l = -1
@@ -248,17 +253,30 @@ class SyncManager:
         return self.reader_may()
 
     def ecat_write(self, off: int, data: bytes | memoryview) -> None:
-        """ECAT write (caller checked ecat_may_write)."""
+        """ECAT write (caller checked ecat_may_write). Its last byte exchanges the buffer:
+        with 0x0806+8n bit 6 the frame's time goes to 0x09F0. Ref: §5.49 Table 90,
+        §5.50.6 Table 122."""
         self.writer_write(off, data)
         if self.control & regs.SM_CTRL_WATCHDOG:
             self.host.wd_pd_trigger()
+        if (
+            off + len(data) >= self.length
+            and self.host.mem[self.status_addr + 1] & regs.SM_ACT_LATCH_ECAT
+        ):
+            self.host.sm_event_time(regs.DC_ECAT_EVENT_TIME)
 
     def ecat_read(self, off: int, out: memoryview) -> None:
-        """ECAT read (caller checked ecat_may_read)."""
+        """ECAT read (caller checked ecat_may_read); the reader's last byte exchanges the
+        buffer (event time as ecat_write)."""
         if self.ecat_side_writes:
             out[:] = self.peek(off, len(out))
-        else:
-            self.reader_read(off, out)
+            return
+        self.reader_read(off, out)
+        if (
+            off + len(out) >= self.length
+            and self.host.mem[self.status_addr + 1] & regs.SM_ACT_LATCH_ECAT
+        ):
+            self.host.sm_event_time(regs.DC_ECAT_EVENT_TIME)
 
     # -- PDI face --------------------------------------------------------------------
 

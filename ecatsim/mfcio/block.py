@@ -616,6 +616,11 @@ class MfcioBlock:
                 continue
             v = self.shadow[r.num] & ~(0xFF << (8 * byte)) | (b << (8 * byte))
             self.shadow[r.num] = v & r.mask
+        # registers triggered "always" take the value now: the MFC CTRL SPI works without
+        # any EtherCAT traffic (§2.3.3), so it cannot wait for the next frame's run
+        if self.windows is None:
+            self.windows = self._read_windows()
+        self._transfer_writable(set())
         self._mfc_event(Trigger.MFC_DESELECT)
 
     def mfc_read(self, addr: int, n: int, now_ns: int) -> bytes:

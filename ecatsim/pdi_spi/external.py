@@ -62,6 +62,7 @@ class ExternalFirmware:
         self._irq = level
 
     def _transfer(self, mosi: bytes) -> bytes:
+        self.pdi.access_time(self.clock.now_ns())
         late = bool(self.pdi.u8(PDI_CONFIG) & LATE_SAMPLE)
         miso = transfer(self, mosi, self.timing, late)
         self._check_irq()

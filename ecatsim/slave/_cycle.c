@@ -32,6 +32,7 @@
  * stays raised until the next reply is written. */
 #define OTHER_EVENTS (EV_AL_CONTROL | EV_SM_ACTIVATION | EV_WATCHDOG_PD | EV_SM0)
 #define SM_PD_OUT_EVENT (EV_SM0 << 2)
+#define SM_ACT_LATCH_PDI 0x80 /* ecatsim/esc/regs.py */
 
 /* cyc tuple layout (ecatsim/slave/cycle.py, build()) */
 enum {
@@ -44,10 +45,13 @@ enum {
 static PyObject *s_state, *s_event_mask, *s_pd_masked, *s_out, *s_value, *s_outputs_applied,
     *s_update_inputs, *s_pack_inputs, *s_service_mailbox;
 
-/* Whole-buffer PDI access of a buffered SM is possible (pdi_may_read / pdi_may_write). */
-static int sm_pdi_ok(const Sm *sm, int reading)
+/* Whole-buffer PDI access of a buffered SM is possible (pdi_may_read / pdi_may_write),
+ * and asks for no PDI event times (0x0806+8n bit 7: Esc.pdi_buffer_event stamps
+ * 0x09F8/0x09FC; Python serves such an SM). */
+static int sm_pdi_ok(const uint8_t *m, const Sm *sm, int reading)
 {
-    return sm->active && !sm->locked && !sm->mailbox &&
+    return !(m[sm->status_addr + 1] & SM_ACT_LATCH_PDI) && sm->active && !sm->locked &&
+           !sm->mailbox &&
            (reading ? sm->ecat_side_writes : !sm->ecat_side_writes) && sm->length > 0 &&
            sm->start + 3 * sm->length <= MEM_SIZE;
 }
@@ -231,9 +235,9 @@ static PyObject *run(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         return NULL;
     int read_out = (ev & SM_PD_OUT_EVENT) != 0;
     long rx_size = PyLong_AsLong(ITEM(C_RX_SIZE)), tx_size = PyLong_AsLong(ITEM(C_TX_SIZE));
-    if (read_out && !(sm_pdi_ok(&sm2, 1) && sm2.length >= rx_size))
+    if (read_out && !(sm_pdi_ok(m, &sm2, 1) && sm2.length >= rx_size))
         Py_RETURN_FALSE;
-    if (!sm_pdi_ok(&sm3, 0))
+    if (!sm_pdi_ok(m, &sm3, 0))
         Py_RETURN_FALSE;
 
     /* ---- p.u8(DC_SYNC0_STATUS): Esc._pr_dc_sync_status */
@@ -347,7 +351,7 @@ static PyObject *constants(PyObject *self, PyObject *unused)
     (void)self;
     (void)unused;
     return Py_BuildValue(
-        "{sisisisisisisisisisisisisisisisisisisisisisi}", "DL_STATUS", DL_STATUS,
+        "{sisisisisisisisisisisisisisisisisisisisisisisi}", "DL_STATUS", DL_STATUS,
         "ECAT_EVENT_MASK", ECAT_EVENT_MASK, "AL_EVENT_MASK", AL_EVENT_MASK,
         "ECAT_EVENT_REQUEST", ECAT_EVENT_REQUEST, "AL_EVENT_REQUEST", AL_EVENT_REQUEST,
         "DC_ACTIVATION", DC_ACTIVATION, "DC_PULSE_LENGTH", DC_PULSE_LENGTH,
@@ -356,7 +360,8 @@ static PyObject *constants(PyObject *self, PyObject *unused)
         EV_SM_ACTIVATION, "EV_WATCHDOG_PD", EV_WATCHDOG_PD, "EV_SM0", EV_SM0, "ECAT_EV_SM0",
         ECAT_EV_SM0, "SM_ST_IRQ_WRITE", SM_ST_IRQ_WRITE, "SM_ST_IRQ_READ", SM_ST_IRQ_READ,
         "SM_ST_BUF_SHIFT", SM_ST_BUF_SHIFT, "SM_ST_READ_OPEN", SM_ST_READ_OPEN,
-        "SM_ST_WRITE_OPEN", SM_ST_WRITE_OPEN, "MEM_SIZE", MEM_SIZE, "N_ITEMS", C_LEN);
+        "SM_ST_WRITE_OPEN", SM_ST_WRITE_OPEN, "SM_ACT_LATCH_PDI", SM_ACT_LATCH_PDI,
+        "MEM_SIZE", MEM_SIZE, "N_ITEMS", C_LEN);
 }
 
 static PyMethodDef methods[] = {

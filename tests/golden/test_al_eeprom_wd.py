@@ -161,13 +161,17 @@ def test_eeprom_invalid_command_and_pdi_ownership() -> None:
     assert m.aprd(0, 0x0508, 4).data == struct.pack("<I", 0x286)
 
 
-def test_eeprom_reload_takes_alias() -> None:
+def test_eeprom_reload_keeps_the_alias() -> None:
+    """The alias is taken from the EEPROM only at the first load after power-on or reset
+    (TMC8460 §5.10 Table 21 note); a reload keeps the value the PDI wrote."""
     seg, _ = segment_of(1, alias=0x0042)
     m = TinyMaster(seg)
     assert m.aprd(0, 0x0012, 2).data == b"\x42\x00"
     Pdi(seg.escs[0]).write(0x0012, b"\x99\x00")
     assert m.aprd(0, 0x0012, 2).data == b"\x99\x00"
     eeprom_cmd(m, 0x0400, 0)
+    assert m.aprd(0, 0x0012, 2).data == b"\x99\x00"
+    seg.escs[0].hardware_reset()
     assert m.aprd(0, 0x0012, 2).data == b"\x42\x00"
 
 

@@ -155,9 +155,13 @@ def test_latch_single_event_and_continuous() -> None:
     esc.latch_input(1, True, b.clock.t + 9000)  # the next single event
     assert t.aprd(0, 0x09AF, 1).data == b"\x05"
     assert struct.unpack("<Q", t.aprd(0, 0x09C0, 8).data)[0] == esc.dc.system_time(b.clock.t + 9000)
-    # LATCH0's pin is the SYNC0 output (0x0151 bit 2 = 1): no latch input there
-    esc.latch_input(0, True, b.clock.t)
-    assert t.aprd(0, 0x09AE, 1).data == b"\x00"
+    # 0x0151 bit 2 = 1 makes SYNC0 an output, and LATCH0 still latches: the TMC8460 has
+    # concurrent SYNC outputs and LATCH inputs (Table 42 note *)
+    assert t.aprd(0, 0x0151, 1).data[0] & 0x04
+    esc.latch_input(0, True, b.clock.t + 10_000)
+    assert t.aprd(0, 0x09AE, 1).data == b"\x04"  # continuous: pin high, no event flag
+    pos0 = esc.dc.system_time(b.clock.t + 10_000)
+    assert struct.unpack("<Q", t.aprd(0, 0x09B0, 8).data)[0] == pos0
 
 
 def test_reset_stops_the_sync_unit() -> None:

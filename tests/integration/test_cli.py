@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import time
@@ -17,14 +18,15 @@ pytestmark = pytest.mark.integration
 
 
 def ecatsim(
-    *args: str, ns: str | None = None, user: int | None = None
+    *args: str, ns: str | None = None, user: int | None = None, env: dict[str, str] | None = None
 ) -> subprocess.CompletedProcess[str]:
     cmd = [sys.executable, "-m", "ecatsim", *args]
     if user is not None:
         cmd = ["setpriv", f"--reuid={user}", f"--regid={user}", "--clear-groups", *cmd]
     if ns is not None:
         cmd = ["ip", "netns", "exec", ns, *cmd]
-    return subprocess.run(cmd, capture_output=True, text=True, timeout=20)
+    full_env = {**os.environ, **env} if env is not None else None
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=20, env=full_env)
 
 
 def one_error_line(r: subprocess.CompletedProcess[str]) -> str:
@@ -138,7 +140,9 @@ def test_daemon_keeps_only_cap_net_raw_and_switches_user(
     assert d.alive()
 
 
-def test_default_control_socket_under_the_run_directory(daemon_factory: Any) -> None:
+def test_default_control_socket_under_the_run_directory(
+    daemon_factory: Any, tmp_path: Path
+) -> None:
     """Without --ctl the daemon serves /run/ecatsim/LINK.sock (directory 0700, socket 0600);
     `ecatsim ctl --link LINK status` finds it; a second daemon on the same link is refused
     with one line; the socket is removed on exit."""
@@ -153,8 +157,12 @@ def test_default_control_socket_under_the_run_directory(daemon_factory: Any) -> 
     assert r.returncode == 0, r.stderr
     status = json.loads(r.stdout)
     assert status["ok"] and status["slaves"][0]["al_status"] == 0x01 and status["faults"] == []
-    # the only daemon running: found without --link, its status printed as a table
-    r = ecatsim("ctl", "status")
+    # the only daemon in the run directory (ECATSIM_RUN_DIR: one that holds only this
+    # daemon's socket, whatever else runs on the host): found without --link, as a table
+    alone = tmp_path / "run"
+    alone.mkdir()
+    (alone / sock.name).symlink_to(sock)
+    r = ecatsim("ctl", "status", env={"ECATSIM_RUN_DIR": str(alone)})
     assert r.returncode == 0, r.stderr
     assert r.stdout.splitlines()[1].split()[:5] == ["0", "0x0000", "INIT", "0x0000", "no"]
     # a missing object: the SDO abort within 1 s, and exit status 1 from the command line
@@ -162,7 +170,7 @@ def test_default_control_socket_under_the_run_directory(daemon_factory: Any) -> 
 
     req = {"cmd": "od", "slave": 0, "index": 0x9999, "sub": 0}
     assert request(sock, req, timeout=1.0)["abort"] == 0x06020000
-    r = ecatsim("ctl", "od", "0", "0x9999", "0")
+    r = ecatsim("ctl", "od", "0", "0x9999", "0", env={"ECATSIM_RUN_DIR": str(alone)})
     assert (r.returncode, r.stderr) == (
         1,
         "ecatsim: error: ctl od: 0x06020000 object does not exist\n",

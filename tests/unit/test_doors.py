@@ -73,6 +73,24 @@ def test_host_wakes_for_new_and_not_for_closed_descriptors() -> None:
     host.close()
 
 
+def test_a_descriptor_number_reused_before_the_host_syncs_is_watched() -> None:
+    """A door closes a descriptor and gets the same number for a new one between two
+    syncs: the host still wakes for the new one."""
+    door = PipeDoor()
+    host = DoorHost({"pipe": door})
+    r, w = door.pipes.pop(0)
+    os.close(r)
+    os.close(w)
+    door.pipes.append(os.pipe())
+    assert door.pipes[0][0] == r  # the kernel hands out the lowest free number again
+    host.service(1)
+    os.write(door.pipes[0][1], b"c")
+    assert readable(host.fileno())
+    host.serve()
+    assert door.got == [b"c"]
+    host.close()
+
+
 def test_a_failing_door_is_counted_and_the_host_goes_on() -> None:
     door = PipeDoor()
     host = DoorHost({"pipe": door})

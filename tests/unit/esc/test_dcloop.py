@@ -75,6 +75,7 @@ def test_constants_agree_with_the_python_model() -> None:
     assert _dcloop.DC_SYSTEM_TIME_DELAY == regs.DC_SYSTEM_TIME_DELAY
     assert _dcloop.DC_SYSTEM_TIME_DIFF == regs.DC_SYSTEM_TIME_DIFF
     assert _dcloop.DC_SPEED_COUNTER_START == regs.DC_SPEED_COUNTER_START
+    assert _dcloop.DC_SPEED_COUNTER_DIFF == regs.DC_SPEED_COUNTER_DIFF
 
 
 def test_time_loops_match_the_python_writes() -> None:

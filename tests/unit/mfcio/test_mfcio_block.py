@@ -72,7 +72,7 @@ class Bench:
 def test_sii_loads_the_configuration_into_the_parameter_ram() -> None:
     b = Bench()
     assert b.m.fprd(STATION, 0x0580, 44).data == b"\x10" * 44
-    assert b.m.fprd(STATION, 0x0141, 1).data == b"\x03"  # device emulation
+    assert b.m.fprd(STATION, 0x0141, 1).data == b"\x0f"  # device emulation, DC units
 
 
 def test_move_of_2000_steps_reads_back_2500_counts_and_none_after_safeop() -> None:

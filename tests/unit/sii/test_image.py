@@ -42,7 +42,7 @@ def test_default_image_header_words() -> None:
     img = build_image(default_description())
     assert len(img) == 4096
     w = struct.unpack_from("<64H", img)
-    assert w[0] == 0x0005 and w[4] == 0
+    assert w[0] == 0x0C05 and w[4] == 0  # PDI SPI; DC SYNC out and latch in units on
     assert img[14] == crc8(img[:14]) and img[15] == 0
     assert struct.unpack_from("<IIII", img, 0x10) == (0x286, 8670, 0x00010000, 1)
     assert w[0x18:0x1C] == (0x1000, 128, 0x1080, 128)

@@ -301,6 +301,43 @@ def test_compiled_cycle_leaves_other_events_to_python(served: list[bool]) -> Non
     assert a.seg.firmware[0].state.name == "SAFEOP"
 
 
+def test_sm_event_times_leave_both_compiled_paths_to_python(
+    served: list[bool], walked: list[int]
+) -> None:
+    """SM2/SM3 with the latch event bits (0x0806+8n bits 6/7): their event times 0x09F0,
+    0x09F8 and 0x09FC are kept by the Python path only, so the compiled walk (no FMMU is
+    routed to such an SM) and the compiled DC cycle (sm_pdi_ok) decline and both segments
+    agree on every byte. Ref: TMC8460 §5.49 Table 90, §5.50.6 Tables 122-124."""
+    a, b = lockstep(1)
+    for _ in range(3):
+        both(a, b)
+    assert served[-3:] == [True] * 3 and walked[-1] == 3
+
+    def latch_events(c: CspCycle) -> None:
+        for sm in (2, 3):
+            c.master.apwr(0, regs.sm_addr(sm, 6), b"\xc1")  # enable + ECAT + PDI events
+
+    same(a, b, latch_events)
+    assert all(f.sm is None for f in a.seg.escs[0].fmmus)
+    mem = a.seg.escs[0].mem
+    assert mem[0x09F0:0x0A00] == bytes(16)
+    before_s, before_w = len(served), len(walked)
+    for _ in range(4):
+        both(a, b)
+    assert served[before_s:] and not any(served[before_s:])
+    assert walked[before_w:] == [-1] * 4
+    assert mem[0x09F0:0x09F4] != bytes(4) and mem[0x09F8:0x0A00] != bytes(8)
+
+    def no_events(c: CspCycle) -> None:
+        for sm in (2, 3):
+            c.master.apwr(0, regs.sm_addr(sm, 6), b"\x01")
+
+    same(a, b, no_events)
+    for _ in range(3):
+        both(a, b)
+    assert served[-3:] == [True] * 3 and walked[-1] == 3
+
+
 def test_constants_agree_with_the_register_map() -> None:
     assert cycle.compiled is not None
     k = cycle.compiled.constants()
