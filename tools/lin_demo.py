@@ -81,7 +81,7 @@ class Master:
 
 def run(m: Master, seconds: float) -> dict[str, list[tuple[float, int]]]:
     m.read(0x3E, 8)  # any header wakes sleeping nodes (they do not answer it)
-    time.sleep(0.05)
+    time.sleep(0.15)  # the wait a LIN master keeps after a wake-up
     for name, ad in NODES.items():
         if m.full_status(ad) is None:
             raise SystemExit(f"node {name} (0x{ad:02X}) does not answer GetFullStatus")

@@ -461,7 +461,8 @@ def test_ecatsim_lin_command_on_a_real_clock(tmp_path: Path) -> None:
             return out
 
         prep = bytes((0x80, 0x81, 0x83, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF))
-        exchange(header(0x3E), 0)  # wakes the node should it sleep already (N6)
+        exchange(header(0x3E), 0)  # wakes the node should it sleep already (N6) ...
+        time.sleep(0.15)  # ... and, as LIN masters do after a wake-up, waits before the next
         exchange(lin_frame(0x3C, prep), 0)
         got = exchange(header(0x3D), 9)
         assert got[:8] == bytes((0x83, 0, 0, 0, 0x80, 0x02, 0, 0xFF))
@@ -498,8 +499,8 @@ def test_segment_file_serves_lin_beside_ethercat(tmp_path: Path) -> None:
             time.sleep(0.05)
         fd = os.open(link, os.O_RDWR | os.O_NOCTTY)
         tty.setraw(fd)
-        os.write(fd, header(0x3E))  # wake-up
-        time.sleep(0.05)
+        os.write(fd, header(0x3E))  # wake-up; a LIN master then waits 100-150 ms
+        time.sleep(0.15)
         os.write(fd, lin_frame(0x3C, bytes((0x80, 0x80, 0x83, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF))))
         time.sleep(0.05)
         os.write(fd, header(0x3D))
