@@ -69,7 +69,8 @@ class _Ctx:
 @click.option("--debug", is_flag=True, help="Show tracebacks for errors.")
 @click.pass_context
 def cli(ctx: click.Context, debug: bool) -> None:
-    """ecatsim: EtherCAT slave emulator (TMC8460 ESC, TMC8670 CoE servo drive)."""
+    """ecatsim: emulated Trinamic motion devices (TMC8460 ESC with MFCIO, TMC8670 CoE drive,
+    TMCM-1311 over TMCL, TMC211 on LIN)."""
     ctx.obj = _Ctx()
     ctx.obj.debug = debug
 
