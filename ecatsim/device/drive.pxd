@@ -12,6 +12,10 @@ cdef long long SW_VOLTAGE, SW_WARNING, SW_REMOTE, SW_TARGET_REACHED, SW_INTERNAL
 cdef long long SW_OMS12, SW_OMS13, SW_MOTOR_ACTIVE, SW_DIRECTION
 
 
+@cython.locals(k="long long", f=double)
+cdef object _round(double x)
+
+
 cdef class Drive:
     cdef public object od
     cdef public dict _entries

@@ -87,6 +87,20 @@ Emcy = Callable[[int, int, bytes], None]
 Demand = tuple[int, float, float, float]
 
 
+def _round(x: float) -> int:
+    """``round(x)``: the nearest integer, ties to even. C arithmetic in the compiled core,
+    where the builtin is a Python call (nan and infinities raise as round() does)."""
+    if not -4.0e18 < x < 4.0e18:
+        return round(x)
+    k = int(x)
+    f = x - k  # exact: the fraction of a float
+    if f > 0.5 or (f == 0.5 and k & 1):
+        k += 1
+    elif f < -0.5 or (f == -0.5 and k & 1):
+        k -= 1
+    return k
+
+
 class Drive:
     """CoeDevice for the TMC8670."""
 
@@ -605,12 +619,12 @@ class Drive:
             sw,
             mode,
             pos,
-            round(rpm),
-            round(self.p_demand),
-            round(self.v_demand_rpm),
-            round(s.iq_ma),
-            round(s.iq_ref_ma),
-            round(self.p_demand - pos),
+            _round(rpm),
+            _round(self.p_demand),
+            _round(self.v_demand_rpm),
+            _round(s.iq_ma),
+            _round(s.iq_ref_ma),
+            _round(self.p_demand - pos),
             self.fault_code,
         )
         hits = self._published

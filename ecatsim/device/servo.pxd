@@ -28,7 +28,11 @@ cdef class Servo:
         cur_ki=double, angle=double, omega=double, iq=double, iq_integ=double, integ=double,
         iq_ref=double, flux=bint, done=long, why=int, out=double, err_p=double, v_ref=double,
         err=double, emf=double, err_a=double, v=double, torque=double, drive=double,
-        new=double, two_pi=double, rpm=double, torque_kind=int, position_kind=int,
+        new=double, rev=double, two_pi=double, rpm=double, torque_kind=int, position_kind=int,
     )
     cpdef tuple run(self, long n, int kind, double ref, double v_ff_rpm=*, double window=*,
                     double i_trip_ma=*, bint index=*)
+
+
+@cython.locals(k="long long")
+cdef double _floor(double x) except? -1.0

@@ -244,14 +244,14 @@ class Servo:
             new = omega + drive / inertia * dt
             if omega != 0.0 and (new > 0) != (omega > 0) and abs(torque - load) <= coulomb:
                 new = 0.0  # friction stops the motor, it does not reverse it
-            rev = math.floor(angle / two_pi) if index else 0
+            rev = _floor(angle / two_pi) if index else 0
             omega = new
             angle += omega * dt
             done += 1
             if abs(iq) > i_trip_ma:
                 why = STOP_OVERCURRENT
                 break
-            if index and math.floor(angle / two_pi) != rev:
+            if index and _floor(angle / two_pi) != rev:
                 why = STOP_INDEX
                 break
         self.angle = angle
@@ -261,6 +261,16 @@ class Servo:
         self.integ = integ
         self.iq_ref_ma = iq_ref
         return done, why
+
+
+def _floor(x: float) -> float:
+    """``math.floor(x)`` as a float: only compared with another floor, so the result is the
+    same; C arithmetic in the compiled core, where ``math.floor`` is a Python call (nan
+    and infinities still raise as math.floor does; beyond 2**62 every float is whole)."""
+    if not -4.0e18 < x < 4.0e18:
+        return float(math.floor(x))
+    k = int(x)
+    return float(k - 1 if x < k else k)
 
 
 class Profile:
