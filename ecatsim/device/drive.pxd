@@ -16,6 +16,9 @@ cdef long long SW_OMS12, SW_OMS13, SW_MOTOR_ACTIVE, SW_DIRECTION
 cdef object _round(double x)
 
 
+cdef long long _int_of(tuple hit) except? -1
+
+
 cdef class Drive:
     cdef public object od
     cdef public dict _entries
@@ -65,7 +68,7 @@ cdef class Drive:
 
     cpdef double _trip(self)
     cpdef double _window(self)
-    @cython.locals(hits=tuple, hit=tuple, q=list, k=Py_ssize_t)
+    @cython.locals(hits=tuple)
     cpdef _snapshot(self)
 
     @cython.locals(mode="long long", v=double, target=double)

@@ -101,6 +101,14 @@ def _round(x: float) -> int:
     return k
 
 
+def _int_of(hit: tuple[Entry, int, int] | None) -> int:
+    """An entry's value if it is an int, else 0 (no entry: 0); see Drive._entry."""
+    if hit is None:
+        return 0
+    v = hit[0].value
+    return v if isinstance(v, int) else 0
+
+
 class Drive:
     """CoeDevice for the TMC8670."""
 
@@ -423,26 +431,17 @@ class Drive:
         hits = self._snapshot_hits
         if hits is None:
             hits = self._snapshot_hits = tuple([self._entry(i, 0) for i in SNAPSHOT])
-        q = [0] * len(hits)
-        for k in range(len(hits)):
-            hit = hits[k]
-            if hit is not None:
-                v = hit[0].value
-                if isinstance(v, int):
-                    q[k] = v
-        (
-            self.q_60ff,
-            self.q_6083,
-            self.q_6084,
-            self.q_607a,
-            self.q_60b0,
-            self.q_60b1,
-            self.q_6071,
-            self.q_60b2,
-            self.q_6065,
-            self.q_6085,
-            self.q_605a,
-        ) = q
+        self.q_60ff = _int_of(hits[0])
+        self.q_6083 = _int_of(hits[1])
+        self.q_6084 = _int_of(hits[2])
+        self.q_607a = _int_of(hits[3])
+        self.q_60b0 = _int_of(hits[4])
+        self.q_60b1 = _int_of(hits[5])
+        self.q_6071 = _int_of(hits[6])
+        self.q_60b2 = _int_of(hits[7])
+        self.q_6065 = _int_of(hits[8])
+        self.q_6085 = _int_of(hits[9])
+        self.q_605a = _int_of(hits[10])
 
     def _steady_demand(self) -> Demand | None:
         """The servo demand if it stays the same over the substeps to come (the OD values
@@ -580,8 +579,8 @@ class Drive:
             sw |= SW_VOLTAGE
         if self.al_state == _AL_OP:
             sw |= SW_REMOTE
-        pos = s.counts
-        rpm = s.rpm
+        pos = s.read_counts()
+        rpm = s.read_rpm()
         mode = self.mode
         if st == _OE:
             if mode == PP:

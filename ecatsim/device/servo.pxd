@@ -21,6 +21,9 @@ cdef class Servo:
     cdef public double vel_limit_rpm
     cdef public tuple motor
 
+    cpdef object read_counts(self)
+    cpdef double read_rpm(self)
+
     @cython.locals(
         dt=double, ppr=double, kt=double, load=double, viscous=double, coulomb=double,
         inertia=double, vmax_v=double, resistance=double, decay=double, lim=double,

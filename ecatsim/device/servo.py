@@ -108,10 +108,19 @@ class Servo:
     @property
     def counts(self) -> int:
         """Encoder position (quantised). Ref: TMC8670 §5.1.14 (2081h)."""
-        return math.floor(self.angle / TWO_PI * self.p.ppr)
+        return self.read_counts()
 
     @property
     def rpm(self) -> float:
+        return self.read_rpm()
+
+    def read_counts(self) -> int:
+        """``counts`` as a method: the compiled drive calls it in C (a property of another
+        module's class is a Python attribute lookup there)."""
+        return int(_floor(self.angle / TWO_PI * self.motor[1]))  # motor[1]: float(ppr)
+
+    def read_rpm(self) -> float:
+        """``rpm`` as a method (see read_counts)."""
         return self.omega / RPM
 
     def counts_per_s(self, rpm: float) -> float:
@@ -266,7 +275,7 @@ class Servo:
 def _floor(x: float) -> float:
     """``math.floor(x)`` as a float: only compared with another floor, so the result is the
     same; C arithmetic in the compiled core, where ``math.floor`` is a Python call (nan
-    and infinities still raise as math.floor does; beyond 2**62 every float is whole)."""
+    and infinities still raise as math.floor does; from 2**52 on every float is whole)."""
     if not -4.0e18 < x < 4.0e18:
         return float(math.floor(x))
     k = int(x)
