@@ -5,6 +5,7 @@
 cimport cython
 
 from ecatsim.device.servo cimport Servo
+cimport ecatsim.device.cia402 as cia402
 
 
 # the statusword bits as C constants (drive.py uses them only within itself)
@@ -24,6 +25,7 @@ cdef class Drive:
     cdef public dict _entries
     cdef public object _published
     cdef public object _snapshot_hits
+    cdef public object _control_hits
     cdef public long long q_60ff, q_6083, q_6084, q_607a, q_60b0, q_60b1, q_6071, q_60b2
     cdef public long long q_6065, q_6085, q_605a
     cdef public object params
@@ -55,6 +57,8 @@ cdef class Drive:
 
     cpdef object _entry(self, int index, int sub)
     cpdef object _v(self, int index, int sub=*)
+    @cython.locals(hits=tuple)
+    cpdef tuple _controls(self)
 
     @cython.locals(target=double, dt=double)
     cpdef outputs_applied(self, now_ns)
@@ -74,7 +78,7 @@ cdef class Drive:
     @cython.locals(mode="long long", v=double, target=double)
     cpdef object _steady_demand(self)
 
-    @cython.locals(cw="long long", mode="long long")
+    @cython.locals(cw="long long", mode="long long", hits=tuple)
     cpdef _controlword(self)
 
     @cython.locals(s=Servo, sw="long long", rpm=double, mode="long long", hits=tuple,

@@ -54,6 +54,8 @@ _MISSING = object()
 PUBLISHED = (0x6041, 0x6061, 0x6064, 0x606C, 0x6062, 0x606B, 0x6077, 0x6074, 0x60F4, 0x603F)
 #: OD values the substeps use, read once per advance() into the q_ attributes, in order
 SNAPSHOT = (0x60FF, 0x6083, 0x6084, 0x607A, 0x60B0, 0x60B1, 0x6071, 0x60B2, 0x6065, 0x6085, 0x605A)
+#: the RxPDO values every outputs_applied() reads: controlword, mode, position target
+CONTROLS = (0x6040, 0x6060, 0x607A)
 #: closed current loop time constant the default 2041h gains give (s)
 CURRENT_LOOP_TAU = 2.5e-4
 
@@ -71,8 +73,6 @@ _POWERED = cia402.POWERED
 _STATUS_BITS = cia402.STATUS_BITS
 _FAULT_RESET = Command.FAULT_RESET
 _SWITCH_ON_ENABLE = Command.SWITCH_ON_ENABLE
-_decode = cia402.decode
-_transition = cia402.step
 
 FAULTS: dict[str, tuple[int, int]] = {
     "overcurrent": (0x2310, 0x02),
@@ -124,6 +124,7 @@ class Drive:
         #: the entries _publish() writes every cycle, in PUBLISHED order (looked up once)
         self._published: tuple[tuple[Entry, int, int] | None, ...] | None = None
         self._snapshot_hits: tuple[tuple[Entry, int, int] | None, ...] | None = None
+        self._control_hits: tuple[tuple[Entry, int, int] | None, ...] | None = None
         # OD values the substeps use, read once per advance() (see _snapshot)
         self.q_60ff = self.q_6083 = self.q_6084 = self.q_607a = self.q_60b0 = 0
         self.q_60b1 = self.q_6071 = self.q_60b2 = self.q_6065 = self.q_6085 = 0
@@ -185,6 +186,13 @@ class Drive:
         v = hit[0].value
         return v if isinstance(v, int) else 0
 
+    def _controls(self) -> tuple[tuple[Entry, int, int] | None, ...]:
+        """The entries of CONTROLS, looked up once."""
+        hits = self._control_hits
+        if hits is None:
+            hits = self._control_hits = tuple([self._entry(i, 0) for i in CONTROLS])
+        return hits
+
     def _set(self, index: int, value: int, sub: int = 0) -> None:
         hit = self._entry(index, sub)
         if hit is not None:
@@ -239,7 +247,7 @@ class Drive:
         """New RxPDO values: advance to now, then act on controlword and targets."""
         self.advance(now_ns)
         if self.mode == CSP:
-            target = float(self._v(0x607A))
+            target = float(_int_of(self._controls()[2]))  # 607Ah
             if self.last_target is not None and self.last_t_ns is not None:
                 dt = (now_ns - self.last_t_ns) * 1e-9
                 if dt > 0:
@@ -312,10 +320,11 @@ class Drive:
 
     # ----------------------------------------------------------------- controlword
     def _controlword(self) -> None:
-        cw = self._v(0x6040)
-        cmd = _decode(cw, self.prev_cw)
+        hits = self._controls()
+        cw = _int_of(hits[0])  # 6040h
+        cmd = cia402.decode(cw, self.prev_cw)
         self.prev_cw = cw
-        mode = self._v(0x6060)
+        mode = _int_of(hits[1])  # 6060h
         if mode != self.mode and mode in MODES:
             self._mode_change(mode)
         if self.al_state != _AL_OP:
@@ -328,7 +337,7 @@ class Drive:
                     self.emcy_clear()
                 self._enter(_SOD, "t15")
             return
-        tr = _transition(self.state, cmd)
+        tr = cia402.step(self.state, cmd)
         if tr is None:
             if self.state == _OE and self.mode == PP:
                 self._pp_setpoint()
