@@ -5,6 +5,7 @@
 cimport cython
 
 from ecatsim.device.servo cimport Servo
+cimport ecatsim.device.cia402 as cia402
 
 
 # the statusword bits as C constants (drive.py uses them only within itself)
@@ -12,11 +13,19 @@ cdef long long SW_VOLTAGE, SW_WARNING, SW_REMOTE, SW_TARGET_REACHED, SW_INTERNAL
 cdef long long SW_OMS12, SW_OMS13, SW_MOTOR_ACTIVE, SW_DIRECTION
 
 
+@cython.locals(k="long long", f=double)
+cdef object _round(double x)
+
+
+cdef long long _int_of(tuple hit) except? -1
+
+
 cdef class Drive:
     cdef public object od
     cdef public dict _entries
     cdef public object _published
     cdef public object _snapshot_hits
+    cdef public object _control_hits
     cdef public long long q_60ff, q_6083, q_6084, q_607a, q_60b0, q_60b1, q_6071, q_60b2
     cdef public long long q_6065, q_6085, q_605a
     cdef public object params
@@ -48,6 +57,8 @@ cdef class Drive:
 
     cpdef object _entry(self, int index, int sub)
     cpdef object _v(self, int index, int sub=*)
+    @cython.locals(hits=tuple)
+    cpdef tuple _controls(self)
 
     @cython.locals(target=double, dt=double)
     cpdef outputs_applied(self, now_ns)
@@ -61,13 +72,13 @@ cdef class Drive:
 
     cpdef double _trip(self)
     cpdef double _window(self)
-    @cython.locals(hits=tuple, hit=tuple, q=list, k=Py_ssize_t)
+    @cython.locals(hits=tuple)
     cpdef _snapshot(self)
 
     @cython.locals(mode="long long", v=double, target=double)
     cpdef object _steady_demand(self)
 
-    @cython.locals(cw="long long", mode="long long")
+    @cython.locals(cw="long long", mode="long long", hits=tuple)
     cpdef _controlword(self)
 
     @cython.locals(s=Servo, sw="long long", rpm=double, mode="long long", hits=tuple,

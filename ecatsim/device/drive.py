@@ -54,6 +54,8 @@ _MISSING = object()
 PUBLISHED = (0x6041, 0x6061, 0x6064, 0x606C, 0x6062, 0x606B, 0x6077, 0x6074, 0x60F4, 0x603F)
 #: OD values the substeps use, read once per advance() into the q_ attributes, in order
 SNAPSHOT = (0x60FF, 0x6083, 0x6084, 0x607A, 0x60B0, 0x60B1, 0x6071, 0x60B2, 0x6065, 0x6085, 0x605A)
+#: the RxPDO values every outputs_applied() reads: controlword, mode, position target
+CONTROLS = (0x6040, 0x6060, 0x607A)
 #: closed current loop time constant the default 2041h gains give (s)
 CURRENT_LOOP_TAU = 2.5e-4
 
@@ -71,8 +73,6 @@ _POWERED = cia402.POWERED
 _STATUS_BITS = cia402.STATUS_BITS
 _FAULT_RESET = Command.FAULT_RESET
 _SWITCH_ON_ENABLE = Command.SWITCH_ON_ENABLE
-_decode = cia402.decode
-_transition = cia402.step
 
 FAULTS: dict[str, tuple[int, int]] = {
     "overcurrent": (0x2310, 0x02),
@@ -85,6 +85,28 @@ Emcy = Callable[[int, int, bytes], None]
 #: what the servo is asked to follow: (kind, reference, velocity feed-forward rpm, following
 #: error window in counts or 0), see Servo.run
 Demand = tuple[int, float, float, float]
+
+
+def _round(x: float) -> int:
+    """``round(x)``: the nearest integer, ties to even. C arithmetic in the compiled core,
+    where the builtin is a Python call (nan and infinities raise as round() does)."""
+    if not -4.0e18 < x < 4.0e18:
+        return round(x)
+    k = int(x)
+    f = x - k  # exact: the fraction of a float
+    if f > 0.5 or (f == 0.5 and k & 1):
+        k += 1
+    elif f < -0.5 or (f == -0.5 and k & 1):
+        k -= 1
+    return k
+
+
+def _int_of(hit: tuple[Entry, int, int] | None) -> int:
+    """An entry's value if it is an int, else 0 (no entry: 0); see Drive._entry."""
+    if hit is None:
+        return 0
+    v = hit[0].value
+    return v if isinstance(v, int) else 0
 
 
 class Drive:
@@ -102,6 +124,7 @@ class Drive:
         #: the entries _publish() writes every cycle, in PUBLISHED order (looked up once)
         self._published: tuple[tuple[Entry, int, int] | None, ...] | None = None
         self._snapshot_hits: tuple[tuple[Entry, int, int] | None, ...] | None = None
+        self._control_hits: tuple[tuple[Entry, int, int] | None, ...] | None = None
         # OD values the substeps use, read once per advance() (see _snapshot)
         self.q_60ff = self.q_6083 = self.q_6084 = self.q_607a = self.q_60b0 = 0
         self.q_60b1 = self.q_6071 = self.q_60b2 = self.q_6065 = self.q_6085 = 0
@@ -163,6 +186,13 @@ class Drive:
         v = hit[0].value
         return v if isinstance(v, int) else 0
 
+    def _controls(self) -> tuple[tuple[Entry, int, int] | None, ...]:
+        """The entries of CONTROLS, looked up once."""
+        hits = self._control_hits
+        if hits is None:
+            hits = self._control_hits = tuple([self._entry(i, 0) for i in CONTROLS])
+        return hits
+
     def _set(self, index: int, value: int, sub: int = 0) -> None:
         hit = self._entry(index, sub)
         if hit is not None:
@@ -217,7 +247,7 @@ class Drive:
         """New RxPDO values: advance to now, then act on controlword and targets."""
         self.advance(now_ns)
         if self.mode == CSP:
-            target = float(self._v(0x607A))
+            target = float(_int_of(self._controls()[2]))  # 607Ah
             if self.last_target is not None and self.last_t_ns is not None:
                 dt = (now_ns - self.last_t_ns) * 1e-9
                 if dt > 0:
@@ -290,10 +320,11 @@ class Drive:
 
     # ----------------------------------------------------------------- controlword
     def _controlword(self) -> None:
-        cw = self._v(0x6040)
-        cmd = _decode(cw, self.prev_cw)
+        hits = self._controls()
+        cw = _int_of(hits[0])  # 6040h
+        cmd = cia402.decode(cw, self.prev_cw)
         self.prev_cw = cw
-        mode = self._v(0x6060)
+        mode = _int_of(hits[1])  # 6060h
         if mode != self.mode and mode in MODES:
             self._mode_change(mode)
         if self.al_state != _AL_OP:
@@ -306,7 +337,7 @@ class Drive:
                     self.emcy_clear()
                 self._enter(_SOD, "t15")
             return
-        tr = _transition(self.state, cmd)
+        tr = cia402.step(self.state, cmd)
         if tr is None:
             if self.state == _OE and self.mode == PP:
                 self._pp_setpoint()
@@ -409,26 +440,17 @@ class Drive:
         hits = self._snapshot_hits
         if hits is None:
             hits = self._snapshot_hits = tuple([self._entry(i, 0) for i in SNAPSHOT])
-        q = [0] * len(hits)
-        for k in range(len(hits)):
-            hit = hits[k]
-            if hit is not None:
-                v = hit[0].value
-                if isinstance(v, int):
-                    q[k] = v
-        (
-            self.q_60ff,
-            self.q_6083,
-            self.q_6084,
-            self.q_607a,
-            self.q_60b0,
-            self.q_60b1,
-            self.q_6071,
-            self.q_60b2,
-            self.q_6065,
-            self.q_6085,
-            self.q_605a,
-        ) = q
+        self.q_60ff = _int_of(hits[0])
+        self.q_6083 = _int_of(hits[1])
+        self.q_6084 = _int_of(hits[2])
+        self.q_607a = _int_of(hits[3])
+        self.q_60b0 = _int_of(hits[4])
+        self.q_60b1 = _int_of(hits[5])
+        self.q_6071 = _int_of(hits[6])
+        self.q_60b2 = _int_of(hits[7])
+        self.q_6065 = _int_of(hits[8])
+        self.q_6085 = _int_of(hits[9])
+        self.q_605a = _int_of(hits[10])
 
     def _steady_demand(self) -> Demand | None:
         """The servo demand if it stays the same over the substeps to come (the OD values
@@ -566,8 +588,8 @@ class Drive:
             sw |= SW_VOLTAGE
         if self.al_state == _AL_OP:
             sw |= SW_REMOTE
-        pos = s.counts
-        rpm = s.rpm
+        pos = s.read_counts()
+        rpm = s.read_rpm()
         mode = self.mode
         if st == _OE:
             if mode == PP:
@@ -605,12 +627,12 @@ class Drive:
             sw,
             mode,
             pos,
-            round(rpm),
-            round(self.p_demand),
-            round(self.v_demand_rpm),
-            round(s.iq_ma),
-            round(s.iq_ref_ma),
-            round(self.p_demand - pos),
+            _round(rpm),
+            _round(self.p_demand),
+            _round(self.v_demand_rpm),
+            _round(s.iq_ma),
+            _round(s.iq_ref_ma),
+            _round(self.p_demand - pos),
             self.fault_code,
         )
         hits = self._published

@@ -21,6 +21,9 @@ cdef class Servo:
     cdef public double vel_limit_rpm
     cdef public tuple motor
 
+    cpdef object read_counts(self)
+    cpdef double read_rpm(self)
+
     @cython.locals(
         dt=double, ppr=double, kt=double, load=double, viscous=double, coulomb=double,
         inertia=double, vmax_v=double, resistance=double, decay=double, lim=double,
@@ -28,7 +31,11 @@ cdef class Servo:
         cur_ki=double, angle=double, omega=double, iq=double, iq_integ=double, integ=double,
         iq_ref=double, flux=bint, done=long, why=int, out=double, err_p=double, v_ref=double,
         err=double, emf=double, err_a=double, v=double, torque=double, drive=double,
-        new=double, two_pi=double, rpm=double, torque_kind=int, position_kind=int,
+        new=double, rev=double, two_pi=double, rpm=double, torque_kind=int, position_kind=int,
     )
     cpdef tuple run(self, long n, int kind, double ref, double v_ff_rpm=*, double window=*,
                     double i_trip_ma=*, bint index=*)
+
+
+@cython.locals(k="long long")
+cdef double _floor(double x) except? -1.0

@@ -108,10 +108,19 @@ class Servo:
     @property
     def counts(self) -> int:
         """Encoder position (quantised). Ref: TMC8670 §5.1.14 (2081h)."""
-        return math.floor(self.angle / TWO_PI * self.p.ppr)
+        return self.read_counts()
 
     @property
     def rpm(self) -> float:
+        return self.read_rpm()
+
+    def read_counts(self) -> int:
+        """``counts`` as a method: the compiled drive calls it in C (a property of another
+        module's class is a Python attribute lookup there)."""
+        return int(_floor(self.angle / TWO_PI * self.motor[1]))  # motor[1]: float(ppr)
+
+    def read_rpm(self) -> float:
+        """``rpm`` as a method (see read_counts)."""
         return self.omega / RPM
 
     def counts_per_s(self, rpm: float) -> float:
@@ -244,14 +253,14 @@ class Servo:
             new = omega + drive / inertia * dt
             if omega != 0.0 and (new > 0) != (omega > 0) and abs(torque - load) <= coulomb:
                 new = 0.0  # friction stops the motor, it does not reverse it
-            rev = math.floor(angle / two_pi) if index else 0
+            rev = _floor(angle / two_pi) if index else 0
             omega = new
             angle += omega * dt
             done += 1
             if abs(iq) > i_trip_ma:
                 why = STOP_OVERCURRENT
                 break
-            if index and math.floor(angle / two_pi) != rev:
+            if index and _floor(angle / two_pi) != rev:
                 why = STOP_INDEX
                 break
         self.angle = angle
@@ -261,6 +270,16 @@ class Servo:
         self.integ = integ
         self.iq_ref_ma = iq_ref
         return done, why
+
+
+def _floor(x: float) -> float:
+    """``math.floor(x)`` as a float: only compared with another floor, so the result is the
+    same; C arithmetic in the compiled core, where ``math.floor`` is a Python call (nan
+    and infinities still raise as math.floor does; from 2**52 on every float is whole)."""
+    if not -4.0e18 < x < 4.0e18:
+        return float(math.floor(x))
+    k = int(x)
+    return float(k - 1 if x < k else k)
 
 
 class Profile:
