@@ -27,6 +27,7 @@ from ecatsim.faults.spec import Family, FaultSpec, FaultSpecError
 from ecatsim.faults.wire import patch
 from ecatsim.segment import Segment
 from ecatsim.slave.al import AlState
+from ecatsim.slave.firmware import Firmware
 from ecatsim.wire.mailbox import MbxError
 
 log = structlog.get_logger("ecatsim.faults")
@@ -84,6 +85,7 @@ class FaultEngine:
     def add(self, spec: FaultSpec, now_ns: int) -> int:
         """Arm a fault; it may start at once. Returns its id."""
         target = self._resolve(spec)
+        self._check_applies(spec, target)
         rng = random.Random(spec.seed) if spec.probability is not None else None
         a = Armed(self._next_id, spec, target, now_ns, self.frames, rng)
         self._next_id += 1
@@ -102,6 +104,20 @@ class FaultEngine:
                 n += 1
         self._refresh()
         return n
+
+    def _check_applies(self, spec: FaultSpec, pos: int | None) -> None:
+        """Refuse, when it is armed, a fault its slave cannot have: an AL fault needs
+        ecatsim's firmware, a mailbox fault a mailbox."""
+        if pos is None or pos >= len(self.segment.firmware):
+            return
+        fw = self.segment.firmware[pos]
+        if spec.kind in ("al_refuse", "al_fall") and not isinstance(fw, Firmware):
+            raise FaultSpecError(
+                f"slave: slave {pos} has no ecatsim firmware to {spec.kind.removeprefix('al_')}"
+                " an AL state (its AL status follows the ESC or external firmware)"
+            )
+        if spec.kind.startswith(("mbx_", "sdo_")) and getattr(fw, "mbx", None) is None:
+            raise FaultSpecError(f"slave: slave {pos} has no mailbox for {spec.kind}")
 
     def _resolve(self, spec: FaultSpec) -> int | None:
         escs = self.segment.escs
@@ -256,7 +272,7 @@ class FaultEngine:
         fw: Any = seg.firmware[pos] if pos < len(seg.firmware) else None
         if s.kind == "power_cycle":
             self._power_off(pos, now_ns, now_ns + s.value * 1_000_000)
-        elif s.kind == "al_refuse":
+        elif s.kind == "al_refuse":  # the slave has ecatsim's firmware (_check_applies)
             fw.refuse_next = s.code
         elif s.kind == "al_fall":
             fw.fail(AlState.SAFEOP, s.code, now_ns)

@@ -129,3 +129,39 @@ def test_find_socket_takes_the_one_live_daemon(tmp_path: Path) -> None:
             b.close()
     finally:
         a.close()
+
+
+@pytest.mark.parametrize("kind", ["al_refuse", "al_fall"])
+def test_al_faults_on_a_slave_without_ecatsim_firmware_answer_one_line(
+    tmp_path: Path, kind: str
+) -> None:
+    """A TMC8460 in device emulation has no firmware to refuse or leave a state."""
+    from ecatsim.config import load_segment
+
+    root = Path(__file__).resolve().parents[2]
+    segment = build_segment(load_segment(root / "config" / "tmc8460-mfcio.yaml"), MonotonicClock())
+    c = ControlSocket(tmp_path / "ctl.sock", segment, FaultEngine(segment))
+    try:
+        r = ask(c, cmd="inject", fault={"kind": kind, "slave": 0, "code": 0x1B})
+        assert r["ok"] is False
+        assert str(r["error"]).startswith(f"slave: slave 0 has no ecatsim firmware to {kind[3:]}")
+    finally:
+        c.close()
+
+
+def test_a_refused_fault_is_not_left_armed(tmp_path: Path) -> None:
+    """The refusal comes when the fault is armed, even one due later, and nothing stays."""
+    from ecatsim.config import load_segment
+
+    root = Path(__file__).resolve().parents[2]
+    segment = build_segment(load_segment(root / "config" / "tmc8460-mfcio.yaml"), MonotonicClock())
+    engine = FaultEngine(segment)
+    c = ControlSocket(tmp_path / "ctl.sock", segment, engine)
+    try:
+        r = ask(c, cmd="inject", fault={"kind": "al_fall", "slave": 0, "code": 0x1B, "after_s": 5})
+        assert r["ok"] is False
+        r = ask(c, cmd="inject", fault={"kind": "mbx_drop", "slave": 0})
+        assert r == {"ok": False, "error": "slave: slave 0 has no mailbox for mbx_drop"}
+        assert engine.faults == []
+    finally:
+        c.close()
