@@ -8,12 +8,16 @@ package's ``server`` module returns a :class:`~ecatsim.doors.FrontDoor` or raise
 from __future__ import annotations
 
 import importlib
+import signal
 from collections.abc import Callable
 from pathlib import Path
-from typing import cast
+from types import FrameType
+from typing import Any, cast
+
+import structlog
 
 from ecatsim.config import SegmentConfig
-from ecatsim.doors import DoorHost, FrontDoor
+from ecatsim.doors import DoorHost, FrontDoor, serve_doors
 from ecatsim.mfcio.block import MfcioBlock
 from ecatsim.pdi_spi.external import ExternalFirmware
 from ecatsim.pdi_spi.mfc import MfcSpi
@@ -56,3 +60,33 @@ def build_doors(cfg: SegmentConfig, segment: Segment | None = None) -> DoorHost 
             door.close()
         raise
     return DoorHost(built)
+
+
+def serve_door(name: str, door: FrontDoor, ctl_path: Path, **ready: Any) -> None:
+    """A daemon serving one front door (``ecatsim tmcl``, ``ecatsim lin``): its control
+    socket at ``ctl_path``, one ``ready`` log line with ``ready``'s fields, the loop until
+    SIGINT/SIGTERM; the socket and the door are closed however it ends."""
+    from ecatsim.clock import MonotonicClock
+    from ecatsim.ctl import ControlSocket
+
+    host = DoorHost({name: door})
+    try:
+        sock = ControlSocket(ctl_path, None, None, host)
+    except BaseException:
+        host.close()
+        raise
+    stopping: list[int] = []
+
+    def stop(signum: int, frame: FrameType | None) -> None:
+        stopping.append(signum)
+
+    signal.signal(signal.SIGINT, stop)
+    signal.signal(signal.SIGTERM, stop)
+    structlog.get_logger(f"ecatsim.{name}").info("ready", ctl=str(sock.path), **ready)
+    try:
+        serve_doors(
+            host, MonotonicClock().now_ns, lambda: bool(stopping), {sock.fileno(): sock.serve}
+        )
+    finally:
+        sock.close()
+        host.close()

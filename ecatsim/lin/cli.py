@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import signal
 from pathlib import Path
-from types import FrameType
 
 import click
 import structlog
@@ -51,8 +49,8 @@ def lin(pty: Path | None, config_path: Path | None, ctl: Path | None, log_format
     """
     from ecatsim.cli import configure_logging
     from ecatsim.clock import MonotonicClock
-    from ecatsim.ctl import ControlSocket, default_path
-    from ecatsim.doors import DoorHost, serve_doors
+    from ecatsim.ctl import default_path
+    from ecatsim.frontdoors import serve_door
     from ecatsim.lin.config import BusConfig, load_bus
     from ecatsim.lin.server import LinDoor
 
@@ -61,32 +59,16 @@ def lin(pty: Path | None, config_path: Path | None, ctl: Path | None, log_format
     link = pty or cfg.pty
     if link is None:
         raise UserError("ecatsim lin: give --pty PATH (or 'pty:' in the --config file)")
-    clock = MonotonicClock()
-    door = LinDoor(cfg, link, clock)
-    host = DoorHost({"lin": door})
+    door = LinDoor(cfg, link, MonotonicClock())
     try:
-        sock = ControlSocket(ctl or default_path(f"lin-{link.name}"), None, None, host)
-    except BaseException:
-        host.close()
-        raise
-    stopping = [False]
-
-    def stop(signum: int, frame: FrameType | None) -> None:
-        stopping[0] = True
-
-    signal.signal(signal.SIGINT, stop)
-    signal.signal(signal.SIGTERM, stop)
-    log.info(
-        "ready",
-        pty=str(link),
-        nodes=[f"{n.name}@0x{n.address:02X}" for n in door.bus.nodes],
-        baud=cfg.baud,
-        ctl=str(sock.path),
-    )
-    try:
-        serve_doors(host, clock.now_ns, lambda: stopping[0], {sock.fileno(): sock.serve})
+        serve_door(
+            "lin",
+            door,
+            ctl or default_path(f"lin-{link.name}"),
+            pty=str(link),
+            nodes=[f"{n.name}@0x{n.address:02X}" for n in door.bus.nodes],
+            baud=cfg.baud,
+        )
     finally:
-        sock.close()
-        host.close()
         p = door.bus.parser
         log.info("stopped", frames=p.frames, errors=p.errors, noise=p.noise)

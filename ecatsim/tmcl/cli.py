@@ -3,9 +3,7 @@
 from __future__ import annotations
 
 import logging
-import signal
 from pathlib import Path
-from types import FrameType
 from typing import Any
 
 import click
@@ -80,9 +78,8 @@ def tmcl(
                  --module-address 2
     """
     from ecatsim.cli import configure_logging
-    from ecatsim.clock import MonotonicClock
-    from ecatsim.ctl import ControlSocket, default_path
-    from ecatsim.doors import DoorHost, serve_doors
+    from ecatsim.ctl import default_path
+    from ecatsim.frontdoors import serve_door
     from ecatsim.tmcl.server import TmclDoor, parse_config
 
     configure_logging("console" if log_format == "auto" else log_format, logging.INFO)
@@ -99,30 +96,14 @@ def tmcl(
         raise UserError("give --listen tcp://HOST:PORT or --listen pty:PATH (or a --config)")
     modules, urls, eeprom_path = parse_config(data, src, base)
     door = TmclDoor(modules, urls, eeprom_path, base=base)
-    host = DoorHost({"tmcl": door})
     try:
-        ctl = ControlSocket(ctl_path or default_path("tmcl"), None, None, host)
-    except BaseException:
-        host.close()
-        raise
-    stopping: list[int] = []
-
-    def stop(signum: int, frame: FrameType | None) -> None:
-        stopping.append(signum)
-
-    signal.signal(signal.SIGINT, stop)
-    signal.signal(signal.SIGTERM, stop)
-    log.info(
-        "ready",
-        listen=door.status()["listen"],
-        modules=[m.address for m in door.modules],
-        eeprom=str(eeprom_path) if eeprom_path else None,
-        ctl=str(ctl.path),
-    )
-    clock = MonotonicClock()
-    try:
-        serve_doors(host, clock.now_ns, lambda: bool(stopping), {ctl.fileno(): ctl.serve})
+        serve_door(
+            "tmcl",
+            door,
+            ctl_path or default_path("tmcl"),
+            listen=door.status()["listen"],
+            modules=[m.address for m in door.modules],
+            eeprom=str(eeprom_path) if eeprom_path else None,
+        )
     finally:
-        ctl.close()
-        host.close()
         log.info("stopped", frames=door.frames, bad_checksums=door.bad_checksums)
