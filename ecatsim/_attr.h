@@ -25,15 +25,35 @@ static inline int intern_names(const Name *names, size_t n)
     return 0;
 }
 
-/* Where a __slots__ attribute lives in an object, found once per (name, type) through
- * the type's member descriptor and kept while the type is unchanged (its version tag):
+/* The offset of the plain __slots__ member ``name`` of type ``t``, or -1: not such a
+ * member (Python's lookup then decides, errors included; no exception is left set). The
+ * class attribute is the member descriptor (public API: the type's getattr and the
+ * PyMemberDescr type). A type's slot offsets are fixed when it is created. */
+static inline Py_ssize_t member_offset(PyTypeObject *t, PyObject *name)
+{
+    PyObject *d = PyObject_GetAttr((PyObject *)t, name);
+    if (d == NULL) {
+        PyErr_Clear();
+        return -1;
+    }
+    Py_ssize_t off = -1;
+    if (Py_IS_TYPE(d, &PyMemberDescr_Type)) {
+        PyMemberDef *m = ((PyMemberDescrObject *)d)->d_member;
+        if (m->type == T_OBJECT_EX && !(m->flags & READONLY))
+            off = m->offset;
+    }
+    Py_DECREF(d);
+    return off;
+}
+
+/* Where a __slots__ attribute lives in an object, found once per (name, type) and kept:
  * the compiled paths read their state after a sleep, when every line is a cache miss,
- * and a slot read touches two lines where PyObject_GetAttr touches about ten. */
+ * and a slot read touches two lines where PyObject_GetAttr touches about ten. The cache
+ * holds a reference to each type it knows, so that no other type can take its address. */
 typedef struct {
     PyObject *name;
     PyTypeObject *type;
-    unsigned int version;
-    Py_ssize_t offset;
+    Py_ssize_t offset; /* -1: not a plain slot */
 } SlotCache;
 
 #define SLOT_CACHE_SIZE 256
@@ -45,20 +65,14 @@ static inline PyObject **slot_of(PyObject *o, PyObject *name)
 {
     PyTypeObject *t = Py_TYPE(o);
     SlotCache *c = &slot_cache[((uintptr_t)name >> 4) % SLOT_CACHE_SIZE];
-    if (c->name == name && c->type == t && c->version == t->tp_version_tag && c->version)
-        return (PyObject **)((char *)o + c->offset);
-    PyObject *d = _PyType_Lookup(t, name);
-    if (d == NULL || !Py_IS_TYPE(d, &PyMemberDescr_Type) ||
-        !PyType_HasFeature(t, Py_TPFLAGS_VALID_VERSION_TAG))
-        return NULL;
-    PyMemberDef *m = ((PyMemberDescrObject *)d)->d_member;
-    if (m->type != T_OBJECT_EX || (m->flags & READONLY))
-        return NULL;
-    c->name = name;
-    c->type = t;
-    c->version = t->tp_version_tag;
-    c->offset = m->offset;
-    return (PyObject **)((char *)o + m->offset);
+    if (c->name != name || c->type != t) {
+        Py_ssize_t off = member_offset(t, name);
+        Py_INCREF(t);
+        Py_XSETREF(c->type, t);
+        c->name = name; /* interned at module init, never freed */
+        c->offset = off;
+    }
+    return c->offset < 0 ? NULL : (PyObject **)((char *)o + c->offset);
 }
 
 /* The offsets of several __slots__ members of one type, found together: an object read
@@ -66,9 +80,9 @@ static inline PyObject **slot_of(PyObject *o, PyObject *name)
  * it touches one table. */
 #define LAYOUT_MAX 24
 typedef struct {
-    PyTypeObject *type;
-    unsigned int version;
+    PyTypeObject *type; /* a reference held; NULL: unknown */
     int n;
+    int plain; /* every member a plain slot: offset[] holds */
     Py_ssize_t offset[LAYOUT_MAX];
 } Layout;
 
@@ -77,26 +91,24 @@ typedef struct {
 static inline int layout_of(Layout *L, PyObject *o, PyObject *const *names, int n)
 {
     PyTypeObject *t = Py_TYPE(o);
-    if (L->type == t && L->version == t->tp_version_tag && L->version && L->n == n)
-        return 1;
-    L->type = NULL; /* invalid while it is filled */
-    if (n > LAYOUT_MAX)
-        return 0;
-    for (int i = 0; i < n; i++) {
-        PyObject *d = _PyType_Lookup(t, names[i]);
-        if (d == NULL || !Py_IS_TYPE(d, &PyMemberDescr_Type))
-            return 0;
-        PyMemberDef *m = ((PyMemberDescrObject *)d)->d_member;
-        if (m->type != T_OBJECT_EX || (m->flags & READONLY))
-            return 0;
-        L->offset[i] = m->offset;
+    if (L->type == t && L->n == n)
+        return L->plain;
+    int plain = n <= LAYOUT_MAX;
+    for (int i = 0; plain && i < n; i++) {
+        L->offset[i] = member_offset(t, names[i]);
+        plain = L->offset[i] >= 0;
     }
-    if (!PyType_HasFeature(t, Py_TPFLAGS_VALID_VERSION_TAG))
-        return 0;
-    L->version = t->tp_version_tag;
+    Py_INCREF(t);
+    Py_XSETREF(L->type, t);
     L->n = n;
-    L->type = t;
-    return 1;
+    L->plain = plain;
+    return plain;
+}
+
+/* L holds for o: the members can be written at their offsets. */
+static inline int layout_holds(const Layout *L, PyObject *o)
+{
+    return L->type == Py_TYPE(o) && L->plain;
 }
 
 /* Member i of a Layout (borrowed; NULL if unset). */

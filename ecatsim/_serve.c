@@ -591,7 +591,24 @@ static PyObject *serve(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     return result(rc, n, t_rx, p);
 }
 
+/* slot_offset(obj, name) -> the offset slot_of reads ``name`` at in ``obj``, or -1 (read
+ * by name): the tests see that the slot path engages on every interpreter. */
+static PyObject *slot_offset(PyObject *self, PyObject *args)
+{
+    PyObject *obj, *name;
+    if (!PyArg_ParseTuple(args, "OU", &obj, &name))
+        return NULL;
+    Py_INCREF(name);
+    PyUnicode_InternInPlace(&name);
+    PyObject **p = slot_of(obj, name);
+    long off = p == NULL ? -1 : (long)((char *)p - (char *)obj);
+    /* the cache keeps the name: it stays alive (interned names are shared) */
+    return PyLong_FromLong(off);
+}
+
 static PyMethodDef methods[] = {
+    {"slot_offset", slot_offset, METH_VARARGS,
+     "slot_offset(obj, name) -> int: where the compiled paths read obj.name (-1: by name)."},
     {"serve", (PyCFunction)(void (*)(void))serve, METH_FASTCALL,
      "serve(fd, others, buf, rx_copy, deadline_ns, busy, seg, t_rx, timer_fd) -> "
      "(code, n, t_rx, p)."},

@@ -177,10 +177,9 @@ static int sm_sync(Esc *e, Sm *sm)
 /* setattr through the layout when it holds for obj, by name otherwise. */
 static int sm_set(PyObject *obj, int i, PyObject *v)
 {
-    PyTypeObject *t = Py_TYPE(obj);
     if (v == NULL)
         return -1;
-    if (sm_layout.type != t || sm_layout.version != t->tp_version_tag || !sm_layout.version) {
+    if (!layout_holds(&sm_layout, obj)) {
         int rc = set_attr(obj, sm_names[i], v);
         Py_DECREF(v);
         return rc;

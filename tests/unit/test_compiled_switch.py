@@ -58,3 +58,22 @@ def test_a_free_threaded_interpreter_loads_no_extension(
     assert compiled.load("ecatsim.esc._logical") is None
     assert "ecatsim.esc._dcloop" not in sys.modules
     assert capsys.readouterr().out.count("compiled_paths_off") == 1
+
+
+def test_the_slot_path_engages_on_this_interpreter() -> None:
+    """The C paths read the segment's, the SMs' and the DC units' state at their __slots__
+    offsets, found through public API (decision P10), on every interpreter: 3.13 included.
+    A property is read by name (-1)."""
+    from ecatsim import daemon
+    from tests.support.compiled import require_built
+    from tests.support.tinymaster import segment_of
+
+    require_built(daemon._serve, "ecatsim._serve")
+    assert daemon._serve is not None
+    seg, _clock = segment_of(1)
+    esc = seg.escs[0]
+    for obj, name in ((seg, "escs"), (esc.sm[2], "length"), (esc.dc, "t_ref")):
+        assert type(obj).__dict__[name].__class__.__name__ == "member_descriptor"
+        assert daemon._serve.slot_offset(obj, name) > 0, (type(obj).__name__, name)
+    assert daemon._serve.slot_offset(esc.sm[2], "no_such_attribute") == -1
+    assert daemon._serve.slot_offset(seg, "sync_escs") == -1  # a property
