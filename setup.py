@@ -54,25 +54,31 @@ TWINS: list[tuple[str, list[str], list[str], list[str]]] = [
     (
         "ecatsim.esc._logical",
         ["ecatsim/esc/_logical.c"],
-        ["ecatsim/esc/_logical.h", "ecatsim/esc/_sm.h", "ecatsim/esc/_events.h", "ecatsim/_attr.h"],
+        [
+            "ecatsim/esc/_logical.h",
+            "ecatsim/esc/_sm.h",
+            "ecatsim/esc/_events.h",
+            "ecatsim/_attr.h",
+            "ecatsim/_module.h",
+        ],
         ["-Wall", "-Wextra"],
     ),
     (
         "ecatsim.esc._dcloop",
         ["ecatsim/esc/_dcloop.c"],
-        ["ecatsim/_attr.h", "ecatsim/esc/_windows.h", "ecatsim/esc/_events.h"],
+        ["ecatsim/_attr.h", "ecatsim/esc/_windows.h", "ecatsim/esc/_events.h", "ecatsim/_module.h"],
         ["-Wall", "-Wextra"],
     ),
     (
         "ecatsim.link._rawio",
         ["ecatsim/link/_rawio.c"],
-        ["ecatsim/link/_rawio.h"],
+        ["ecatsim/link/_rawio.h", "ecatsim/_module.h"],
         ["-Wall", "-Wextra"],
     ),
     (
         "ecatsim.slave._cycle",
         ["ecatsim/slave/_cycle.c"],
-        ["ecatsim/esc/_sm.h", "ecatsim/esc/_events.h", "ecatsim/_attr.h"],
+        ["ecatsim/esc/_sm.h", "ecatsim/esc/_events.h", "ecatsim/_attr.h", "ecatsim/_module.h"],
         ["-Wall", "-Wextra"],
     ),
     (
@@ -85,6 +91,7 @@ TWINS: list[tuple[str, list[str], list[str], list[str]]] = [
             "ecatsim/_attr.h",
             "ecatsim/esc/_windows.h",
             "ecatsim/esc/_events.h",
+            "ecatsim/_module.h",
         ],
         ["-Wall", "-Wextra"],
     ),

@@ -46,6 +46,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "_module.h"
 #include "esc/_logical.h"
 #include "esc/_windows.h"
 #include "link/_rawio.h"
@@ -595,6 +596,7 @@ static PyObject *serve(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
  * by name): the tests see that the slot path engages on every interpreter. */
 static PyObject *slot_offset(PyObject *self, PyObject *args)
 {
+    (void)self;
     PyObject *obj, *name;
     if (!PyArg_ParseTuple(args, "OU", &obj, &name))
         return NULL;
@@ -616,12 +618,7 @@ static PyMethodDef methods[] = {
     {NULL, NULL, 0, NULL},
 };
 
-static struct PyModuleDef module = {
-    PyModuleDef_HEAD_INIT, "_serve", "The compiled responder (decision P9).", -1, methods,
-    NULL, NULL, NULL, NULL,
-};
-
-PyMODINIT_FUNC PyInit__serve(void)
+static int exec_module(PyObject *m)
 {
     static const Name names[] = {
         {&s_logical, "logical"}, {&s_reach, "reach"}, {&s_irq, "irq"},
@@ -636,17 +633,21 @@ PyMODINIT_FUNC PyInit__serve(void)
         {&s_sm_windows, "sm_windows"},
     };
     if (intern_names(names, sizeof names / sizeof names[0]) < 0 || logical_init() < 0)
-        return NULL;
-    PyObject *m = PyModule_Create(&module);
-    if (m == NULL)
-        return NULL;
+        return -1;
     if (PyModule_AddIntConstant(m, "TIMEOUT", TIMEOUT) < 0 ||
         PyModule_AddIntConstant(m, "WAKE", WAKE) < 0 ||
         PyModule_AddIntConstant(m, "FRAME", FRAME) < 0 ||
         PyModule_AddIntConstant(m, "REPLIED", REPLIED) < 0 ||
-        PyModule_AddIntConstant(m, "RESUME", RESUME) < 0) {
-        Py_DECREF(m);
-        return NULL;
-    }
-    return m;
+        PyModule_AddIntConstant(m, "RESUME", RESUME) < 0)
+        return -1;
+    return 0;
 }
+
+static PyModuleDef_Slot slots[] = ECATSIM_MODULE_SLOTS(exec_module);
+
+static struct PyModuleDef module = {
+    PyModuleDef_HEAD_INIT, "_serve", "The compiled responder (decision P9).", 0, methods,
+    slots, NULL, NULL, NULL,
+};
+
+PyMODINIT_FUNC PyInit__serve(void) { return PyModuleDef_Init(&module); }

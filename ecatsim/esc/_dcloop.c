@@ -42,6 +42,7 @@
 #include <string.h>
 
 #include "../_attr.h"
+#include "../_module.h"
 #include "_events.h"
 #include "_windows.h"
 
@@ -671,13 +672,7 @@ static PyMethodDef methods[] = {
     {NULL, NULL, 0, NULL},
 };
 
-static struct PyModuleDef module = {
-    PyModuleDef_HEAD_INIT, "_dcloop",
-    "Compiled DC loops: the time loops of an FRMW of 0x0910, the SYNC0 pulses.", -1, methods,
-    NULL, NULL, NULL, NULL,
-};
-
-PyMODINIT_FUNC PyInit__dcloop(void)
+static int exec_module(PyObject *m)
 {
     static const Name names[] = {
         {&s_escs, "escs"}, {&s_ctx, "ctx"}, {&s_t_ns, "t_ns"},
@@ -696,13 +691,10 @@ PyMODINIT_FUNC PyInit__dcloop(void)
         {&s_pulse_hint, "_pulse_hint"}, {&s_pdi_ns, "pdi_ns"},
     };
     if (intern_names(names, sizeof names / sizeof names[0]) < 0)
-        return NULL;
-    two64 = PyLong_FromString("18446744073709551616", NULL, 10); /* 2^64 */
+        return -1;
+    Py_XSETREF(two64, PyLong_FromString("18446744073709551616", NULL, 10)); /* 2^64 */
     if (two64 == NULL)
-        return NULL;
-    PyObject *m = PyModule_Create(&module);
-    if (m == NULL)
-        return NULL;
+        return -1;
     if (PyModule_AddIntConstant(m, "MOVE_NS", MOVE_NS) < 0 ||
         PyModule_AddIntConstant(m, "FAR_NS", FAR_NS) < 0 ||
         PyModule_AddIntConstant(m, "DC_SYSTEM_TIME", DC_SYSTEM_TIME) < 0 ||
@@ -722,9 +714,17 @@ PyMODINIT_FUNC PyInit__dcloop(void)
         PyModule_AddIntConstant(m, "EV_SYNC0", EV_SYNC0) < 0 ||
         PyModule_AddIntConstant(m, "MAX_SYNC0_CATCHUP", MAX_SYNC0_CATCHUP) < 0 ||
         PyModule_AddIntConstant(m, "PULSE_HINT_MARGIN_NS", PULSE_HINT_MARGIN_NS) < 0 ||
-        PyModule_AddIntConstant(m, "NO_DEADLINE", (long)NO_DEADLINE) < 0) {
-        Py_DECREF(m);
-        return NULL;
-    }
-    return m;
+        PyModule_AddIntConstant(m, "NO_DEADLINE", (long)NO_DEADLINE) < 0)
+        return -1;
+    return 0;
 }
+
+static PyModuleDef_Slot slots[] = ECATSIM_MODULE_SLOTS(exec_module);
+
+static struct PyModuleDef module = {
+    PyModuleDef_HEAD_INIT, "_dcloop",
+    "Compiled DC loops: the time loops of an FRMW of 0x0910, the SYNC0 pulses.", 0, methods,
+    slots, NULL, NULL, NULL,
+};
+
+PyMODINIT_FUNC PyInit__dcloop(void) { return PyModuleDef_Init(&module); }

@@ -20,6 +20,7 @@
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 
+#include "../_module.h"
 #include "_logical.h"
 
 static PyObject *run(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
@@ -49,14 +50,17 @@ static PyMethodDef methods[] = {
     {NULL, NULL, 0, NULL},
 };
 
+static int exec_module(PyObject *m)
+{
+    (void)m;
+    return logical_init();
+}
+
+static PyModuleDef_Slot slots[] = ECATSIM_MODULE_SLOTS(exec_module);
+
 static struct PyModuleDef module = {
-    PyModuleDef_HEAD_INIT, "_logical", "Compiled logical datagrams (FMMU to SM).", -1,
-    methods, NULL, NULL, NULL, NULL,
+    PyModuleDef_HEAD_INIT, "_logical", "Compiled logical datagrams (FMMU to SM).", 0,
+    methods, slots, NULL, NULL, NULL,
 };
 
-PyMODINIT_FUNC PyInit__logical(void)
-{
-    if (logical_init() < 0)
-        return NULL;
-    return PyModule_Create(&module);
-}
+PyMODINIT_FUNC PyInit__logical(void) { return PyModuleDef_Init(&module); }

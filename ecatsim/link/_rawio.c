@@ -15,6 +15,7 @@
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 
+#include "../_module.h"
 #include "_rawio.h"
 
 static PyObject *recv_frame(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
@@ -46,9 +47,17 @@ static PyMethodDef methods[] = {
     {NULL, NULL, 0, NULL},
 };
 
+static int exec_module(PyObject *m)
+{
+    (void)m;
+    return 0;
+}
+
+static PyModuleDef_Slot slots[] = ECATSIM_MODULE_SLOTS(exec_module);
+
 static struct PyModuleDef module = {
-    PyModuleDef_HEAD_INIT, "_rawio", "Compiled receive of the raw link.", -1, methods,
-    NULL, NULL, NULL, NULL,
+    PyModuleDef_HEAD_INIT, "_rawio", "Compiled receive of the raw link.", 0, methods,
+    slots, NULL, NULL, NULL,
 };
 
-PyMODINIT_FUNC PyInit__rawio(void) { return PyModule_Create(&module); }
+PyMODINIT_FUNC PyInit__rawio(void) { return PyModuleDef_Init(&module); }

@@ -24,6 +24,7 @@
 #include <stdint.h>
 #include <string.h>
 
+#include "../_module.h"
 #include "../esc/_sm.h"
 
 /* Events the Python firmware serves other than SYNC0 and process data: any of them sends
@@ -371,13 +372,9 @@ static PyMethodDef methods[] = {
     {NULL, NULL, 0, NULL},
 };
 
-static struct PyModuleDef module = {
-    PyModuleDef_HEAD_INIT, "_cycle", "Compiled DC cycle of the slave firmware.", -1, methods,
-    NULL, NULL, NULL, NULL,
-};
-
-PyMODINIT_FUNC PyInit__cycle(void)
+static int exec_module(PyObject *m)
 {
+    (void)m;
     static const Name names[] = {
         {&s_state, "state"}, {&s_event_mask, "event_mask"}, {&s_pd_masked, "pd_masked"},
         {&s_out, "out"}, {&s_value, "value"},
@@ -385,8 +382,15 @@ PyMODINIT_FUNC PyInit__cycle(void)
         {&s_pack_inputs, "pack_inputs"}, {&s_service_mailbox, "service_mailbox"},
     };
     if (intern_names(names, sizeof names / sizeof names[0]) < 0)
-        return NULL;
-    if (sm_names_init() < 0)
-        return NULL;
-    return PyModule_Create(&module);
+        return -1;
+    return sm_names_init();
 }
+
+static PyModuleDef_Slot slots[] = ECATSIM_MODULE_SLOTS(exec_module);
+
+static struct PyModuleDef module = {
+    PyModuleDef_HEAD_INIT, "_cycle", "Compiled DC cycle of the slave firmware.", 0, methods,
+    slots, NULL, NULL, NULL,
+};
+
+PyMODINIT_FUNC PyInit__cycle(void) { return PyModuleDef_Init(&module); }

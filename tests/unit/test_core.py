@@ -131,3 +131,19 @@ def test_every_extension_is_optional(monkeypatch: pytest.MonkeyPatch) -> None:
     exts = [*setup["twins"](), *setup["core"]()]
     assert {e.name for e in exts} >= set(compiled.CORE)
     assert [e.name for e in exts if not e.optional] == []
+
+
+def test_every_hand_written_extension_declares_its_gil_use() -> None:
+    """Each C extension initialises in phases with the slots of ecatsim/_module.h: Py_mod_gil
+    says it needs the GIL (the loader does not import it on a free-threaded interpreter),
+    and it is not loaded in a subinterpreter."""
+    root = Path(compiled.__file__).parents[1]
+    setup = runpy.run_path(str(root / "setup.py"), run_name="probe")
+    header = (root / "ecatsim" / "_module.h").read_text()
+    assert "{Py_mod_gil, Py_MOD_GIL_USED}" in header
+    assert "Py_MOD_MULTIPLE_INTERPRETERS_NOT_SUPPORTED" in header
+    for name, sources, depends, _extra in setup["TWINS"]:
+        text = (root / sources[0]).read_text()
+        assert "ecatsim/_module.h" in depends, name
+        assert "ECATSIM_MODULE_SLOTS(exec_module)" in text, name
+        assert "PyModuleDef_Init(&module)" in text and "PyModule_Create" not in text, name
