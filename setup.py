@@ -70,12 +70,6 @@ TWINS: list[tuple[str, list[str], list[str], list[str]]] = [
         ["-Wall", "-Wextra"],
     ),
     (
-        "ecatsim.link._rawio",
-        ["ecatsim/link/_rawio.c"],
-        ["ecatsim/link/_rawio.h", "ecatsim/_module.h"],
-        ["-Wall", "-Wextra"],
-    ),
-    (
         "ecatsim.slave._cycle",
         ["ecatsim/slave/_cycle.c"],
         ["ecatsim/esc/_sm.h", "ecatsim/esc/_events.h", "ecatsim/_attr.h", "ecatsim/_module.h"],

@@ -1,6 +1,6 @@
 /* One frame from a RawLink socket by recvmsg(2), shared by the compiled paths
- * (ecatsim/link/_rawio.c: RawLink.recv_into; ecatsim/_serve.c: the responder).
- * RawLink._recv_py (ecatsim/link/raw.py) is the reference.
+ * (ecatsim/_serve.c: the responder). RawLink.recv_into (ecatsim/link/raw.py) is the
+ * reference; tests/unit/link/test_links.py runs both.
  *
  * raw_recv(fd, buf, cap, flags, &stamp) -> frame length in buf (an 802.1Q tag the kernel
  *   moved into PACKET_AUXDATA put back at offset 12); 0 if no frame is waiting (EAGAIN,

@@ -26,10 +26,7 @@ import struct
 import subprocess
 import time
 
-from ecatsim.compiled import load
 from ecatsim.link.errors import LinkError
-
-_rawio = load("ecatsim.link._rawio")  # decision P4; None: Python serves
 
 ETH_P_ECAT = 0x88A4
 ETH_P_8021Q = 0x8100
@@ -162,8 +159,6 @@ class RawLink:
     #: fileno() is a packet socket: one recvmsg(2) is one frame, one send(2) one reply, so
     #: the daemon's compiled responder (decision P9) may use it directly
     raw_socket = True
-    #: receive with the compiled recvmsg (_rawio.c) where it was built; tests run both
-    compiled = True
 
     def __init__(self, iface: str, *, qdisc_bypass: bool = True, bring_up: bool = True) -> None:
         if not iface or len(iface) > 15:
@@ -219,16 +214,9 @@ class RawLink:
         return self.sock.fileno()
 
     def recv_into(self, buf: bytearray) -> int:
-        """One frame into ``buf``; 0 if none was waiting (or it was our own outgoing one)."""
-        if _rawio is not None and self.compiled:
-            n, stamp = _rawio.recv(self._fd, buf)
-            if n:
-                self.rx_ns = _monotonic(stamp)
-            return int(n)
-        return self._recv_py(buf)
-
-    def _recv_py(self, buf: bytearray) -> int:
-        """recv_into through Python's socket module (the reference for _rawio.c)."""
+        """One frame into ``buf``; 0 if none was waiting (or it was our own outgoing one).
+        The daemon's compiled responder receives the same way in C (``_rawio.h``, decision
+        P4); tests/unit/link/test_links.py runs both."""
         while True:
             try:
                 n, anc, _flags, addr = self.sock.recvmsg_into([buf], self._anc_size)

@@ -238,8 +238,6 @@ def _csp_sine(master_factory: Any, daemon_factory: Any, cfg: Any, started: list[
     # spins while it waits for the reply and must not hold off the daemon sending it.
     old_policy, old_param = os.sched_getscheduler(0), os.sched_getparam(0)
     os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(30))
-    gc.collect()
-    gc.disable()  # no collector pause in the master's cycle
     errors: list[int] = []
     # The bound assumes one new target per SYNC0. When the master itself stalls or bursts
     # (seen in the DC time of its frames: a SYNC0 interval with no frame, or two), the
@@ -271,7 +269,6 @@ def _csp_sine(master_factory: Any, daemon_factory: Any, cfg: Any, started: list[
             if rows[0][0] & 0x6F != 0x27 or rows[1][0] & 0x6F != 0x27:
                 break  # no longer following: nothing more to judge
     finally:
-        gc.enable()
         os.sched_setscheduler(0, old_policy, old_param)
     return SineRun(m, d, rows, errors, judged, anomalies, k, bound, last_send[1])
 
@@ -294,6 +291,11 @@ def test_csp_sine_with_dc_sync0(master_factory: Any, daemon_factory: Any, tmp_pa
     for _ in range(3):
         started: list[Any] = []
         failure = ""
+        # No collector pause in the master's cycle: after a long test session a full
+        # collection takes about as long as the SM watchdog (100 ms), so it runs before the
+        # cyclic exchange begins, and not again until the run is over.
+        gc.collect()
+        gc.disable()
         with StallWatch() as watch:
             try:
                 run = _csp_sine(master_factory, daemon_factory, cfg, started)
@@ -301,6 +303,8 @@ def test_csp_sine_with_dc_sync0(master_factory: Any, daemon_factory: Any, tmp_pa
                     failure = f"the drives left Operation enabled: {run.why()}"
             except AssertionError as exc:
                 failure = f"{exc!r}"
+            finally:
+                gc.enable()
         if not failure:
             break
         if not stalled(watch.worst_s):

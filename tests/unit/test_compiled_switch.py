@@ -11,9 +11,9 @@ import sys
 import pytest
 
 PROBE = """
-import ecatsim.slave.cycle as cycle, ecatsim.link.raw as raw, ecatsim.segment as segment
+import ecatsim.slave.cycle as cycle, ecatsim.segment as segment
 import ecatsim.daemon as daemon
-print(*(m is not None for m in (cycle.compiled, raw._rawio, segment._logical, daemon._serve,
+print(*(m is not None for m in (cycle.compiled, segment._logical, daemon._serve,
                                 segment._dcloop)))
 """
 
@@ -28,15 +28,15 @@ def probe(**env: str) -> str:
 
 
 def test_pure_python_switches_every_compiled_path_off() -> None:
-    assert probe(ECATSIM_PURE_PYTHON="1") == "False False False False False"
+    assert probe(ECATSIM_PURE_PYTHON="1") == "False False False False"
 
 
 def test_compiled_paths_are_used_where_built() -> None:
     if os.environ.get("ECATSIM_PURE_PYTHON", "") not in ("", "0"):
         pytest.skip("the pure-Python core runs (ECATSIM_PURE_PYTHON)")
     got = probe()
-    if got != "True True True True True":
-        names = "cycle, rawio, logical, serve, dcloop"
+    if got != "True True True True":
+        names = "cycle, logical, serve, dcloop"
         msg = f"not every extension was built ({names}: {got})"
         if os.environ.get("CI"):
             pytest.fail(msg, pytrace=False)

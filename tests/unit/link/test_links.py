@@ -7,6 +7,7 @@ Ref: packet(7), tuntap; ETG.1000.4 (EtherType 0x88A4, UDP port 0x88A4); IEEE 802
 
 from __future__ import annotations
 
+import os
 import select
 import socket
 import struct
@@ -17,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from ecatsim.link import raw
+from ecatsim import daemon
 from ecatsim.link.errors import LinkError
 from ecatsim.link.loopback import LoopbackLink, Manipulator
 from ecatsim.link.pcap import MAGIC_NSEC, MAGIC_USEC, PcapWriter
@@ -73,17 +74,44 @@ def pair() -> Iterator[NetnsPair]:
         yield p
 
 
-@pytest.fixture(params=[True, False], ids=["compiled", "python"])
+class ResponderLink(RawLink):
+    """A RawLink whose receive is the daemon's compiled responder's (``_serve.serve`` with
+    no segment: wait until the deadline, receive with ``_rawio.h``, hand the frame back),
+    so the tests below run the C receive and the Python reference alike."""
+
+    def __init__(self, iface: str) -> None:
+        super().__init__(iface)
+        assert daemon._serve is not None
+        self._serve = daemon._serve
+        self._timer = self._serve.timer()
+        self._rx_copy = bytearray(2048)
+
+    def recv_into(self, buf: bytearray) -> int:
+        srv = self._serve
+        code, n, t_rx, _ = srv.serve(
+            self.fileno(), (), buf, self._rx_copy, time.monotonic_ns(), False, None, 0, self._timer
+        )
+        if code != srv.FRAME:
+            assert code == srv.TIMEOUT, code
+            return 0
+        self.rx_ns = t_rx
+        return n
+
+    def close(self) -> None:
+        os.close(self._timer)
+        super().close()
+
+
+@pytest.fixture(params=[True, False], ids=["responder", "python"])
 def raw_pair(
     pair: NetnsPair, request: pytest.FixtureRequest
 ) -> Iterator[tuple[RawLink, socket.socket, NetnsPair]]:
-    """RawLink on the slave end (receiving through _rawio.c, and through Python's socket
-    module, decision P4); a plain ETH_P_ALL socket on the master end."""
+    """A RawLink on the slave end, receiving as the compiled responder does (decision P4)
+    or through Python's socket module; a plain ETH_P_ALL socket on the master end."""
     if request.param:
-        require_built(raw._rawio, "ecatsim.link._rawio")
+        require_built(daemon._serve, "ecatsim._serve")
     with in_netns(pair.slave_ns):
-        link = RawLink(pair.slave_if)
-    link.compiled = request.param
+        link = ResponderLink(pair.slave_if) if request.param else RawLink(pair.slave_if)
     with in_netns(pair.master_ns):
         master = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(ETH_P_ALL))
         master.bind((pair.master_if, 0))

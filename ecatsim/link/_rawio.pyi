@@ -1,3 +1,0 @@
-"""Type stub of the compiled raw-link receive (ecatsim/link/_rawio.c)."""
-
-def recv(fd: int, buf: bytearray) -> tuple[int, int]: ...
