@@ -98,6 +98,13 @@ def cli(ctx: click.Context, debug: bool) -> None:
     "or CAP_SYS_NICE).",
 )
 @click.option("--no-rt", is_flag=True, help="Keep the ordinary scheduler (no SCHED_FIFO).")
+@click.option(
+    "--follow-master-cpu/--no-follow-master-cpu",
+    default=True,
+    show_default=True,
+    help="Real-time on a raw interface without --cpu: run on the CPU the master's frames "
+    "come from, so the reply is there before the master first looks for it.",
+)
 @click.option("--trace", "trace", type=click.Path(path_type=Path), help="Per-cycle drive CSV.")
 @click.option(
     "--ctl",
@@ -121,6 +128,7 @@ def run(
     cpu: int | None,
     rt_priority: int | None,
     no_rt: bool,
+    follow_master_cpu: bool,
     trace: Path | None,
     ctl: Path | None,
     user: str | None,
@@ -144,6 +152,7 @@ def run(
         cpu=cpu,
         rt_priority=rt_priority,
         no_rt=no_rt,
+        follow_master_cpu=follow_master_cpu,
         trace=trace,
         ctl=ctl,
         user=user,

@@ -25,6 +25,7 @@ from ecatsim.compiled import load
 from ecatsim.doors import DoorHost
 from ecatsim.faults.engine import FaultEngine
 from ecatsim.link.base import Link
+from ecatsim.link.follow import CpuFollower
 from ecatsim.recorder import FrameRecorder
 from ecatsim.segment import Segment
 from ecatsim.wire.frame import ecat_offset, mark_processed
@@ -92,6 +93,8 @@ class Daemon:
         self._rx_copy = bytearray(MAX_FRAME)
         #: the compiled responder's timer fd (armed once per deadline), made on first use
         self._timer_fd = -1
+        #: runs the daemon on the master's CPU (decision K6); None: stays where it is
+        self.follower: CpuFollower | None = None
         self.failures = 0
         self.replies = 0
         #: replies the compiled responder sent (served whole in C)
@@ -184,12 +187,25 @@ class Daemon:
         except Exception as exc:
             self._failure("process", exc)
         self._service(t_rx)
+        follower = self.follower
+        if follower is not None and t_rx >= follower.due_ns:
+            self._follow(follower, t_rx)
         faults = self.faults
         if faults.active:
             try:
                 faults.after_frame(seg.clock.now_ns())
             except Exception as exc:
                 self._failure("faults", exc)
+
+    def _follow(self, follower: CpuFollower, now_ns: int) -> None:
+        """Move to the CPU the master's frames come from (decision K6)."""
+        try:
+            cpu = follower.poll(now_ns)
+        except OSError as exc:
+            self._failure("follow", exc)
+            return
+        if cpu is not None:
+            (log.info if follower.moves == 1 else log.debug)("following_master_cpu", cpu=cpu)
 
     def _hold(self, frame: bytes, copies: int, delay_ns: int) -> None:
         """A delay fault: send ``frame`` later (``copies`` times)."""
@@ -394,6 +410,8 @@ class Daemon:
 
     def close(self) -> None:
         self.link.close()
+        if self.follower is not None:
+            self.follower.close()
         for f in (self._wake_r, self._wake_w, self._timer_fd):
             if f < 0:
                 continue

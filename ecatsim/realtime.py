@@ -83,9 +83,12 @@ def lock_memory() -> bool:
     return False
 
 
-def apply(priority: int | None, explicit: bool) -> None:
-    """Scheduling class and memory lock for the serving loop (call once everything is built)."""
+def apply(priority: int | None, explicit: bool) -> bool:
+    """Scheduling class and memory lock for the serving loop (call once everything is
+    built). True if the daemon now runs SCHED_FIFO."""
     if priority is None:
-        return
-    if set_fifo(priority, explicit):
-        lock_memory()
+        return False
+    if not set_fifo(priority, explicit):
+        return False
+    lock_memory()
+    return True

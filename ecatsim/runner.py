@@ -22,6 +22,7 @@ from ecatsim.faults.spec import FaultSpecError
 from ecatsim.frontdoors import build_doors
 from ecatsim.link.base import Link
 from ecatsim.link.errors import LinkError
+from ecatsim.link.follow import CpuFollower
 from ecatsim.mfcio import trace as mfcio_trace
 from ecatsim.mfcio.block import MfcioBlock
 from ecatsim.privileges import drop_privileges
@@ -46,6 +47,7 @@ class RunOptions:
     cpu: int | None = None
     rt_priority: int | None = None
     no_rt: bool = False
+    follow_master_cpu: bool = True
     trace: Path | None = None
     ctl: Path | None = None
     user: str | None = None
@@ -114,6 +116,20 @@ def arm_faults(cfg: SegmentConfig, segment: Segment) -> FaultEngine:
     return engine
 
 
+def follow_master(opts: RunOptions, link: Link) -> CpuFollower | None:
+    """The CPU follower (decision K6) where it applies: a raw interface, the daemon
+    real-time and not pinned by --cpu, --no-follow-master-cpu not given."""
+    from ecatsim.link.raw import RawLink
+
+    if not opts.follow_master_cpu or opts.cpu is not None or not isinstance(link, RawLink):
+        return None
+    try:
+        return CpuFollower(link.iface)
+    except OSError as exc:
+        log.warning("follow_master_cpu_unavailable", reason=exc.strerror)
+        return None
+
+
 def run_daemon(opts: RunOptions) -> None:
     """Build everything, log ``ready``, serve until SIGINT/SIGTERM."""
     cfg = segment_config(opts)
@@ -146,7 +162,8 @@ def run_daemon(opts: RunOptions) -> None:
     # collector so a full collection cannot stall a reply by milliseconds.
     gc.collect()
     gc.freeze()
-    realtime.apply(priority, explicit=opts.rt_priority is not None)
+    if realtime.apply(priority, explicit=opts.rt_priority is not None):
+        daemon.follower = follow_master(opts, link)
     compiled.say_if_pure()  # one warning line where the pure-Python core serves
     drop_privileges(opts.user)  # sockets and files are open: keep CAP_NET_RAW only
     daemon.install_signal_handlers()
@@ -179,4 +196,5 @@ def run_daemon(opts: RunOptions) -> None:
             sync0_pulses=segment.sync0_ticks,
             sync0_max_late_us=segment.sync0_late_ns // 1000,
             failures=daemon.failures,
+            cpu_moves=daemon.follower.moves if daemon.follower is not None else 0,
         )

@@ -1,10 +1,12 @@
 """KickCAT (pinned, default settings: 2 ms link timeout) brings the default segment to OP,
 beside pysoem, on an idle machine and with both CPUs kept busy by other processes.
 
-The daemon's part is checked on every run: every request a kernel timestamp sees arrive at
-the daemon's interface gets its reply at the master's interface, well inside KickCAT's
-2 ms (tools/reply_time.py). Whether KickCAT itself then sees the reply in time depends on
-its own scheduling, which a busy host takes from it; the figure over 20 runs is in
+KickCAT polls for its reply right after sending and naps between polls; on a busy host a
+nap can end after its deadline, and it does not look once more. The daemon therefore runs
+on the CPU the master's frames come from (decision K6), so the reply is queued before
+KickCAT's first poll. The daemon's own part is checked on every run as well: every request
+a kernel timestamp sees arrive at the daemon's interface gets its reply at the master's
+interface well inside the 2 ms (tools/reply_time.py). The figure over 20 runs is in
 bench/results (tools/kickcat_load.py).
 Ref: ETG.1000.6 §6.4 (AL state machine) as a second, independent master implements it."""
 
@@ -36,11 +38,8 @@ def timed_trial(pair: NetnsPair) -> tuple[dict[str, Any], dict[str, Any]]:
 
 
 def test_kickcat_reaches_op_and_runs_500_cycles(netns_pair: NetnsPair, daemon_factory: Any) -> None:
-    d = daemon_factory()
+    daemon_factory()
     result, replies = timed_trial(netns_pair)
-    if not result["ok"]:  # a stall of the master itself: once more, from power-up
-        d.restart()
-        result, replies = timed_trial(netns_pair)
     assert result == {"ok": True, "stage": "done", "slaves": 1, "cycles": 500}
     assert replies["unpaired"] == 0 and replies["frames"] > 1000, replies
     assert replies["max"] < KICKCAT_TIMEOUT_US, replies
@@ -49,10 +48,9 @@ def test_kickcat_reaches_op_and_runs_500_cycles(netns_pair: NetnsPair, daemon_fa
 def test_kickcat_under_load_with_the_daemons_default_flags(
     netns_pair: NetnsPair, daemon_factory: Any
 ) -> None:
-    """Both CPUs busy, 5 runs from power-up: the daemon answers every frame of every run in
-    time, and KickCAT reaches OP and runs 500 cycles. Runs in which KickCAT declares a frame
-    lost that the daemon answered in time are the master's own stalls (its process waits
-    behind the busy ones); they are not counted against the daemon."""
+    """Both CPUs busy with processes at nice 0, KickCAT at nice 0 with its defaults, 5 runs
+    from power-up: the daemon answers every frame of every run in time, and KickCAT reaches
+    OP and runs 500 cycles in at least 4 of the 5."""
     d = daemon_factory()
     runs = []
     with busy_cpus(os.cpu_count() or 2):
@@ -62,4 +60,4 @@ def test_kickcat_under_load_with_the_daemons_default_flags(
     for result, replies in runs:
         assert replies["unpaired"] == 0, (result, replies)
         assert replies["max"] < KICKCAT_TIMEOUT_US, (result, replies)
-    assert sum(r["ok"] for r, _ in runs) >= 1, runs
+    assert sum(r["ok"] for r, _ in runs) >= 4, runs

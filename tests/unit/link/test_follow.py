@@ -1,0 +1,103 @@
+"""The CPU follower (decision K6): probe sockets count the EtherCAT frames that arrive by the
+CPU they arrive on, and poll() pins the caller to the CPU most came from. A veth pair in two
+namespaces; this process sends from one CPU, then another. Root."""
+
+from __future__ import annotations
+
+import os
+import socket
+import time
+from collections.abc import Iterator
+
+import pytest
+
+from ecatsim.link import follow
+from ecatsim.link.follow import CpuFollower
+from tests.integration.netns import NetnsPair, in_netns, require_root
+
+ECAT = b"\xff" * 6 + b"\x02" * 6 + b"\x88\xa4" + bytes(46)
+TAGGED = b"\xff" * 6 + b"\x02" * 6 + b"\x81\x00\x00\x05\x88\xa4" + bytes(42)
+IPV4 = b"\xff" * 6 + b"\x02" * 6 + b"\x08\x00" + bytes(46)
+
+
+def two_cpus() -> tuple[int, int]:
+    cpus = sorted(os.sched_getaffinity(0))
+    if len(cpus) < 2:
+        pytest.fail(f"the follower tests need two CPUs (this process may use {cpus})")
+    return cpus[0], cpus[1]
+
+
+@pytest.fixture
+def rig() -> Iterator[tuple[CpuFollower, socket.socket, socket.socket]]:
+    """(follower on the slave end, a sender on the master end, a sender on the slave end);
+    this process's CPU set is restored afterwards."""
+    require_root("the CPU follower test")
+    allowed = os.sched_getaffinity(0)
+    with NetnsPair() as pair:
+        with in_netns(pair.slave_ns):
+            f = CpuFollower(pair.slave_if)
+            own = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, 0)
+            own.bind((pair.slave_if, 0))
+        with in_netns(pair.master_ns):
+            master = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, 0)
+            master.bind((pair.master_if, 0))
+        try:
+            yield f, master, own
+        finally:
+            os.sched_setaffinity(0, allowed)
+            master.close()
+            own.close()
+            f.close()
+
+
+def send_from(cpu: int, sock: socket.socket, *frames: bytes) -> None:
+    os.sched_setaffinity(0, {cpu})
+    for frame in frames:
+        sock.send(frame)
+    time.sleep(0.02)
+
+
+def test_probes_count_ethercat_frames_by_the_cpu_they_arrive_on(
+    rig: tuple[CpuFollower, socket.socket, socket.socket],
+) -> None:
+    f, master, own = rig
+    a, b = two_cpus()
+    for cpu in (a, b, a):
+        send_from(cpu, master, ECAT, ECAT, ECAT, TAGGED, IPV4)
+        send_from(cpu, own, ECAT)  # the daemon's own replies leave, they do not arrive
+        want = [0] * f.ncpu
+        want[cpu] = 4
+        assert f.counts() == want
+    assert f.counts() == [0] * f.ncpu  # drained
+
+
+def test_poll_pins_to_the_cpu_most_frames_came_from(
+    rig: tuple[CpuFollower, socket.socket, socket.socket],
+) -> None:
+    f, master, _ = rig
+    a, b = two_cpus()
+    t = 1_000_000_000
+    assert f.poll(t) is None and f.cpu is None  # nothing came yet
+    send_from(b, master, ECAT, ECAT)
+    send_from(a, master, ECAT)
+    assert f.poll(t) is None  # not due yet: the probes are read every PERIOD_NS
+    t += follow.PERIOD_NS
+    assert f.poll(t) == b and f.cpu == b and f.moves == 1
+    assert os.sched_getaffinity(0) == {b}
+    send_from(a, master, ECAT, ECAT)
+    send_from(b, master, ECAT, ECAT)
+    t += follow.PERIOD_NS
+    assert f.poll(t) is None and os.sched_getaffinity(0) == {b}  # a tie stays
+    send_from(a, master, ECAT, ECAT, ECAT)
+    t += follow.PERIOD_NS
+    assert f.poll(t) == a and f.moves == 2 and os.sched_getaffinity(0) == {a}
+
+
+def test_a_cpu_the_daemon_may_not_use_is_not_followed(
+    rig: tuple[CpuFollower, socket.socket, socket.socket],
+) -> None:
+    f, master, _ = rig
+    a, b = two_cpus()
+    f.allowed = {a}  # as a cpuset that leaves the daemon one CPU would
+    send_from(b, master, ECAT, ECAT)
+    assert f.poll(follow.PERIOD_NS) is None and f.cpu is None
