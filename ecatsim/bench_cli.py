@@ -30,6 +30,7 @@ class BenchOptions:
     cpu: int | None
     rt_priority: int | None
     no_rt: bool
+    no_follow_master_cpu: bool
     master_spin: bool
     max_rate: bool
     hold: float
@@ -83,6 +84,11 @@ class BenchOptions:
     help="The daemon's SCHED_FIFO priority (default: the daemon's own default).",
 )
 @click.option("--no-rt", is_flag=True, help="Run the daemon with --no-rt (the ordinary scheduler).")
+@click.option(
+    "--no-follow-master-cpu",
+    is_flag=True,
+    help="Run the daemon with --no-follow-master-cpu (it stays where the scheduler puts it).",
+)
 @click.option(
     "--master-spin", is_flag=True, help="The master spins between cycles instead of sleeping."
 )

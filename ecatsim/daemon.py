@@ -93,7 +93,7 @@ class Daemon:
         self._rx_copy = bytearray(MAX_FRAME)
         #: the compiled responder's timer fd (armed once per deadline), made on first use
         self._timer_fd = -1
-        #: runs the daemon on the master's CPU (decision K6); None: stays where it is
+        #: runs the daemon on the master's CPU (decision K5); None: stays where it is
         self.follower: CpuFollower | None = None
         self.failures = 0
         self.replies = 0
@@ -198,11 +198,11 @@ class Daemon:
                 self._failure("faults", exc)
 
     def _follow(self, follower: CpuFollower, now_ns: int) -> None:
-        """Move to the CPU the master's frames come from (decision K6)."""
+        """Move to the CPU the master's frames come from (decision K5)."""
         try:
             cpu = follower.poll(now_ns)
         except OSError as exc:
-            self._failure("follow", exc)
+            log.warning("follow_master_cpu_failed", reason=exc.strerror)
             return
         if cpu is not None:
             (log.info if follower.moves == 1 else log.debug)("following_master_cpu", cpu=cpu)

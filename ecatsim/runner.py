@@ -117,7 +117,7 @@ def arm_faults(cfg: SegmentConfig, segment: Segment) -> FaultEngine:
 
 
 def follow_master(opts: RunOptions, link: Link) -> CpuFollower | None:
-    """The CPU follower (decision K6) where it applies: a raw interface, the daemon
+    """The CPU follower (decision K5) where it applies: a raw interface, the daemon
     real-time and not pinned by --cpu, --no-follow-master-cpu not given."""
     from ecatsim.link.raw import RawLink
 

@@ -351,6 +351,8 @@ def run(args: BenchOptions) -> int:
             pin = ["taskset", "-c", str(cpu)] if cpu is not None else []
             rt = ("--rt-priority", str(args.rt_priority)) if args.rt_priority else ()
             rt = ("--no-rt",) if args.no_rt else rt
+            if args.no_follow_master_cpu:
+                rt = (*rt, "--no-follow-master-cpu")
             extra = (*(("--busy-poll",) if busy else ()),
                      *(("--cpu", str(cpu)) if cpu is not None else ()), *rt)  # fmt: skip
             os.sched_setaffinity(0, {cpu} if placement == "same-cpu" else all_cpus)

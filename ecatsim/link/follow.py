@@ -1,4 +1,4 @@
-"""Run the daemon on the CPU the master's frames come from (decision K6).
+"""Run the daemon on the CPU the master's frames come from (decision K5).
 
 A master polls for its reply right after sending, and many sleep between polls (KickCAT:
 ``recv`` with ``MSG_DONTWAIT``, then a 20 us nap, until its 2 ms deadline; no last try after
@@ -20,8 +20,6 @@ from __future__ import annotations
 import os
 import socket
 
-import structlog
-
 from ecatsim.link.raw import (
     ETH_P_8021Q,
     ETH_P_ALL,
@@ -30,8 +28,6 @@ from ecatsim.link.raw import (
     SOL_PACKET,
     attach_filter,
 )
-
-log = structlog.get_logger("ecatsim.follow")
 
 #: packet(7): PACKET_FANOUT and its CPU mode (linux/if_packet.h)
 PACKET_FANOUT = 18
@@ -97,7 +93,8 @@ class CpuFollower:
 
     def poll(self, now_ns: int) -> int | None:
         """Every PERIOD_NS: pin the daemon to the CPU most frames came from, if it may run
-        there and is not there yet. Returns the CPU it moved to, else None."""
+        there and is not there yet. Returns the CPU it moved to, else None. OSError: the
+        move failed (the probes are then read again only after 1000 periods)."""
         if now_ns < self.due_ns:
             return None
         self.due_ns = now_ns + PERIOD_NS
@@ -109,10 +106,9 @@ class CpuFollower:
             return None  # a tie keeps the daemon where it is
         try:
             os.sched_setaffinity(0, {best})
-        except OSError as exc:
-            log.warning("follow_master_cpu_failed", cpu=best, reason=exc.strerror)
+        except OSError:
             self.due_ns = now_ns + 1000 * PERIOD_NS
-            return None
+            raise
         self.cpu = best
         self.moves += 1
         return best

@@ -1,6 +1,6 @@
-"""The daemon runs on the CPU the master's frames come from (decision K6): pysoem sends from
+"""The daemon runs on the CPU the master's frames come from (decision K5): pysoem sends from
 one CPU, then from another, and the daemon's CPU set follows; with --no-follow-master-cpu or
---cpu it stays as it was. Ref: decision K6."""
+--cpu it stays as it was. Ref: decision K5."""
 
 from __future__ import annotations
 

@@ -3,7 +3,7 @@ beside pysoem, on an idle machine and with both CPUs kept busy by other processe
 
 KickCAT polls for its reply right after sending and naps between polls; on a busy host a
 nap can end after its deadline, and it does not look once more. The daemon therefore runs
-on the CPU the master's frames come from (decision K6), so the reply is queued before
+on the CPU the master's frames come from (decision K5), so the reply is queued before
 KickCAT's first poll. The daemon's own part is checked on every run as well: every request
 a kernel timestamp sees arrive at the daemon's interface gets its reply at the master's
 interface well inside the 2 ms (tools/reply_time.py). The figure over 20 runs is in

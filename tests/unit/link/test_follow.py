@@ -1,4 +1,4 @@
-"""The CPU follower (decision K6): probe sockets count the EtherCAT frames that arrive by the
+"""The CPU follower (decision K5): probe sockets count the EtherCAT frames that arrive by the
 CPU they arrive on, and poll() pins the caller to the CPU most came from. A veth pair in two
 namespaces; this process sends from one CPU, then another. Root."""
 
