@@ -199,6 +199,7 @@ class Daemon:
 
     def _follow(self, follower: CpuFollower, now_ns: int) -> None:
         """Move to the CPU the master's frames come from (decision K5)."""
+        pauses = follower.pauses
         try:
             cpu = follower.poll(now_ns)
         except OSError as exc:
@@ -206,6 +207,8 @@ class Daemon:
             return
         if cpu is not None:
             (log.info if follower.moves == 1 else log.debug)("following_master_cpu", cpu=cpu)
+        elif follower.pauses != pauses:
+            log.info("follow_master_cpu_paused", reason="the master keeps moving away")
 
     def _hold(self, frame: bytes, copies: int, delay_ns: int) -> None:
         """A delay fault: send ``frame`` later (``copies`` times)."""

@@ -197,4 +197,5 @@ def run_daemon(opts: RunOptions) -> None:
             sync0_max_late_us=segment.sync0_late_ns // 1000,
             failures=daemon.failures,
             cpu_moves=daemon.follower.moves if daemon.follower is not None else 0,
+            cpu_follow_pauses=daemon.follower.pauses if daemon.follower is not None else 0,
         )

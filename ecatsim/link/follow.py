@@ -9,15 +9,20 @@ once and the reply is queued before the master's first poll, whatever else runs.
 
 The CPU a frame arrived on comes from a packet fanout group (``PACKET_FANOUT_CPU``: each
 frame goes to the member whose index is the receiving CPU, packet(7)): one probe socket per
-CPU, each keeping one byte of each EtherCAT frame it gets. Every ``PERIOD_NS`` the daemon
-drains the probes and, when most frames came from another CPU than the one it runs on, pins
-itself there (``sched_setaffinity``). Only while it runs SCHED_FIFO: an ordinary task
-woken on the master's CPU would wait behind it.
+CPU, each keeping one byte of each EtherCAT frame it gets. After each frame the daemon
+drains the probes that hold frames and, when most came from another CPU than the one it
+runs on, pins itself there (``sched_setaffinity``): a master that moves is followed from
+its next frame on. A daemon with much work per cycle on the master's CPU drives the
+scheduler to move the master away, again and again: more than ``CHASE_MOVES`` moves within
+a second stop the following for ``CHASE_PAUSE_NS`` and give the daemon all its CPUs back.
+Only while the daemon runs SCHED_FIFO: an ordinary task woken on the master's CPU would
+wait behind it.
 """
 
 from __future__ import annotations
 
 import os
+import select
 import socket
 
 from ecatsim.link.raw import (
@@ -32,8 +37,11 @@ from ecatsim.link.raw import (
 #: packet(7): PACKET_FANOUT and its CPU mode (linux/if_packet.h)
 PACKET_FANOUT = 18
 PACKET_FANOUT_CPU = 2
-#: how often the probes are read
-PERIOD_NS = 10_000_000
+#: after a failed move, how long the daemon stays where it is before it tries again
+BACKOFF_NS = 10_000_000_000
+#: more moves than this within one second are a chase: the following pauses
+CHASE_MOVES = 20
+CHASE_PAUSE_NS = 10_000_000_000
 #: each probe's receive buffer: room for a few hundred one-byte frames
 PROBE_BUF = 1 << 18
 
@@ -59,8 +67,12 @@ class CpuFollower:
         self.ncpu = os.cpu_count() or 1
         self.allowed = os.sched_getaffinity(0)
         self.cpu: int | None = None  # where the daemon is pinned by us (None: not yet)
+        #: no move before this time (after a failed one)
         self.due_ns = 0
         self.moves = 0
+        self.pauses = 0
+        self._window_ns = 0  # start of the second the recent moves are counted in
+        self._window_moves = 0
         self._buf = bytearray(1)
         self.probes: list[socket.socket] = []
         group = (os.getpid() & 0xFFFF) | (PACKET_FANOUT_CPU << 16)
@@ -76,42 +88,61 @@ class CpuFollower:
         except OSError:
             self.close()
             raise
+        self._cpu_of = {s.fileno(): cpu for cpu, s in enumerate(self.probes)}
+        self._poller = select.poll()
+        for s in self.probes:
+            self._poller.register(s, select.POLLIN)
 
     def counts(self) -> list[int]:
-        """Frames received on each CPU since the last call (the probes drained)."""
-        out = []
-        for s in self.probes:
+        """Frames that arrived on each CPU since the probes were last read (drained)."""
+        out = [0] * self.ncpu
+        for fd, _events in self._poller.poll(0):
+            cpu = self._cpu_of[fd]
+            probe = self.probes[cpu]
             n = 0
             while True:
                 try:
-                    s.recv_into(self._buf)
+                    probe.recv_into(self._buf)
                 except (BlockingIOError, InterruptedError):
                     break
                 n += 1
-            out.append(n)
+            out[cpu] = n
         return out
 
     def poll(self, now_ns: int) -> int | None:
-        """Every PERIOD_NS: pin the daemon to the CPU most frames came from, if it may run
-        there and is not there yet. Returns the CPU it moved to, else None. OSError: the
-        move failed (the probes are then read again only after 1000 periods)."""
+        """Pin the daemon to the CPU most frames came from since the last call, if it may
+        run there and is not there yet (a tie keeps it where it is). Returns the CPU it
+        moved to, else None. OSError: the move failed; no other is tried for BACKOFF_NS."""
+        counts = self.counts()  # read while paused too: a later move looks at new frames
         if now_ns < self.due_ns:
             return None
-        self.due_ns = now_ns + PERIOD_NS
-        counts = self.counts()
         best = max(range(self.ncpu), key=counts.__getitem__)
         if not counts[best] or best == self.cpu or best not in self.allowed:
             return None
         if self.cpu is not None and counts[best] <= counts[self.cpu]:
-            return None  # a tie keeps the daemon where it is
+            return None
         try:
             os.sched_setaffinity(0, {best})
         except OSError:
-            self.due_ns = now_ns + 1000 * PERIOD_NS
+            self.due_ns = now_ns + BACKOFF_NS
             raise
         self.cpu = best
         self.moves += 1
+        if now_ns - self._window_ns > 1_000_000_000:
+            self._window_ns, self._window_moves = now_ns, 0
+        self._window_moves += 1
+        if self._window_moves > CHASE_MOVES:
+            self._pause(now_ns)
+            return None
         return best
+
+    def _pause(self, now_ns: int) -> None:
+        """Stop following for CHASE_PAUSE_NS; the daemon may run on all its CPUs again."""
+        self.pauses += 1
+        self.cpu = None
+        self.due_ns = now_ns + CHASE_PAUSE_NS
+        self._window_moves = 0
+        os.sched_setaffinity(0, self.allowed)
 
     def close(self) -> None:
         for s in self.probes:

@@ -1,6 +1,7 @@
 """The CPU follower (decision K5): probe sockets count the EtherCAT frames that arrive by the
 CPU they arrive on, and poll() pins the caller to the CPU most came from. A veth pair in two
-namespaces; this process sends from one CPU, then another. Root."""
+namespaces; this process sends from one CPU, then another (pinning itself to send, so its
+CPU set is checked right after a move only). Root."""
 
 from __future__ import annotations
 
@@ -80,17 +81,17 @@ def test_poll_pins_to_the_cpu_most_frames_came_from(
     assert f.poll(t) is None and f.cpu is None  # nothing came yet
     send_from(b, master, ECAT, ECAT)
     send_from(a, master, ECAT)
-    assert f.poll(t) is None  # not due yet: the probes are read every PERIOD_NS
-    t += follow.PERIOD_NS
     assert f.poll(t) == b and f.cpu == b and f.moves == 1
     assert os.sched_getaffinity(0) == {b}
+    assert f.poll(t) is None  # nothing new
     send_from(a, master, ECAT, ECAT)
     send_from(b, master, ECAT, ECAT)
-    t += follow.PERIOD_NS
-    assert f.poll(t) is None and os.sched_getaffinity(0) == {b}  # a tie stays
-    send_from(a, master, ECAT, ECAT, ECAT)
-    t += follow.PERIOD_NS
+    assert f.poll(t) is None and f.cpu == b  # a tie stays
+    send_from(a, master, ECAT)
     assert f.poll(t) == a and f.moves == 2 and os.sched_getaffinity(0) == {a}
+    f.due_ns = t + follow.BACKOFF_NS  # as after a failed move
+    send_from(b, master, ECAT)
+    assert f.poll(t) is None and f.cpu == a and f.moves == 2
 
 
 def test_a_cpu_the_daemon_may_not_use_is_not_followed(
@@ -100,4 +101,27 @@ def test_a_cpu_the_daemon_may_not_use_is_not_followed(
     a, b = two_cpus()
     f.allowed = {a}  # as a cpuset that leaves the daemon one CPU would
     send_from(b, master, ECAT, ECAT)
-    assert f.poll(follow.PERIOD_NS) is None and f.cpu is None
+    assert f.poll(1) is None and f.cpu is None
+
+
+def test_a_master_that_keeps_moving_away_pauses_the_following(
+    rig: tuple[CpuFollower, socket.socket, socket.socket],
+) -> None:
+    """More than CHASE_MOVES moves within a second: the daemon stops following for
+    CHASE_PAUSE_NS and may run on all its CPUs again."""
+    f, master, _ = rig
+    a, b = two_cpus()
+    allowed = f.allowed
+    t = 5_000_000_000
+    for k in range(follow.CHASE_MOVES):
+        cpu = (a, b)[k % 2]
+        send_from(cpu, master, ECAT)
+        assert f.poll(t + k) == cpu
+    send_from(a if f.cpu == b else b, master, ECAT)
+    assert f.poll(t + follow.CHASE_MOVES) is None
+    assert (f.pauses, f.cpu, f.due_ns) == (1, None, t + follow.CHASE_MOVES + follow.CHASE_PAUSE_NS)
+    assert os.sched_getaffinity(0) == allowed
+    send_from(a, master, ECAT)
+    assert f.poll(t + follow.CHASE_PAUSE_NS) is None  # still paused
+    send_from(b, master, ECAT)
+    assert f.poll(t + follow.CHASE_MOVES + follow.CHASE_PAUSE_NS) == b  # following again
