@@ -187,9 +187,8 @@ class Daemon:
         except Exception as exc:
             self._failure("process", exc)
         self._service(t_rx)
-        follower = self.follower
-        if follower is not None and t_rx >= follower.due_ns:
-            self._follow(follower, t_rx)
+        if self.follower is not None:
+            self._follow(self.follower, t_rx)
         faults = self.faults
         if faults.active:
             try:

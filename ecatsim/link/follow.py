@@ -64,8 +64,9 @@ class CpuFollower:
     """Probe sockets on ``iface`` (a fanout group, one member per CPU) and the pinning."""
 
     def __init__(self, iface: str) -> None:
-        self.ncpu = os.cpu_count() or 1
         self.allowed = os.sched_getaffinity(0)
+        #: fanout members: frame on CPU c -> member c % ncpu, so one per CPU number
+        self.ncpu = max(os.cpu_count() or 1, max(self.allowed) + 1)
         self.cpu: int | None = None  # where the daemon is pinned by us (None: not yet)
         #: no move before this time (after a failed one)
         self.due_ns = 0
