@@ -72,7 +72,13 @@ TWINS: list[tuple[str, list[str], list[str], list[str]]] = [
     (
         "ecatsim.slave._cycle",
         ["ecatsim/slave/_cycle.c"],
-        ["ecatsim/esc/_sm.h", "ecatsim/esc/_events.h", "ecatsim/_attr.h", "ecatsim/_module.h"],
+        [
+            "ecatsim/esc/_pdi.h",
+            "ecatsim/esc/_sm.h",
+            "ecatsim/esc/_events.h",
+            "ecatsim/_attr.h",
+            "ecatsim/_module.h",
+        ],
         ["-Wall", "-Wextra"],
     ),
     (

@@ -1,8 +1,9 @@
 """The PDI face of the ESC: what the firmware behind the SPI PDI can see and do.
 
-Firmware (``ecatsim.slave``) and devices import the ESC only through this module.
-Accesses follow the PDI columns of the register table and the PDI side of the
-SyncManagers. Ref: TMC8460 §2.3.2, §3.5 (PDI SPI), §5 (PDI access columns).
+Firmware (``ecatsim.slave``) and devices import the ESC only through this module (the
+compiled firmware cycle through its C form, ``esc/_pdi.h``). Accesses follow the PDI
+columns of the register table and the PDI side of the SyncManagers.
+Ref: TMC8460 §2.3.2, §3.5 (PDI SPI), §5 (PDI access columns).
 """
 
 from __future__ import annotations

@@ -25,7 +25,7 @@
 #include <string.h>
 
 #include "../_module.h"
-#include "../esc/_sm.h"
+#include "../esc/_pdi.h"
 
 /* Events the Python firmware serves other than SYNC0 and process data: any of them sends
  * the call to Python. SM0 is a mailbox request. SM1 (the master took a reply) is not
@@ -33,7 +33,6 @@
  * stays raised until the next reply is written. */
 #define OTHER_EVENTS (EV_AL_CONTROL | EV_SM_ACTIVATION | EV_WATCHDOG_PD | EV_SM0)
 #define SM_PD_OUT_EVENT (EV_SM0 << 2)
-#define SM_ACT_LATCH_PDI 0x80 /* ecatsim/esc/regs.py */
 
 /* cyc tuple layout (ecatsim/slave/cycle.py, build()) */
 enum {
@@ -45,53 +44,6 @@ enum {
 
 static PyObject *s_state, *s_event_mask, *s_pd_masked, *s_out, *s_value, *s_outputs_applied,
     *s_update_inputs, *s_pack_inputs, *s_service_mailbox;
-
-/* Whole-buffer PDI access of a buffered SM is possible (pdi_may_read / pdi_may_write),
- * and asks for no PDI event times (0x0806+8n bit 7: Esc.pdi_buffer_event stamps
- * 0x09F8/0x09FC; Python serves such an SM). */
-static int sm_pdi_ok(const uint8_t *m, const Sm *sm, int reading)
-{
-    return !(m[sm->status_addr + 1] & SM_ACT_LATCH_PDI) && sm->active && !sm->locked &&
-           !sm->mailbox &&
-           (reading ? sm->ecat_side_writes : !sm->ecat_side_writes) && sm->length > 0 &&
-           sm->start + 3 * sm->length <= MEM_SIZE;
-}
-
-/* Pdi.sm_read: SyncManager.reader_read(0, whole) -> _reader_open, _reader_access(first,
- * last). Returns the buffer's base address. */
-static long sm_pdi_read(Esc *e, Sm *sm)
-{
-    if (sm->l >= 0)
-        sm->r = sm->l;
-    else if (sm->r == sm->w)
-        sm->r = (sm->w + 1) % 3;
-    long base = sm->start + sm->r * sm->length; /* read open only during the copy */
-    sm->status &= ~SM_ST_IRQ_WRITE;
-    sm->r_open = 0;
-    sm->status |= SM_ST_IRQ_READ;
-    if (sm_sync(e, sm) < 0 || sm_store(sm) < 0)
-        return -1;
-    return base;
-}
-
-/* Pdi.sm_write: SyncManager.writer_write(0, whole) -> _writer_access(first, last), after
- * the caller filled the buffer at sm_write_base(). */
-static long sm_write_base(const Sm *sm) { return sm->start + sm->w * sm->length; }
-
-static int sm_pdi_written(Esc *e, Sm *sm)
-{
-    sm->status &= ~SM_ST_IRQ_READ; /* write open only during the copy */
-    sm->w_open = 0;
-    long latest = sm->l = sm->w;
-    if (sm->r_open && sm->r != latest)
-        sm->w = 3 - latest - sm->r;
-    else
-        sm->w = latest == 0 ? 1 : 0;
-    sm->status |= SM_ST_IRQ_WRITE;
-    if (sm_sync(e, sm) < 0)
-        return -1;
-    return sm_store(sm);
-}
 
 /* A process image layout: 3 bytes per mapped entry, offset (LE 16) and a struct code. */
 static int code_size(char c)
@@ -198,15 +150,14 @@ static PyObject *run(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     }
     Esc e = {(uint8_t *)PyByteArray_AS_STRING(memobj), ITEM(C_ESC), ITEM(C_CTX),
              ITEM(C_PENDING), ITEM(C_POSITION)};
-    uint8_t *m = e.m;
 
     /* ---- preconditions (Firmware.service's branches); nothing changes before these. */
-    if (!(m[DL_STATUS] & 0x01))
-        Py_RETURN_FALSE; /* PDI not operational */
-    uint32_t ev = rd32(m, AL_EVENT_REQUEST);
+    if (!pdi_operational(&e))
+        Py_RETURN_FALSE;
+    uint32_t ev = pdi_al_event(&e);
     if (!(ev & EV_SYNC0) || (ev & OTHER_EVENTS))
         Py_RETURN_FALSE;
-    if ((m[DC_ACTIVATION] & 0x03) != 0x03 || (m[DC_ACTIVATION_STATUS] & 0x01))
+    if (!pdi_sync0_running(&e))
         Py_RETURN_FALSE; /* not DC synchronous with the pulses running */
     PyObject *state = get_attr(fw, s_state);
     if (state == NULL)
@@ -232,29 +183,27 @@ static PyObject *run(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             Py_RETURN_FALSE;
     }
     Sm sm2, sm3;
-    if (sm_load(&sm2, ITEM(C_SM2)) < 0 || sm_load(&sm3, ITEM(C_SM3)) < 0)
+    if (pdi_sm_load(&sm2, ITEM(C_SM2)) < 0 || pdi_sm_load(&sm3, ITEM(C_SM3)) < 0)
         return NULL;
     int read_out = (ev & SM_PD_OUT_EVENT) != 0;
     long rx_size = PyLong_AsLong(ITEM(C_RX_SIZE)), tx_size = PyLong_AsLong(ITEM(C_TX_SIZE));
-    if (read_out && !(sm_pdi_ok(m, &sm2, 1) && sm2.length >= rx_size))
+    if (read_out && !(pdi_sm_may(&e, &sm2, 1) && sm2.length >= rx_size))
         Py_RETURN_FALSE;
-    if (!sm_pdi_ok(m, &sm3, 0))
+    if (!pdi_sm_may(&e, &sm3, 0))
         Py_RETURN_FALSE;
 
-    /* ---- p.u8(DC_SYNC0_STATUS): Esc._pr_dc_sync_status */
-    if (clr_al_event(&e, EV_SYNC0) < 0)
+    /* ---- p.u8(DC_SYNC0_STATUS) */
+    if (pdi_ack_sync0(&e) < 0)
         return NULL;
-    if (!(m[DC_PULSE_LENGTH] | m[DC_PULSE_LENGTH + 1]))
-        m[DC_SYNC0_STATUS] &= 0xFE;
 
     /* ---- SM2 read; in OP the outputs are written into the OD (app.set_outputs) */
     int applied = 0;
     if (read_out) {
-        long base = sm_pdi_read(&e, &sm2);
-        if (base < 0)
+        const uint8_t *out = pdi_sm_read(&e, &sm2);
+        if (out == NULL)
             return NULL;
         if (op) {
-            if (unpack_rx(m + base, ITEM(C_RX_ENTRIES), ITEM(C_RX_LAYOUT)) < 0)
+            if (unpack_rx(out, ITEM(C_RX_ENTRIES), ITEM(C_RX_LAYOUT)) < 0)
                 return NULL;
             applied = 1;
         }
@@ -288,7 +237,7 @@ static PyObject *run(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     /* ---- Firmware._write_inputs: Pdi.sm_write(SM3) */
     /* SM3 was checked writable above (Pdi.sm_write would otherwise refuse); the device
      * does not touch the SMs, so the state loaded then is still the state now. */
-    uint8_t *buf = m + sm_write_base(&sm3);
+    uint8_t *buf = pdi_sm_write_buffer(&e, &sm3);
     long n = sm3.length;
     int packed = tx_size <= n ? pack_tx(buf, ITEM(C_TX_ENTRIES), ITEM(C_TX_LAYOUT)) : 0;
     if (packed < 0)
@@ -323,7 +272,7 @@ static PyObject *run(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             memset(buf + dn, 0, (size_t)(n - dn));
         Py_DECREF(data);
     }
-    if (sm_pdi_written(&e, &sm3) < 0)
+    if (pdi_sm_written(&e, &sm3) < 0)
         return NULL;
 
     /* ---- Firmware.service_mailbox: the mask changes only if the device queued a message
