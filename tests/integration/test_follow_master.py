@@ -9,17 +9,22 @@ import os
 import time
 from typing import Any
 
+import pysoem
 import pytest
 
 pytestmark = pytest.mark.integration
 
 
 def exchange_from(cpu: int, m: Any, seconds: float = 0.1) -> None:
-    """Read the AL status of every slave (BRD) from ``cpu`` for ``seconds``."""
+    """Read slave 0's AL status (FPRD) from ``cpu`` for ``seconds``. A reply late on a busy
+    host (a daemon with --no-rt) is no matter here: the frames reach the daemon anyway."""
     os.sched_setaffinity(0, {cpu})
     end = time.monotonic() + seconds
     while time.monotonic() < end:
-        m.slaves[0]._fprd(0x0130, 2)
+        try:
+            m.slaves[0]._fprd(0x0130, 2)
+        except pysoem.WkcError:
+            pass
         time.sleep(0.001)
 
 
