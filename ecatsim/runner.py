@@ -23,6 +23,7 @@ from ecatsim.frontdoors import build_doors
 from ecatsim.link.base import Link
 from ecatsim.link.errors import LinkError
 from ecatsim.link.follow import CpuFollower
+from ecatsim.link.raw import RawLink, iface_ipv4_addresses
 from ecatsim.mfcio import trace as mfcio_trace
 from ecatsim.mfcio.block import MfcioBlock
 from ecatsim.privileges import drop_privileges
@@ -71,8 +72,6 @@ def open_link(opts: RunOptions) -> Link:
         raise UserError("give exactly one of --iface IFACE, --tap NAME or --udp HOST:PORT")
     try:
         if opts.iface:
-            from ecatsim.link.raw import RawLink, iface_ipv4_addresses
-
             addrs = iface_ipv4_addresses(opts.iface)
             if addrs and not opts.allow_ip_iface:
                 raise UserError(
@@ -119,8 +118,6 @@ def arm_faults(cfg: SegmentConfig, segment: Segment) -> FaultEngine:
 def follow_master(opts: RunOptions, link: Link) -> CpuFollower | None:
     """The CPU follower (decision K5) where it applies: a raw interface, the daemon
     real-time and not pinned by --cpu, --no-follow-master-cpu not given."""
-    from ecatsim.link.raw import RawLink
-
     if not opts.follow_master_cpu or opts.cpu is not None or not isinstance(link, RawLink):
         return None
     try:
