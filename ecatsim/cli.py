@@ -9,36 +9,15 @@ from __future__ import annotations
 import logging
 import sys
 from pathlib import Path
-from typing import Any
 
 import click
-import structlog
 
 from ecatsim import __version__
 from ecatsim.bench_cli import bench
 from ecatsim.errors import UserError
 from ecatsim.lin.cli import lin
+from ecatsim.logsetup import configure_logging, log_format_option
 from ecatsim.tmcl.cli import tmcl
-
-
-def configure_logging(fmt: str, level: int = logging.INFO) -> None:
-    """structlog: pretty on a TTY, JSON with --log-format json, plain text otherwise."""
-    processors: list[Any] = [
-        structlog.contextvars.merge_contextvars,
-        structlog.processors.add_log_level,
-        structlog.processors.TimeStamper(fmt="iso", utc=True),
-    ]
-    if fmt == "json":
-        processors += [structlog.processors.dict_tracebacks, structlog.processors.JSONRenderer()]
-    else:
-        colors = fmt == "console" and sys.stderr.isatty()
-        processors += [structlog.dev.ConsoleRenderer(colors=colors)]
-    structlog.configure(
-        processors=processors,
-        wrapper_class=structlog.make_filtering_bound_logger(level),
-        logger_factory=structlog.PrintLoggerFactory(file=sys.stderr),
-        cache_logger_on_first_use=False,
-    )
 
 
 def _print_version(ctx: click.Context, value: bool) -> None:
@@ -81,12 +60,7 @@ def cli(ctx: click.Context, debug: bool) -> None:
 @click.option("--udp", "udp", help="Serve EtherCAT over UDP on HOST:PORT (port 34980 = 0x88A4).")
 @click.option("--config", "config_path", type=click.Path(path_type=Path), help="Segment YAML.")
 @click.option("--slaves", type=int, help="Repeat the default device N times.")
-@click.option(
-    "--log-format",
-    type=click.Choice(["auto", "console", "json"]),
-    default="auto",
-    show_default=True,
-)
+@log_format_option
 @click.option("--trace-frames", is_flag=True, help="Log every frame (slow; for debugging).")
 @click.option("--allow-ip-iface", is_flag=True, help="Allow an interface with an IPv4 address.")
 @click.option("--busy-poll", is_flag=True, help="Spin instead of blocking (lowest latency).")
@@ -136,10 +110,7 @@ def run(
     """Emulate the segment on an interface until SIGINT/SIGTERM."""
     from ecatsim.runner import RunOptions, run_daemon
 
-    configure_logging(
-        "console" if log_format == "auto" else log_format,
-        logging.DEBUG if trace_frames else logging.INFO,
-    )
+    configure_logging(log_format, logging.DEBUG if trace_frames else logging.INFO)
     opts = RunOptions(
         iface=iface,
         tap=tap,

@@ -8,6 +8,7 @@ import click
 import structlog
 
 from ecatsim.errors import UserError
+from ecatsim.logsetup import configure_logging, log_format_option
 
 log = structlog.get_logger("ecatsim.lin")
 
@@ -33,12 +34,7 @@ log = structlog.get_logger("ecatsim.lin")
     type=click.Path(path_type=Path),
     help="Control socket path (0600; default: the runtime dir, named after the pty).",
 )
-@click.option(
-    "--log-format",
-    type=click.Choice(["auto", "console", "json"]),
-    default="auto",
-    show_default=True,
-)
+@log_format_option
 def lin(pty: Path | None, config_path: Path | None, ctl: Path | None, log_format: str) -> None:
     """Serve TMC211 LIN nodes on a pty until SIGINT/SIGTERM.
 
@@ -47,14 +43,13 @@ def lin(pty: Path | None, config_path: Path | None, ctl: Path | None, log_format
     writes the header only and reads the answer. `ecatsim ctl door lin help` lists the
     control commands (temperature, voltage, coil faults, switch, stops).
     """
-    from ecatsim.cli import configure_logging
     from ecatsim.clock import MonotonicClock
     from ecatsim.ctl import default_path
     from ecatsim.frontdoors import serve_door
     from ecatsim.lin.config import BusConfig, load_bus
     from ecatsim.lin.server import LinDoor
 
-    configure_logging("console" if log_format == "auto" else log_format)
+    configure_logging(log_format)
     cfg = load_bus(config_path) if config_path is not None else BusConfig()
     link = pty or cfg.pty
     if link is None:

@@ -11,6 +11,7 @@ import structlog
 import yaml
 
 from ecatsim.errors import UserError
+from ecatsim.logsetup import configure_logging, log_format_option
 
 log = structlog.get_logger("ecatsim.tmcl")
 
@@ -56,12 +57,7 @@ def _load(path: Path) -> dict[str, Any]:
     type=click.Path(path_type=Path),
     help="Control socket path (default: RUNDIR/tmcl.sock).",
 )
-@click.option(
-    "--log-format",
-    type=click.Choice(["auto", "console", "json"]),
-    default="auto",
-    show_default=True,
-)
+@log_format_option
 def tmcl(
     listen: tuple[str, ...],
     config_path: Path | None,
@@ -77,12 +73,11 @@ def tmcl(
     ecatsim tmcl --listen pty:/tmp/tmcm1311 --eeprom tmcm.json --module-address 1 \\
                  --module-address 2
     """
-    from ecatsim.cli import configure_logging
     from ecatsim.ctl import default_path
     from ecatsim.frontdoors import serve_door
     from ecatsim.tmcl.server import TmclDoor, parse_config
 
-    configure_logging("console" if log_format == "auto" else log_format, logging.INFO)
+    configure_logging(log_format, logging.INFO)
     data: dict[str, Any] = _load(config_path) if config_path is not None else {}
     src = str(config_path) if config_path is not None else "command line"
     base = config_path.parent if config_path is not None else None
