@@ -47,6 +47,7 @@ class SyncManager:
         "locked",
         "mailbox",
         "mbx_full",
+        "mem",
         "mirror",
         "n",
         "r",
@@ -60,6 +61,8 @@ class SyncManager:
 
     def __init__(self, host: SmHost, n: int) -> None:
         self.host = host
+        #: the ESC memory the windows and buffers live in (the host's, for its lifetime)
+        self.mem = host.mem
         self.n = n
         self.status_addr = regs.sm_addr(n, 5)
         self.start = 0
@@ -141,12 +144,11 @@ class SyncManager:
             if self.w_open:
                 st |= regs.SM_ST_WRITE_OPEN
         self.status = st
-        host = self.host
-        host.mem[self.status_addr] = st
+        self.mem[self.status_addr] = st
         mirror = (1 if st & self.irq_to_ecat else 0) | (2 if st & self.irq_to_pdi else 0)
         if mirror != self.mirror:  # the event registers change only when these bits do
             self.mirror = mirror
-            host.sm_status_changed(self)
+            self.host.sm_status_changed(self)
 
     def _writer_access(self, first: bool, last: bool) -> None:
         if self.mailbox:
@@ -222,7 +224,7 @@ class SyncManager:
         first = off == 0
         last = off + len(data) >= self.length
         base = self._base_for_write()
-        self.host.mem[base + off : base + off + len(data)] = data
+        self.mem[base + off : base + off + len(data)] = data
         self._writer_access(first, last)
 
     def reader_read(self, off: int, out: memoryview) -> None:
@@ -232,13 +234,13 @@ class SyncManager:
         if first:
             self._reader_open()
         base = self._base_for_read()
-        out[:] = self.host.mem[base + off : base + off + len(out)]
+        out[:] = self.mem[base + off : base + off + len(out)]
         self._reader_access(first, last)
 
     def peek(self, off: int, n: int) -> bytes:
         """The bytes a reader would see, without side effects (for logging and bit FMMUs)."""
         base = self._base_for_read()
-        return bytes(self.host.mem[base + off : base + off + n])
+        return bytes(self.mem[base + off : base + off + n])
 
     # -- ECAT face -------------------------------------------------------------------
 
@@ -261,7 +263,7 @@ class SyncManager:
             self.host.wd_pd_trigger()
         if (
             off + len(data) >= self.length
-            and self.host.mem[self.status_addr + 1] & regs.SM_ACT_LATCH_ECAT
+            and self.mem[self.status_addr + 1] & regs.SM_ACT_LATCH_ECAT
         ):
             self.host.sm_event_time(regs.DC_ECAT_EVENT_TIME)
 
@@ -274,7 +276,7 @@ class SyncManager:
         self.reader_read(off, out)
         if (
             off + len(out) >= self.length
-            and self.host.mem[self.status_addr + 1] & regs.SM_ACT_LATCH_ECAT
+            and self.mem[self.status_addr + 1] & regs.SM_ACT_LATCH_ECAT
         ):
             self.host.sm_event_time(regs.DC_ECAT_EVENT_TIME)
 

@@ -1,0 +1,24 @@
+# The compiled core's declarations for sm.py (Cython, pure-Python mode): the SyncManager's
+# state as typed fields. sm.py stays the one source of the behaviour; this file only
+# gives types. Decisions P2, P13.
+cdef class SyncManager:
+    cdef public object host
+    cdef public bytearray mem
+    cdef public long long n, status_addr, start, length, control
+    cdef public bint active, enabled, locked, mailbox, ecat_side_writes, mbx_full
+    cdef public long long w, l, r
+    cdef public bint r_open, w_open
+    cdef public long long status, mirror, irq_to_ecat, irq_to_pdi
+
+    cpdef void _sync(self) except *
+    cpdef void _writer_access(self, bint first, bint last) except *
+    cpdef void _reader_open(self) except *
+    cpdef void _reader_access(self, bint first, bint last) except *
+    cpdef long long _base_for_write(self) except? -1
+    cpdef long long _base_for_read(self) except? -1
+    cpdef bint writer_may(self) except -1
+    cpdef bint reader_may(self) except -1
+    cpdef bint ecat_may_write(self) except -1
+    cpdef bint ecat_may_read(self) except -1
+    cpdef bint pdi_may_write(self) except -1
+    cpdef bint pdi_may_read(self) except -1

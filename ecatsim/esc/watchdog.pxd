@@ -1,0 +1,7 @@
+# The compiled core's declarations for watchdog.py (Cython, pure-Python mode). P2, P13.
+cdef class Watchdog:
+    cdef public bytearray mem
+    cdef public long long deadline_ns, increment_ns, timeout_ns
+
+    cpdef void trigger(self, long long now_ns) except *
+    cpdef bint expired(self, long long now_ns) except -1
