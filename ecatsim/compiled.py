@@ -42,6 +42,7 @@ CORE = (
     "ecatsim.esc.fmmu",
     "ecatsim.esc.watchdog",
     "ecatsim.esc.dc",
+    "ecatsim.esc.core",
     "ecatsim.device.cia402",
     "ecatsim.device.servo",
     "ecatsim.device.drive",

@@ -56,6 +56,11 @@ PASSIVE_SIDE_EFFECTS = frozenset(
     }
 )
 
+#: the logical commands as plain ints (compiled: C constants)
+_LRD = int(Cmd.LRD)
+_LWR = int(Cmd.LWR)
+_LRW = int(Cmd.LRW)
+
 Hook = Callable[["Esc", int, int, bytes], None]
 ReadHook = Callable[["Esc", int, int], None]
 
@@ -468,15 +473,15 @@ class Esc:
         lo = lad * 8
         hi = lo + n * 8
         wr = rd = False
-        if cmd != Cmd.LRD:
+        if cmd != _LRD:
             for f in self.fmmus:
                 if f.write and f.lbit < hi and lo < f.lend and self._fmmu_xfer(f, lad, data, True):
                     wr = True
-        if cmd != Cmd.LWR:
+        if cmd != _LWR:
             for f in self.fmmus:
                 if f.read and f.lbit < hi and lo < f.lend and self._fmmu_xfer(f, lad, data, False):
                     rd = True
-        if cmd == Cmd.LRW:
+        if cmd == _LRW:
             return (1 if rd else 0) + (2 if wr else 0)
         return 1 if (rd or wr) else 0
 

@@ -3,6 +3,7 @@
 # gives types. Decisions P2, P13.
 cdef class SyncManager:
     cdef public object host
+    cdef unsigned char[:] mv
     cdef public bytearray mem
     cdef public long long n, status_addr, start, length, control
     cdef public bint active, enabled, locked, mailbox, ecat_side_writes, mbx_full
@@ -22,3 +23,7 @@ cdef class SyncManager:
     cpdef bint ecat_may_read(self) except -1
     cpdef bint pdi_may_write(self) except -1
     cpdef bint pdi_may_read(self) except -1
+    cpdef void writer_write(self, long long off, const unsigned char[:] data) except *
+    cpdef void reader_read(self, long long off, unsigned char[:] out) except *
+    cpdef void ecat_write(self, long long off, const unsigned char[:] data) except *
+    cpdef void ecat_read(self, long long off, unsigned char[:] out) except *

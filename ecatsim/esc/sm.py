@@ -49,6 +49,7 @@ class SyncManager:
         "mbx_full",
         "mem",
         "mirror",
+        "mv",
         "n",
         "r",
         "r_open",
@@ -63,6 +64,7 @@ class SyncManager:
         self.host = host
         #: the ESC memory the windows and buffers live in (the host's, for its lifetime)
         self.mem = host.mem
+        self.mv = memoryview(host.mem)
         self.n = n
         self.status_addr = regs.sm_addr(n, 5)
         self.start = 0
@@ -224,7 +226,7 @@ class SyncManager:
         first = off == 0
         last = off + len(data) >= self.length
         base = self._base_for_write()
-        self.mem[base + off : base + off + len(data)] = data
+        self.mv[base + off : base + off + len(data)] = data
         self._writer_access(first, last)
 
     def reader_read(self, off: int, out: memoryview) -> None:
@@ -234,7 +236,7 @@ class SyncManager:
         if first:
             self._reader_open()
         base = self._base_for_read()
-        out[:] = self.mem[base + off : base + off + len(out)]
+        out[:] = self.mv[base + off : base + off + len(out)]
         self._reader_access(first, last)
 
     def peek(self, off: int, n: int) -> bytes:
@@ -271,7 +273,8 @@ class SyncManager:
         """ECAT read (caller checked ecat_may_read); the reader's last byte exchanges the
         buffer (event time as ecat_write)."""
         if self.ecat_side_writes:
-            out[:] = self.peek(off, len(out))
+            base = self._base_for_read()  # peek(): no side effects
+            out[:] = self.mv[base + off : base + off + len(out)]
             return
         self.reader_read(off, out)
         if (

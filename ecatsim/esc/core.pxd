@@ -1,0 +1,53 @@
+# The compiled core's declarations for core.py (Cython, pure-Python mode): the ESC's and
+# the frame context's state as typed fields. core.py stays the one source of the
+# behaviour; this file only gives types. Decisions P2, P13.
+from ecatsim.esc.dc cimport DcUnit
+from ecatsim.esc.fmmu cimport FmmuMap
+from ecatsim.esc.sm cimport SyncManager
+from ecatsim.esc.watchdog cimport Watchdog
+
+
+cimport cython
+
+cdef long long _LRD, _LWR, _LRW
+
+
+cdef class FrameContext:
+    cdef public long long frame_no
+    cdef public object t_ns, pdi_ns
+    cdef public bint irq_dirty, addr_dirty, logical_dirty, topology_dirty, timers_dirty
+    cdef public set pending, flush
+
+
+cdef class Esc:
+    cdef public long long position
+    cdef public bint pdi_emulation
+    cdef public FrameContext ctx
+    cdef public bytearray mem
+    cdef public object t
+    cdef public list sm
+    cdef public object eeprom
+    cdef public DcUnit dc
+    cdef public Watchdog wd
+    cdef public object mii
+    cdef public tuple fmmus
+    cdef public tuple sm_windows
+    cdef public bint pdram_ok
+    cdef public long long slaves_behind
+    cdef public bint port1_closed, port0_open
+    cdef public list link_down
+    cdef public bint al_control_locked
+    cdef public long long reset_progress_frame
+    cdef public long long ecat_irq
+    cdef public long long wr_s, wr_e
+    cdef public bytearray _scratch
+    cdef public object on_reset
+
+    @cython.locals(n="long long", lo="long long", hi="long long", wr=bint, rd=bint, f=FmmuMap)
+    cpdef long long ecat_logical(self, long long cmd, long long lad, object data) except -1
+    @cython.locals(n="long long", lo="long long", hi="long long", phys="long long",
+                   sm=SyncManager, b0="long long", b1="long long", nb="long long",
+                   pb="long long", ps="long long", pe="long long", fb="long long")
+    cpdef bint _fmmu_xfer(self, FmmuMap f, long long lad, object data, bint write) except -1
+    cpdef long long ecat_read(self, long long ado, object out) except -1
+    cpdef long long ecat_write(self, long long ado, object data) except -1
