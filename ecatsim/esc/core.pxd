@@ -12,6 +12,11 @@ cimport cython
 cdef long long _LRD, _LWR, _LRW
 
 
+cdef long long _get32(bytearray m, long long a) except? -1
+cdef void _put16(bytearray m, long long a, long long v) except *
+cdef void _put32(bytearray m, long long a, long long v) except *
+
+
 cdef class FrameContext:
     cdef public long long frame_no
     cdef public object t_ns, pdi_ns
@@ -49,5 +54,13 @@ cdef class Esc:
                    sm=SyncManager, b0="long long", b1="long long", nb="long long",
                    pb="long long", ps="long long", pe="long long", fb="long long")
     cpdef bint _fmmu_xfer(self, FmmuMap f, long long lad, object data, bint write) except -1
+    cpdef void _set_ecat_event(self, long long bits) except *
+    cpdef void _clr_ecat_event(self, long long bits) except *
+    cpdef void _irq_update(self) except *
+    cpdef void set_al_event(self, long long bits) except *
+    cpdef void clr_al_event(self, long long bits) except *
+    cpdef void _pdi_irq(self, long long request) except *
+    cpdef void sm_status_changed(self, SyncManager sm) except *
+    cpdef void wd_pd_trigger(self) except *
     cpdef long long ecat_read(self, long long ado, object out) except -1
     cpdef long long ecat_write(self, long long ado, object data) except -1

@@ -61,6 +61,25 @@ _LRD = int(Cmd.LRD)
 _LWR = int(Cmd.LWR)
 _LRW = int(Cmd.LRW)
 
+
+
+def _get32(m: bytearray, a: int) -> int:
+    """The little-endian 32-bit register at ``a``."""
+    return m[a] | (m[a + 1] << 8) | (m[a + 2] << 16) | (m[a + 3] << 24)
+
+
+def _put16(m: bytearray, a: int, v: int) -> None:
+    m[a] = v & 0xFF
+    m[a + 1] = (v >> 8) & 0xFF
+
+
+def _put32(m: bytearray, a: int, v: int) -> None:
+    m[a] = v & 0xFF
+    m[a + 1] = (v >> 8) & 0xFF
+    m[a + 2] = (v >> 16) & 0xFF
+    m[a + 3] = (v >> 24) & 0xFF
+
+
 Hook = Callable[["Esc", int, int, bytes], None]
 ReadHook = Callable[["Esc", int, int], None]
 
@@ -360,14 +379,14 @@ class Esc:
         m = self.mem
         v = m[regs.ECAT_EVENT_REQUEST] | (m[regs.ECAT_EVENT_REQUEST + 1] << 8)
         if (v | bits) != v:
-            _U16.pack_into(m, regs.ECAT_EVENT_REQUEST, v | bits)
+            _put16(m, regs.ECAT_EVENT_REQUEST, v | bits)
             self._irq_update()
 
     def _clr_ecat_event(self, bits: int) -> None:
         m = self.mem
         v = m[regs.ECAT_EVENT_REQUEST] | (m[regs.ECAT_EVENT_REQUEST + 1] << 8)
         if v & bits:
-            _U16.pack_into(m, regs.ECAT_EVENT_REQUEST, v & ~bits)
+            _put16(m, regs.ECAT_EVENT_REQUEST, v & ~bits)
             self._irq_update()
 
     def _irq_update(self) -> None:
@@ -381,29 +400,29 @@ class Esc:
             self.ctx.irq_dirty = True
 
     def al_event(self) -> int:
-        return int(_U32.unpack_from(self.mem, regs.AL_EVENT_REQUEST)[0])
+        return _get32(self.mem, regs.AL_EVENT_REQUEST)
 
     def set_al_event(self, bits: int) -> None:
         """Raise AL event request bits (the PDI interrupt source). Ref: §5.32 Table 46."""
         m = self.mem
-        v = _U32.unpack_from(m, regs.AL_EVENT_REQUEST)[0] | bits
-        _U32.pack_into(m, regs.AL_EVENT_REQUEST, v)
+        v = _get32(m, regs.AL_EVENT_REQUEST) | bits
+        _put32(m, regs.AL_EVENT_REQUEST, v)
         self._pdi_irq(v)
 
     def clr_al_event(self, bits: int) -> None:
         m = self.mem
-        v = _U32.unpack_from(m, regs.AL_EVENT_REQUEST)[0]
+        v = _get32(m, regs.AL_EVENT_REQUEST)
         if v & bits:
             v &= ~bits
-            _U32.pack_into(m, regs.AL_EVENT_REQUEST, v)
+            _put32(m, regs.AL_EVENT_REQUEST, v)
             self._pdi_irq(v)
 
     def _pdi_irq_update(self) -> None:
-        self._pdi_irq(_U32.unpack_from(self.mem, regs.AL_EVENT_REQUEST)[0])
+        self._pdi_irq(_get32(self.mem, regs.AL_EVENT_REQUEST))
 
     def _pdi_irq(self, request: int) -> None:
         """The PDI interrupt: AL event request AND AL event mask. Ref: §5.32, §5.33."""
-        if request & _U32.unpack_from(self.mem, regs.AL_EVENT_MASK)[0]:
+        if request & _get32(self.mem, regs.AL_EVENT_MASK):
             self.ctx.pending.add(self.position)
         else:
             self.ctx.pending.discard(self.position)

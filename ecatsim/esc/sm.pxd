@@ -1,8 +1,11 @@
 # The compiled core's declarations for sm.py (Cython, pure-Python mode): the SyncManager's
 # state as typed fields. sm.py stays the one source of the behaviour; this file only
 # gives types. Decisions P2, P13.
+from ecatsim.esc.core cimport Esc
+
+
 cdef class SyncManager:
-    cdef public object host
+    cdef public Esc host
     cdef unsigned char[:] mv
     cdef public bytearray mem
     cdef public long long n, status_addr, start, length, control
