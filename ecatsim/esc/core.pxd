@@ -10,6 +10,22 @@ from ecatsim.esc.watchdog cimport Watchdog
 cimport cython
 
 cdef long long _LRD, _LWR, _LRW
+# the registers, imported from regs.py: C constants here
+cdef long long AL_EVENT_MASK, AL_EVENT_REQUEST, AL_STATUS, CUC_LATCH0_PDI
+cdef long long CUC_SYNC_PDI, DC_ACTIVATION, DC_ACTIVATION_STATUS, DC_CYCLIC_UNIT_CONTROL
+cdef long long DC_ECAT_EVENT_TIME, DC_LATCH0_CONTROL, DC_LATCH0_POS, DC_LATCH0_STATUS
+cdef long long DC_PDI_CHANGE_EVENT_TIME, DC_PDI_START_EVENT_TIME, DC_PULSE_LENGTH, DC_RECV_TIME_P0
+cdef long long DC_SYNC0_STATUS, DC_TIME_DIFF_FILTER, DL_CONTROL, DL_STATUS
+cdef long long ECAT_EVENT_MASK, ECAT_EVENT_REQUEST, ECAT_EV_AL_STATUS, ECAT_EV_DC_LATCH
+cdef long long ECAT_EV_DL_STATUS, ECAT_EV_SM0, ECAT_PU_ERROR_COUNTER, EEPROM_CONFIG
+cdef long long ESC_CFG_LATCH_IN, ESC_CFG_SYNC_OUT, ESC_CONFIG, EV_AL_CONTROL
+cdef long long EV_DC_LATCH, EV_SM0, EV_SM_ACTIVATION, EV_SYNC0
+cdef long long EV_SYNC1, EV_WATCHDOG_PD, LOST_LINK_COUNTER, MII_ECAT_ACCESS
+cdef long long MII_PDI_ACCESS, MII_PHY_ADDRESS, N_SM, PDI_ERROR_CODE
+cdef long long PDI_ERROR_COUNTER, PDRAM_END, PDRAM_START, PHY_PORT_STATUS
+cdef long long REGISTER_END, RX_ERROR_COUNTER, SM_ACT_LATCH_ECAT, SM_ACT_LATCH_PDI
+cdef long long SM_BASE, SM_CTRL_WATCHDOG, SM_STRIDE, WD_COUNTER_PD
+cdef long long WD_COUNTER_PDI, WD_STATUS_PD
 
 
 cdef long long _get32(bytearray m, long long a) except? -1
@@ -49,11 +65,11 @@ cdef class Esc:
     cdef public object on_reset
 
     @cython.locals(n="long long", lo="long long", hi="long long", wr=bint, rd=bint, f=FmmuMap)
-    cpdef long long ecat_logical(self, long long cmd, long long lad, object data) except -1
+    cpdef long long ecat_logical(self, long long cmd, long long lad, unsigned char[:] data) except -1
     @cython.locals(n="long long", lo="long long", hi="long long", phys="long long",
-                   sm=SyncManager, b0="long long", b1="long long", nb="long long",
+                   sm=SyncManager, view="unsigned char[:]", b0="long long", b1="long long", nb="long long",
                    pb="long long", ps="long long", pe="long long", fb="long long")
-    cpdef bint _fmmu_xfer(self, FmmuMap f, long long lad, object data, bint write) except -1
+    cpdef bint _fmmu_xfer(self, FmmuMap f, long long lad, unsigned char[:] data, bint write) except -1
     cpdef void _set_ecat_event(self, long long bits) except *
     cpdef void _clr_ecat_event(self, long long bits) except *
     cpdef void _irq_update(self) except *

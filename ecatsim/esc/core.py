@@ -19,6 +19,66 @@ from functools import cache
 from typing import TYPE_CHECKING
 
 from ecatsim.esc import regs
+from ecatsim.esc.regs import (
+    AL_EVENT_MASK,
+    AL_EVENT_REQUEST,
+    AL_STATUS,
+    CUC_LATCH0_PDI,
+    CUC_SYNC_PDI,
+    DC_ACTIVATION,
+    DC_ACTIVATION_STATUS,
+    DC_CYCLIC_UNIT_CONTROL,
+    DC_ECAT_EVENT_TIME,
+    DC_LATCH0_CONTROL,
+    DC_LATCH0_POS,
+    DC_LATCH0_STATUS,
+    DC_PDI_CHANGE_EVENT_TIME,
+    DC_PDI_START_EVENT_TIME,
+    DC_PULSE_LENGTH,
+    DC_RECV_TIME_P0,
+    DC_SYNC0_STATUS,
+    DC_TIME_DIFF_FILTER,
+    DL_CONTROL,
+    DL_STATUS,
+    ECAT_EVENT_MASK,
+    ECAT_EVENT_REQUEST,
+    ECAT_EV_AL_STATUS,
+    ECAT_EV_DC_LATCH,
+    ECAT_EV_DL_STATUS,
+    ECAT_EV_SM0,
+    ECAT_PU_ERROR_COUNTER,
+    EEPROM_CONFIG,
+    ESC_CFG_LATCH_IN,
+    ESC_CFG_SYNC_OUT,
+    ESC_CONFIG,
+    EV_AL_CONTROL,
+    EV_DC_LATCH,
+    EV_SM0,
+    EV_SM_ACTIVATION,
+    EV_SYNC0,
+    EV_SYNC1,
+    EV_WATCHDOG_PD,
+    LOST_LINK_COUNTER,
+    MII_ECAT_ACCESS,
+    MII_PDI_ACCESS,
+    MII_PHY_ADDRESS,
+    N_SM,
+    PDI_ERROR_CODE,
+    PDI_ERROR_COUNTER,
+    PDRAM_END,
+    PDRAM_START,
+    PHY_PORT_STATUS,
+    REGISTER_END,
+    RX_ERROR_COUNTER,
+    SM_ACT_LATCH_ECAT,
+    SM_ACT_LATCH_PDI,
+    SM_BASE,
+    SM_CTRL_WATCHDOG,
+    SM_STRIDE,
+    WD_COUNTER_PD,
+    WD_COUNTER_PDI,
+    WD_STATUS_PD,
+)
 from ecatsim.esc.dc import DcUnit
 from ecatsim.esc.eeprom import EepromUnit
 from ecatsim.esc.fmmu import FmmuMap, compile_fmmus, copy_bits
@@ -133,7 +193,7 @@ class _Tables:
 
 
 def _mask_bytes(rows: tuple[Register, ...], attr: str) -> bytes:
-    out = bytearray(regs.REGISTER_END)
+    out = bytearray(REGISTER_END)
     for r in rows:
         if not r.available:
             continue
@@ -147,9 +207,9 @@ def tables() -> _Tables:
     """Compile the register table into byte masks and per-address hook lists (once)."""
     rows = load_registers()
     maps: dict[str, list[tuple[object, int, int] | None]] = {
-        k: [None] * regs.REGISTER_END for k in ("_ew_", "_er_", "_pw_", "_pr_")
+        k: [None] * REGISTER_END for k in ("_ew_", "_er_", "_pw_", "_pr_")
     }
-    bits = {k: bytearray(regs.REGISTER_END) for k in maps}
+    bits = {k: bytearray(REGISTER_END) for k in maps}
     for r in rows:
         if r.side_effect is None or not r.available:
             continue
@@ -233,7 +293,7 @@ class Esc:
         self.ctx = ctx
         self.mem = bytearray(0x10000)
         self.t = tables()
-        self.sm = [SyncManager(self, n) for n in range(regs.N_SM)]
+        self.sm = [SyncManager(self, n) for n in range(N_SM)]
         self.eeprom = EepromUnit(self.mem, sii, self._eeprom_written)
         self.dc = DcUnit(
             self.mem, position, start_ns=dc_start_ns, drift_ppm=dc_drift_ppm, hop_ns=dc_hop_ns
@@ -270,8 +330,8 @@ class Esc:
         m[:] = bytes(0x10000)
         for addr, size, value in self.t.resets:
             m[addr : addr + size] = value.to_bytes(size, "little")
-        m[regs.ESC_CONFIG] = (m[regs.ESC_CONFIG] & 0xFE) | int(self.pdi_emulation)
-        m[regs.DL_STATUS] |= 0x04  # enhanced link detection: 1 until the first EEPROM load
+        m[ESC_CONFIG] = (m[ESC_CONFIG] & 0xFE) | int(self.pdi_emulation)
+        m[DL_STATUS] |= 0x04  # enhanced link detection: 1 until the first EEPROM load
         for s in self.sm:
             s.configure(0, 0, 0, False)
         self.fmmus = ()
@@ -281,11 +341,11 @@ class Esc:
         self.ctx.timers_dirty = True
         self.wd.deadline_ns = 0
         self.wd.reconfigure()
-        m[regs.WD_STATUS_PD] &= 0xFE  # "expired" until first triggered (reset value 0)
+        m[WD_STATUS_PD] &= 0xFE  # "expired" until first triggered (reset value 0)
         self.mii.reset()
         self.pdram_ok = self.eeprom.load(first=True)
         if self.pdram_ok:
-            m[regs.DL_STATUS] |= 0x02  # PDI watchdog reloaded: the firmware is running
+            m[DL_STATUS] |= 0x02  # PDI watchdog reloaded: the firmware is running
         self.update_dl_status()
         self.ctx.addr_dirty = self.ctx.logical_dirty = self.ctx.irq_dirty = True
         self.ctx.topology_dirty = True
@@ -310,10 +370,10 @@ class Esc:
         (closed, no link). Ref: TMC8460 §5.19 Tables 30, 31; §5.17 Table 28 bits 8-15.
         """
         m = self.mem
-        loop = m[regs.DL_CONTROL + 1]
+        loop = m[DL_CONTROL + 1]
         link0 = not self.link_down[0]
         link1 = self.slaves_behind > 0 and not self.link_down[1]
-        lo = m[regs.DL_STATUS] & 0x07
+        lo = m[DL_STATUS] & 0x07
         lo |= (0x10 if link0 else 0) | (0x20 if link1 else 0)
         hi = 0x50  # ports 2 and 3: closed, no communication
         # port 0
@@ -326,14 +386,14 @@ class Esc:
         if p1 == 0x02 and not link1:
             closed1 = False
         hi |= 0x04 if closed1 else (0x08 if link1 else 0x00)
-        old = m[regs.DL_STATUS] | (m[regs.DL_STATUS + 1] << 8)
-        m[regs.DL_STATUS] = lo
-        m[regs.DL_STATUS + 1] = hi
+        old = m[DL_STATUS] | (m[DL_STATUS + 1] << 8)
+        m[DL_STATUS] = lo
+        m[DL_STATUS + 1] = hi
         self.port1_closed = closed1
         self.mii.set_link(0, link0)
         self.mii.set_link(1, link1)
         if old != (lo | (hi << 8)):
-            self._set_ecat_event(regs.ECAT_EV_DL_STATUS)
+            self._set_ecat_event(ECAT_EV_DL_STATUS)
             self.ctx.topology_dirty = True
 
     def set_pdi_watchdog(self, alive: bool) -> None:
@@ -341,24 +401,24 @@ class Esc:
         in 0x0443, the change signalled as a DL status event. Ref: TMC8460 §5.19 Table 30,
         §5.40, §5.44."""
         m = self.mem
-        if bool(m[regs.DL_STATUS] & 0x02) == alive:
+        if bool(m[DL_STATUS] & 0x02) == alive:
             return
         if alive:
-            m[regs.DL_STATUS] |= 0x02
+            m[DL_STATUS] |= 0x02
         else:
-            m[regs.DL_STATUS] &= 0xFD
-            if m[regs.WD_COUNTER_PDI] < 0xFF:
-                m[regs.WD_COUNTER_PDI] += 1
+            m[DL_STATUS] &= 0xFD
+            if m[WD_COUNTER_PDI] < 0xFF:
+                m[WD_COUNTER_PDI] += 1
         self.update_dl_status()
-        self._set_ecat_event(regs.ECAT_EV_DL_STATUS)
+        self._set_ecat_event(ECAT_EV_DL_STATUS)
 
     def pdi_interface_error(self, code: int) -> None:
         """A PDI access with an interface error: 0x030D counts (saturating at 0xFF), 0x030E
         keeps the code of the last one. Ref: TMC8460 §5.36 Table 50, §5.37 Table 51."""
         m = self.mem
-        if m[regs.PDI_ERROR_COUNTER] < 0xFF:
-            m[regs.PDI_ERROR_COUNTER] += 1
-        m[regs.PDI_ERROR_CODE] = code & 0xFF
+        if m[PDI_ERROR_COUNTER] < 0xFF:
+            m[PDI_ERROR_COUNTER] += 1
+        m[PDI_ERROR_CODE] = code & 0xFF
 
     def set_link(self, port: int, up: bool) -> None:
         """A link fault on port 0 or 1: DL status changes; a lost link at an open port in
@@ -367,9 +427,9 @@ class Esc:
             return
         self.link_down[port] = not up
         m = self.mem
-        loop = (m[regs.DL_CONTROL + 1] >> (2 * port)) & 0x03
-        if not up and loop == 0 and m[regs.LOST_LINK_COUNTER + port] < 0xFF:
-            m[regs.LOST_LINK_COUNTER + port] += 1
+        loop = (m[DL_CONTROL + 1] >> (2 * port)) & 0x03
+        if not up and loop == 0 and m[LOST_LINK_COUNTER + port] < 0xFF:
+            m[LOST_LINK_COUNTER + port] += 1
         self.update_dl_status()
         self.ctx.topology_dirty = True
 
@@ -377,52 +437,52 @@ class Esc:
 
     def _set_ecat_event(self, bits: int) -> None:
         m = self.mem
-        v = m[regs.ECAT_EVENT_REQUEST] | (m[regs.ECAT_EVENT_REQUEST + 1] << 8)
+        v = m[ECAT_EVENT_REQUEST] | (m[ECAT_EVENT_REQUEST + 1] << 8)
         if (v | bits) != v:
-            _put16(m, regs.ECAT_EVENT_REQUEST, v | bits)
+            _put16(m, ECAT_EVENT_REQUEST, v | bits)
             self._irq_update()
 
     def _clr_ecat_event(self, bits: int) -> None:
         m = self.mem
-        v = m[regs.ECAT_EVENT_REQUEST] | (m[regs.ECAT_EVENT_REQUEST + 1] << 8)
+        v = m[ECAT_EVENT_REQUEST] | (m[ECAT_EVENT_REQUEST + 1] << 8)
         if v & bits:
-            _put16(m, regs.ECAT_EVENT_REQUEST, v & ~bits)
+            _put16(m, ECAT_EVENT_REQUEST, v & ~bits)
             self._irq_update()
 
     def _irq_update(self) -> None:
         """IRQ field contribution: ECAT event request AND ECAT event mask. Ref: §5.29, 5.31."""
         m = self.mem
-        req = m[regs.ECAT_EVENT_REQUEST] | (m[regs.ECAT_EVENT_REQUEST + 1] << 8)
-        mask = m[regs.ECAT_EVENT_MASK] | (m[regs.ECAT_EVENT_MASK + 1] << 8)
+        req = m[ECAT_EVENT_REQUEST] | (m[ECAT_EVENT_REQUEST + 1] << 8)
+        mask = m[ECAT_EVENT_MASK] | (m[ECAT_EVENT_MASK + 1] << 8)
         irq = req & mask
         if irq != self.ecat_irq:
             self.ecat_irq = irq
             self.ctx.irq_dirty = True
 
     def al_event(self) -> int:
-        return _get32(self.mem, regs.AL_EVENT_REQUEST)
+        return _get32(self.mem, AL_EVENT_REQUEST)
 
     def set_al_event(self, bits: int) -> None:
         """Raise AL event request bits (the PDI interrupt source). Ref: §5.32 Table 46."""
         m = self.mem
-        v = _get32(m, regs.AL_EVENT_REQUEST) | bits
-        _put32(m, regs.AL_EVENT_REQUEST, v)
+        v = _get32(m, AL_EVENT_REQUEST) | bits
+        _put32(m, AL_EVENT_REQUEST, v)
         self._pdi_irq(v)
 
     def clr_al_event(self, bits: int) -> None:
         m = self.mem
-        v = _get32(m, regs.AL_EVENT_REQUEST)
+        v = _get32(m, AL_EVENT_REQUEST)
         if v & bits:
             v &= ~bits
-            _put32(m, regs.AL_EVENT_REQUEST, v)
+            _put32(m, AL_EVENT_REQUEST, v)
             self._pdi_irq(v)
 
     def _pdi_irq_update(self) -> None:
-        self._pdi_irq(_get32(self.mem, regs.AL_EVENT_REQUEST))
+        self._pdi_irq(_get32(self.mem, AL_EVENT_REQUEST))
 
     def _pdi_irq(self, request: int) -> None:
         """The PDI interrupt: AL event request AND AL event mask. Ref: §5.32, §5.33."""
-        if request & _get32(self.mem, regs.AL_EVENT_MASK):
+        if request & _get32(self.mem, AL_EVENT_MASK):
             self.ctx.pending.add(self.position)
         else:
             self.ctx.pending.discard(self.position)
@@ -433,8 +493,8 @@ class Esc:
         accesses change these bits). Ref: §5.49 Tables 88, 89.
         """
         mirror = sm.mirror
-        ebit = regs.ECAT_EV_SM0 << sm.n
-        abit = regs.EV_SM0 << sm.n
+        ebit = ECAT_EV_SM0 << sm.n
+        abit = EV_SM0 << sm.n
         if mirror & 1:
             self._set_ecat_event(ebit)
         else:
@@ -450,7 +510,7 @@ class Esc:
     def check_timers(self, now_ns: int) -> None:
         """Run the watchdog; on expiry raise AL event 0x0220.6. Ref: §5.32, §5.42."""
         if self.wd.deadline_ns and self.wd.expired(now_ns):
-            self.set_al_event(regs.EV_WATCHDOG_PD)
+            self.set_al_event(EV_WATCHDOG_PD)
 
     # ================================================================ ECAT face
 
@@ -601,7 +661,7 @@ class Esc:
         wins = []
         for sm in self.sm:
             w = sm.window()
-            if w is not None and w[0] >= regs.PDRAM_START:
+            if w is not None and w[0] >= PDRAM_START:
                 wins.append((w[0], w[1], sm))
         wins.sort(key=lambda x: x[0])
         self.sm_windows = tuple(wins)
@@ -620,23 +680,23 @@ class Esc:
                 hits = self._hits(ps, pe)
                 if len(hits) == 1 and hits[0][0] <= ps and pe <= hits[0][1]:
                     sm = hits[0][2]
-                    if not self.mem[sm.status_addr + 1] & regs.SM_ACT_LATCH_ECAT:
+                    if not self.mem[sm.status_addr + 1] & SM_ACT_LATCH_ECAT:
                         f.sm = sm
 
     # -- plain memory ------------------------------------------------------------------
 
     def _plain_write(self, ado: int, data: memoryview) -> bool:
         end = ado + len(data)
-        if end <= regs.REGISTER_END:
+        if end <= REGISTER_END:
             self._reg_write(ado, data)
             return True
-        if ado < regs.REGISTER_END:
-            self._reg_write(ado, data[: regs.REGISTER_END - ado])
-            data = data[regs.REGISTER_END - ado :]
-            ado = regs.REGISTER_END
+        if ado < REGISTER_END:
+            self._reg_write(ado, data[: REGISTER_END - ado])
+            data = data[REGISTER_END - ado :]
+            ado = REGISTER_END
         if not self.pdram_ok:
             return False
-        e = min(end, regs.PDRAM_END)
+        e = min(end, PDRAM_END)
         if e > ado:
             self.mem[ado:e] = data[: e - ado]
             for sm in self.sm:  # an SM of length 1 is not activated: the watchdog trigger
@@ -654,21 +714,21 @@ class Esc:
             sm.enabled
             and not sm.locked
             and sm.ecat_side_writes
-            and bool(sm.control & regs.SM_CTRL_WATCHDOG)
+            and bool(sm.control & SM_CTRL_WATCHDOG)
         )
 
     def _plain_read(self, ado: int, out: memoryview) -> bool:
         end = ado + len(out)
-        if end <= regs.REGISTER_END:
+        if end <= REGISTER_END:
             self._reg_read(ado, out)
             return True
-        if ado < regs.REGISTER_END:
-            self._reg_read(ado, out[: regs.REGISTER_END - ado])
-            out = out[regs.REGISTER_END - ado :]
-            ado = regs.REGISTER_END
+        if ado < REGISTER_END:
+            self._reg_read(ado, out[: REGISTER_END - ado])
+            out = out[REGISTER_END - ado :]
+            ado = REGISTER_END
         if not self.pdram_ok:
             return False
-        e = min(end, regs.PDRAM_END)
+        e = min(end, PDRAM_END)
         if e > ado:
             out[: e - ado] = self.mem[ado:e]
         if end > e:
@@ -771,34 +831,34 @@ class Esc:
 
     def _er_dl_status(self, ra: int, rs: int) -> None:
         """Reading DL status clears ECAT event 0x0210.2. Ref: TMC8460 §5.19 note *."""
-        self._clr_ecat_event(regs.ECAT_EV_DL_STATUS)
+        self._clr_ecat_event(ECAT_EV_DL_STATUS)
 
     def _ew_al_control(self, ra: int, rs: int, old: bytes) -> None:
         """AL control: copied to AL status in device emulation, else an AL event to the PDI
         that locks the register until the PDI reads it. Ref: TMC8460 §5.20, §5.26 bit 0."""
         m = self.mem
-        if m[regs.ESC_CONFIG] & 0x01:
+        if m[ESC_CONFIG] & 0x01:
             new = m[ra] | (m[ra + 1] << 8)
-            st = m[regs.AL_STATUS] | (m[regs.AL_STATUS + 1] << 8)
+            st = m[AL_STATUS] | (m[AL_STATUS + 1] << 8)
             self.set_al_status((st & ~0x3F) | (new & 0x2F))
             return
         if self.al_control_locked:
             m[ra : ra + rs] = old
             return
         self.al_control_locked = True
-        self.set_al_event(regs.EV_AL_CONTROL)
+        self.set_al_event(EV_AL_CONTROL)
 
     def set_al_status(self, value: int) -> None:
         """Write AL status; a change raises ECAT event 0x0210.3. Ref: TMC8460 §5.21, §5.31."""
         m = self.mem
-        old = m[regs.AL_STATUS] | (m[regs.AL_STATUS + 1] << 8)
-        _U16.pack_into(m, regs.AL_STATUS, value & 0xFFFF)
+        old = m[AL_STATUS] | (m[AL_STATUS + 1] << 8)
+        _U16.pack_into(m, AL_STATUS, value & 0xFFFF)
         if old != value:
-            self._set_ecat_event(regs.ECAT_EV_AL_STATUS)
+            self._set_ecat_event(ECAT_EV_AL_STATUS)
 
     def _er_al_status(self, ra: int, rs: int) -> None:
         """Reading AL status clears ECAT event 0x0210.3. Ref: TMC8460 §5.21 note *."""
-        self._clr_ecat_event(regs.ECAT_EV_AL_STATUS)
+        self._clr_ecat_event(ECAT_EV_AL_STATUS)
 
     def _ew_ecat_event_mask(self, ra: int, rs: int, old: bytes) -> None:
         """Ref: TMC8460 §5.29 (mask for the IRQ field)."""
@@ -806,20 +866,20 @@ class Esc:
 
     def _ew_rx_error_counter(self, ra: int, rs: int, old: bytes) -> None:
         """Writing any RX error counter clears 0x0300-0x030B. Ref: TMC8460 §5.33, §5.34."""
-        self.mem[regs.RX_ERROR_COUNTER : regs.ECAT_PU_ERROR_COUNTER] = bytes(12)
+        self.mem[RX_ERROR_COUNTER : ECAT_PU_ERROR_COUNTER] = bytes(12)
 
     def _ew_ecat_pu_error_counter(self, ra: int, rs: int, old: bytes) -> None:
         """Writing 0x030C clears it. Ref: TMC8460 §5.35."""
-        self.mem[regs.ECAT_PU_ERROR_COUNTER] = 0
+        self.mem[ECAT_PU_ERROR_COUNTER] = 0
 
     def _ew_pdi_error_counter(self, ra: int, rs: int, old: bytes) -> None:
         """Writing 0x030D clears it and 0x030E. Ref: TMC8460 §5.36, §5.37."""
-        self.mem[regs.PDI_ERROR_COUNTER] = 0
-        self.mem[regs.PDI_ERROR_CODE] = 0
+        self.mem[PDI_ERROR_COUNTER] = 0
+        self.mem[PDI_ERROR_CODE] = 0
 
     def _ew_lost_link_counter(self, ra: int, rs: int, old: bytes) -> None:
         """Writing any lost link counter clears 0x0310-0x0313. Ref: TMC8460 §5.38."""
-        self.mem[regs.LOST_LINK_COUNTER : regs.LOST_LINK_COUNTER + 4] = bytes(4)
+        self.mem[LOST_LINK_COUNTER : LOST_LINK_COUNTER + 4] = bytes(4)
 
     def _ew_wd_divider(self, ra: int, rs: int, old: bytes) -> None:
         """Ref: TMC8460 §5.39."""
@@ -834,12 +894,12 @@ class Esc:
 
     def _pr_wd_status_pd(self, ra: int, rs: int) -> None:
         """PDI read of 0x0440 clears AL event 0x0220.6. Ref: TMC8460 §5.42 note *."""
-        self.clr_al_event(regs.EV_WATCHDOG_PD)
+        self.clr_al_event(EV_WATCHDOG_PD)
 
     def _ew_wd_counter(self, ra: int, rs: int, old: bytes) -> None:
         """Writing either watchdog counter clears both. Ref: TMC8460 §5.43, §5.44."""
-        self.mem[regs.WD_COUNTER_PD] = 0
-        self.mem[regs.WD_COUNTER_PDI] = 0
+        self.mem[WD_COUNTER_PD] = 0
+        self.mem[WD_COUNTER_PDI] = 0
 
     def _ew_eeprom_config(self, ra: int, rs: int, old: bytes) -> None:
         """Ref: TMC8460 §5.45 Table 60."""
@@ -847,7 +907,7 @@ class Esc:
 
     def _pw_eeprom_pdi_access(self, ra: int, rs: int, old: bytes) -> None:
         """PDI may take the EEPROM only if offered (0x0500.0=1, .1=0). Ref: Table 61."""
-        cfg = self.mem[regs.EEPROM_CONFIG]
+        cfg = self.mem[EEPROM_CONFIG]
         if not (cfg & 0x01) or cfg & 0x02:
             self.mem[ra] = old[0]
         self.eeprom.ownership_changed(self.ctx.frame_no)
@@ -871,11 +931,11 @@ class Esc:
         """After an EEPROM reload: a SYNC out unit that 0x0141.2 now disables stops.
         Ref: TMC8460 §5.26 Table 38 bit 2."""
         dc = self.dc
-        if not self.mem[regs.ESC_CONFIG] & regs.ESC_CFG_SYNC_OUT and (
+        if not self.mem[ESC_CONFIG] & ESC_CFG_SYNC_OUT and (
             dc.next_sync0 is not None or dc.next_sync1 is not None
         ):
             dc.next_sync0 = dc.next_sync1 = None
-            self.mem[regs.DC_ACTIVATION_STATUS] &= 0xFC
+            self.mem[DC_ACTIVATION_STATUS] &= 0xFC
             self.ctx.timers_dirty = True
 
     def _er_eeprom_control(self, ra: int, rs: int) -> None:
@@ -929,19 +989,19 @@ class Esc:
         Ref: TMC8460 §5.46 Tables 68-70 r/(w)."""
         if self.mii.pdi_owns():
             self.mem[ra : ra + rs] = old
-        elif ra == regs.MII_PHY_ADDRESS:
+        elif ra == MII_PHY_ADDRESS:
             self.mii.show_address()
 
     def _pw_mii_phy(self, ra: int, rs: int, old: bytes) -> None:
         """Ref: TMC8460 §5.46 Tables 68-70 r/(w)."""
         if not self.mii.pdi_owns():
             self.mem[ra : ra + rs] = old
-        elif ra == regs.MII_PHY_ADDRESS:
+        elif ra == MII_PHY_ADDRESS:
             self.mii.show_address()
 
     def _ew_mii_ecat_access(self, ra: int, rs: int, old: bytes) -> None:
         """ECAT claims or frees MI access only while 0x0517.0 = 0. Ref: Table 71 note."""
-        if self.mem[regs.MII_PDI_ACCESS] & 0x01:
+        if self.mem[MII_PDI_ACCESS] & 0x01:
             self.mem[ra] = old[0]
 
     def _ew_mii_pdi_access(self, ra: int, rs: int, old: bytes) -> None:
@@ -956,7 +1016,7 @@ class Esc:
         m = self.mem
         take = m[ra] & 0x01 and not old[0] & 0x01
         if take and (
-            m[regs.MII_ECAT_ACCESS] & 0x01 or old[0] & 0x02 or not m[regs.DL_STATUS] & 0x01
+            m[MII_ECAT_ACCESS] & 0x01 or old[0] & 0x02 or not m[DL_STATUS] & 0x01
         ):
             m[ra] = old[0]
         self.mii.ownership_changed()
@@ -974,7 +1034,7 @@ class Esc:
 
     def _clear_port_status(self) -> None:
         m = self.mem
-        for a in range(regs.PHY_PORT_STATUS, regs.PHY_PORT_STATUS + 4):
+        for a in range(PHY_PORT_STATUS, PHY_PORT_STATUS + 4):
             m[a] &= ~0x28 & 0xFF
 
     def _ew_fmmu(self, ra: int, rs: int, old: bytes) -> None:
@@ -986,21 +1046,21 @@ class Esc:
     def _ew_sm_config(self, ra: int, rs: int, old: bytes) -> None:
         """SM start/length/control are writable only while the SM is disabled.
         Ref: TMC8460 §5.49 Tables 86-88 note r/(w)."""
-        n = (ra - regs.SM_BASE) // regs.SM_STRIDE
+        n = (ra - SM_BASE) // SM_STRIDE
         if self.sm[n].enabled:  # state before this frame's activate byte is applied
             self.mem[ra : ra + rs] = old
 
     def _ew_sm_activate(self, ra: int, rs: int, old: bytes) -> None:
         """Enable/disable an SM, repeat request; a change raises AL event 0x0220.4.
         Ref: TMC8460 §5.49 Table 90, §5.32 bit 4."""
-        n = (ra - regs.SM_BASE) // regs.SM_STRIDE
+        n = (ra - SM_BASE) // SM_STRIDE
         new = self.mem[ra]
         if (new ^ old[0]) & 0x01:
             self._sm_restart(n)
-        elif (new ^ old[0]) & regs.SM_ACT_LATCH_ECAT:
+        elif (new ^ old[0]) & SM_ACT_LATCH_ECAT:
             self._route_fmmus()  # an SM with ECAT event times is left to the Python path
         if new != old[0]:
-            self.set_al_event(regs.EV_SM_ACTIVATION)
+            self.set_al_event(EV_SM_ACTIVATION)
 
     def _sm_restart(self, n: int) -> None:
         m = self.mem
@@ -1014,12 +1074,12 @@ class Esc:
 
     def _pr_sm_activate(self, ra: int, rs: int) -> None:
         """PDI read of an activation register clears AL event 0x0220.4. Ref: Table 90 *."""
-        self.clr_al_event(regs.EV_SM_ACTIVATION)
+        self.clr_al_event(EV_SM_ACTIVATION)
 
     def _pw_sm_pdi_control(self, ra: int, rs: int, old: bytes) -> None:
         """PDI deactivate (bit 0) resets and locks the SM; bit 1 is the repeat ack.
         Ref: TMC8460 §5.49 Table 91."""
-        n = (ra - regs.SM_BASE) // regs.SM_STRIDE
+        n = (ra - SM_BASE) // SM_STRIDE
         if (self.mem[ra] ^ old[0]) & 0x01:
             self._sm_restart(n)
 
@@ -1027,16 +1087,16 @@ class Esc:
         """PDI read of AL control clears AL event 0x0220.0 and unlocks the register.
         Ref: TMC8460 §5.20 note, §5.32 bit 0."""
         self.al_control_locked = False
-        self.clr_al_event(regs.EV_AL_CONTROL)
+        self.clr_al_event(EV_AL_CONTROL)
 
     def _pw_al_status(self, ra: int, rs: int, old: bytes) -> None:
         """PDI writes AL status only with device emulation off. Ref: TMC8460 §5.21 note."""
         m = self.mem
-        if m[regs.ESC_CONFIG] & 0x01:
+        if m[ESC_CONFIG] & 0x01:
             m[ra : ra + rs] = old
             return
         if bytes(m[ra : ra + rs]) != old:
-            self._set_ecat_event(regs.ECAT_EV_AL_STATUS)
+            self._set_ecat_event(ECAT_EV_AL_STATUS)
 
     def _pw_al_event_mask(self, ra: int, rs: int, old: bytes) -> None:
         """Ref: TMC8460 §5.30 (mask for the PDI interrupt)."""
@@ -1044,7 +1104,7 @@ class Esc:
 
     def _ew_dc_receive_time(self, ra: int, rs: int, old: bytes) -> None:
         """A write to 0x0900 latches the receive times. Ref: TMC8460 §5.50.1 Table 92."""
-        if ra == regs.DC_RECV_TIME_P0:
+        if ra == DC_RECV_TIME_P0:
             self.dc.latch_receive_times(self.ctx.t_ns, self.slaves_behind)
         else:
             self.mem[ra : ra + rs] = old
@@ -1076,7 +1136,7 @@ class Esc:
     def _ew_dc_filter_depth(self, ra: int, rs: int, old: bytes) -> None:
         """Writing 0x0934 resets 0x092C; 0x0935 resets the internal speed counter filter
         only. Ref: TMC8460 §5.50.2 Tables 101, 102."""
-        if ra == regs.DC_TIME_DIFF_FILTER:
+        if ra == DC_TIME_DIFF_FILTER:
             self.dc.reset_time_difference()
 
     def _ew_dc_cyclic_unit_control(self, ra: int, rs: int, old: bytes) -> None:
@@ -1091,7 +1151,7 @@ class Esc:
     def _sync_owner_is(self, pdi: bool) -> bool:
         """0x0980.0: the SYNC out unit's registers are written by its owner only.
         Ref: TMC8460 Table 104, notes of Tables 105, 110, 112, 113."""
-        return bool(self.mem[regs.DC_CYCLIC_UNIT_CONTROL] & regs.CUC_SYNC_PDI) == pdi
+        return bool(self.mem[DC_CYCLIC_UNIT_CONTROL] & CUC_SYNC_PDI) == pdi
 
     def _activation(self, ra: int, old: bytes, now_sys: int) -> None:
         self.mem[ra] &= 0x7F  # bit 7 (debug pulse) self-clearing
@@ -1116,21 +1176,21 @@ class Esc:
     def sync0_tick(self, now_ns: int) -> None:
         """A due SYNC0 pulse: status, and AL event 0x0220.2 if mapped. Ref: §5.32 bit 2."""
         if self.dc.sync0_pulse(now_ns):
-            self.set_al_event(regs.EV_SYNC0)
+            self.set_al_event(EV_SYNC0)
         if self.dc.next_sync0 is None:
             self.ctx.timers_dirty = True  # single shot: this ESC's SYNC unit is done
 
     def sync1_tick(self) -> None:
         """A due SYNC1 pulse: status, and AL event 0x0220.3 if mapped. Ref: §5.32 bit 3."""
         if self.dc.sync1_pulse():
-            self.set_al_event(regs.EV_SYNC1)
+            self.set_al_event(EV_SYNC1)
 
     def _pr_dc_sync_status(self, ra: int, rs: int) -> None:
         """PDI read of 0x098E/0x098F clears AL event 0x0220.2/.3; in acknowledge mode (pulse
         length 0x0982 = 0) it also clears the SYNC state bit. Ref: Tables 106, 108, 109."""
-        self.clr_al_event(regs.EV_SYNC0 if ra == regs.DC_SYNC0_STATUS else regs.EV_SYNC1)
+        self.clr_al_event(EV_SYNC0 if ra == DC_SYNC0_STATUS else EV_SYNC1)
         m = self.mem
-        if not (m[regs.DC_PULSE_LENGTH] | m[regs.DC_PULSE_LENGTH + 1]):
+        if not (m[DC_PULSE_LENGTH] | m[DC_PULSE_LENGTH + 1]):
             m[ra] &= 0xFE
 
     def _start_time(self, ra: int, rs: int, old: bytes, pdi: bool, now_sys: int) -> None:
@@ -1138,15 +1198,15 @@ class Esc:
         32 bits it is extended to 64 (0x0981.4, or auto-activation 0x0981.3); with
         auto-activation the write starts the unit. Ref: TMC8460 Tables 105, 110."""
         m = self.mem
-        act = m[regs.DC_ACTIVATION]
+        act = m[DC_ACTIVATION]
         if act & 0x01 or not self._sync_owner_is(pdi):
             m[ra : ra + rs] = old
             return
         if act & 0x18 and self.wr_e <= ra + 4:
             self.dc.extend_start_time(now_sys)
         if act & 0x08:
-            m[regs.DC_ACTIVATION] = act | 0x01
-            self._activation(regs.DC_ACTIVATION, bytes([act]), now_sys)
+            m[DC_ACTIVATION] = act | 0x01
+            self._activation(DC_ACTIVATION, bytes([act]), now_sys)
 
     def _ew_dc_start_time(self, ra: int, rs: int, old: bytes) -> None:
         """Ref: TMC8460 §5.50.4 Table 110."""
@@ -1168,29 +1228,29 @@ class Esc:
 
     def _latch_pdi(self, unit: int) -> bool:
         """0x0980.4/.5: latch unit ``unit`` is PDI controlled. Ref: TMC8460 Table 104."""
-        return bool(self.mem[regs.DC_CYCLIC_UNIT_CONTROL] & (regs.CUC_LATCH0_PDI << unit))
+        return bool(self.mem[DC_CYCLIC_UNIT_CONTROL] & (CUC_LATCH0_PDI << unit))
 
     def _ew_dc_latch_control(self, ra: int, rs: int, old: bytes) -> None:
         """Written by the latch unit's owner (0x0980.4/.5). Ref: Tables 114, 115."""
-        if self._latch_pdi(ra - regs.DC_LATCH0_CONTROL):
+        if self._latch_pdi(ra - DC_LATCH0_CONTROL):
             self.mem[ra] = old[0]
 
     def _pw_dc_latch_control(self, ra: int, rs: int, old: bytes) -> None:
         """Ref: TMC8460 §5.50.5 Tables 114, 115."""
-        if not self._latch_pdi(ra - regs.DC_LATCH0_CONTROL):
+        if not self._latch_pdi(ra - DC_LATCH0_CONTROL):
             self.mem[ra] = old[0]
 
     def _latch_time_read(self, ra: int, pdi: bool) -> bool:
         """The owner's read of a latch time clears its event flag; True if no unit of that
         owner has an event flag left. Ref: TMC8460 Tables 116-121."""
-        idx = (ra - regs.DC_LATCH0_POS) // 8
+        idx = (ra - DC_LATCH0_POS) // 8
         unit = idx >> 1
         if self._latch_pdi(unit) != pdi:
             return False
         m = self.mem
-        m[regs.DC_LATCH0_STATUS + unit] &= ~(1 << (idx & 1)) & 0xFF
+        m[DC_LATCH0_STATUS + unit] &= ~(1 << (idx & 1)) & 0xFF
         for u in (0, 1):
-            if self._latch_pdi(u) == pdi and m[regs.DC_LATCH0_STATUS + u] & 0x03:
+            if self._latch_pdi(u) == pdi and m[DC_LATCH0_STATUS + u] & 0x03:
                 return False
         return True
 
@@ -1198,13 +1258,13 @@ class Esc:
         """ECAT read of an ECAT-controlled latch time clears its status flag, and the DC
         latch event 0x0210.0 once no such flag is left. Ref: Tables 118-121; Table 45."""
         if self._latch_time_read(ra, False):
-            self._clr_ecat_event(regs.ECAT_EV_DC_LATCH)
+            self._clr_ecat_event(ECAT_EV_DC_LATCH)
 
     def _pr_dc_latch_time(self, ra: int, rs: int) -> None:
         """PDI read of a PDI-controlled latch time clears its status flag, and AL event
         0x0220.1 once no such flag is left. Ref: Tables 118-121 note *; Table 46 bit 1."""
         if self._latch_time_read(ra, True):
-            self.clr_al_event(regs.EV_DC_LATCH)
+            self.clr_al_event(EV_DC_LATCH)
 
     def latch_input(self, unit: int, level: bool, host_ns: int) -> None:
         """The LATCH ``unit`` pin is driven to ``level`` at host time ``host_ns``. The
@@ -1213,15 +1273,15 @@ class Esc:
         DC latch event of the unit's owner: ECAT 0x0210.0 or AL 0x0220.1 (0x0980.4/.5).
         Ref: TMC8460 §5.28.2 Table 42, §5.26 Table 38, §5.50.3 Table 104, §5.50.5."""
         m = self.mem
-        if not m[regs.ESC_CONFIG] & regs.ESC_CFG_LATCH_IN:
+        if not m[ESC_CONFIG] & ESC_CFG_LATCH_IN:
             return  # the latch in unit is disabled (power saving)
-        if bool(m[regs.DC_LATCH0_STATUS + unit] & 0x04) == level:
+        if bool(m[DC_LATCH0_STATUS + unit] & 0x04) == level:
             return  # no edge
         if self.dc.latch_edge(unit, level, host_ns):
             if self._latch_pdi(unit):
-                self.set_al_event(regs.EV_DC_LATCH)
+                self.set_al_event(EV_DC_LATCH)
             else:
-                self._set_ecat_event(regs.ECAT_EV_DC_LATCH)
+                self._set_ecat_event(ECAT_EV_DC_LATCH)
 
     # -- SyncManager event times (TMC8460 §5.50.6) ----------------------------------------
 
@@ -1230,15 +1290,15 @@ class Esc:
         takes the local time of the frame's beginning (ECAT), 0x09F8/0x09FC the local time
         of the PDI access. Ref: TMC8460 §5.50.6 Tables 122-124, §5.49 Table 90."""
         ctx = self.ctx
-        t = self.dc.arrival_ns(ctx.t_ns) if reg == regs.DC_ECAT_EVENT_TIME else ctx.pdi_ns
+        t = self.dc.arrival_ns(ctx.t_ns) if reg == DC_ECAT_EVENT_TIME else ctx.pdi_ns
         _U32.pack_into(self.mem, reg, self.dc.local_time(t) & 0xFFFFFFFF)
 
     def pdi_buffer_event(self, sm: SyncManager, first: bool, last: bool) -> None:
         """A PDI access of SM ``sm``'s buffer: its start address is a PDI buffer start
         event, its last byte a PDI buffer change event, if 0x0806+8n bit 7 asks for them.
         Ref: TMC8460 §5.49 Table 90 bit 7, §5.50.6 Tables 123, 124."""
-        if self.mem[sm.status_addr + 1] & regs.SM_ACT_LATCH_PDI:
+        if self.mem[sm.status_addr + 1] & SM_ACT_LATCH_PDI:
             if first:
-                self.sm_event_time(regs.DC_PDI_START_EVENT_TIME)
+                self.sm_event_time(DC_PDI_START_EVENT_TIME)
             if last:
-                self.sm_event_time(regs.DC_PDI_CHANGE_EVENT_TIME)
+                self.sm_event_time(DC_PDI_CHANGE_EVENT_TIME)

@@ -13,6 +13,23 @@ from __future__ import annotations
 from typing import Protocol
 
 from ecatsim.esc import regs
+from ecatsim.esc.regs import (
+    DC_ECAT_EVENT_TIME,
+    SM_ACT_LATCH_ECAT,
+    SM_CTRL_ECAT_IRQ,
+    SM_CTRL_PDI_IRQ,
+    SM_CTRL_WATCHDOG,
+    SM_DIR_MASK,
+    SM_DIR_WRITE,
+    SM_MODE_MAILBOX,
+    SM_MODE_MASK,
+    SM_ST_BUF_SHIFT,
+    SM_ST_IRQ_READ,
+    SM_ST_IRQ_WRITE,
+    SM_ST_MBX_FULL,
+    SM_ST_READ_OPEN,
+    SM_ST_WRITE_OPEN,
+)
 
 
 class SmHost(Protocol):
@@ -106,8 +123,8 @@ class SyncManager:
         self.start = start
         self.length = length
         self.control = control
-        self.mailbox = (control & regs.SM_MODE_MASK) == regs.SM_MODE_MAILBOX
-        self.ecat_side_writes = (control & regs.SM_DIR_MASK) == regs.SM_DIR_WRITE
+        self.mailbox = (control & SM_MODE_MASK) == SM_MODE_MAILBOX
+        self.ecat_side_writes = (control & SM_DIR_MASK) == SM_DIR_WRITE
         # a length of 1 does not activate the SM (only its watchdog trigger: Esc)
         self.active = active and length > 1
         self.mbx_full = False
@@ -120,10 +137,10 @@ class SyncManager:
         self.mirror = -1
         # The write interrupt goes to the reading side, the read interrupt to the writing
         # side, each if enabled in the control register. Ref: §5.49 Tables 88, 89.
-        to_ecat = regs.SM_ST_IRQ_READ if self.ecat_side_writes else regs.SM_ST_IRQ_WRITE
-        to_pdi = regs.SM_ST_IRQ_WRITE if self.ecat_side_writes else regs.SM_ST_IRQ_READ
-        self.irq_to_ecat = to_ecat if control & regs.SM_CTRL_ECAT_IRQ else 0
-        self.irq_to_pdi = to_pdi if control & regs.SM_CTRL_PDI_IRQ else 0
+        to_ecat = SM_ST_IRQ_READ if self.ecat_side_writes else SM_ST_IRQ_WRITE
+        to_pdi = SM_ST_IRQ_WRITE if self.ecat_side_writes else SM_ST_IRQ_READ
+        self.irq_to_ecat = to_ecat if control & SM_CTRL_ECAT_IRQ else 0
+        self.irq_to_pdi = to_pdi if control & SM_CTRL_PDI_IRQ else 0
         self._sync()
 
     def window(self) -> tuple[int, int] | None:
@@ -135,16 +152,16 @@ class SyncManager:
     # -- shared helpers --------------------------------------------------------------
 
     def _sync(self) -> None:
-        st = self.status & (regs.SM_ST_IRQ_WRITE | regs.SM_ST_IRQ_READ)
+        st = self.status & (SM_ST_IRQ_WRITE | SM_ST_IRQ_READ)
         if self.mailbox:
             if self.mbx_full:
-                st |= regs.SM_ST_MBX_FULL
+                st |= SM_ST_MBX_FULL
         else:
-            st |= (self.l if self.l >= 0 else 3) << regs.SM_ST_BUF_SHIFT
+            st |= (self.l if self.l >= 0 else 3) << SM_ST_BUF_SHIFT
             if self.r_open:
-                st |= regs.SM_ST_READ_OPEN
+                st |= SM_ST_READ_OPEN
             if self.w_open:
-                st |= regs.SM_ST_WRITE_OPEN
+                st |= SM_ST_WRITE_OPEN
         self.status = st
         self.mem[self.status_addr] = st
         mirror = (1 if st & self.irq_to_ecat else 0) | (2 if st & self.irq_to_pdi else 0)
@@ -155,14 +172,14 @@ class SyncManager:
     def _writer_access(self, first: bool, last: bool) -> None:
         if self.mailbox:
             if first:
-                self.status &= ~regs.SM_ST_IRQ_READ
+                self.status &= ~SM_ST_IRQ_READ
             if last:
                 self.mbx_full = True
-                self.status |= regs.SM_ST_IRQ_WRITE
+                self.status |= SM_ST_IRQ_WRITE
         else:
             if first:
                 self.w_open = True
-                self.status &= ~regs.SM_ST_IRQ_READ
+                self.status &= ~SM_ST_IRQ_READ
             if last:
                 self.w_open = False
                 latest = self.l = self.w
@@ -171,7 +188,7 @@ class SyncManager:
                     self.w = 3 - latest - self.r
                 else:
                     self.w = 1 if latest == 0 else 0
-                self.status |= regs.SM_ST_IRQ_WRITE
+                self.status |= SM_ST_IRQ_WRITE
         if first or last:
             self._sync()
 
@@ -186,16 +203,16 @@ class SyncManager:
     def _reader_access(self, first: bool, last: bool) -> None:
         if self.mailbox:
             if first:
-                self.status &= ~regs.SM_ST_IRQ_WRITE
+                self.status &= ~SM_ST_IRQ_WRITE
             if last:
                 self.mbx_full = False
-                self.status |= regs.SM_ST_IRQ_READ
+                self.status |= SM_ST_IRQ_READ
         else:
             if first:
-                self.status &= ~regs.SM_ST_IRQ_WRITE
+                self.status &= ~SM_ST_IRQ_WRITE
             if last:
                 self.r_open = False
-                self.status |= regs.SM_ST_IRQ_READ
+                self.status |= SM_ST_IRQ_READ
         if first or last:
             self._sync()
 
@@ -261,13 +278,13 @@ class SyncManager:
         with 0x0806+8n bit 6 the frame's time goes to 0x09F0. Ref: §5.49 Table 90,
         §5.50.6 Table 122."""
         self.writer_write(off, data)
-        if self.control & regs.SM_CTRL_WATCHDOG:
+        if self.control & SM_CTRL_WATCHDOG:
             self.host.wd_pd_trigger()
         if (
             off + len(data) >= self.length
-            and self.mem[self.status_addr + 1] & regs.SM_ACT_LATCH_ECAT
+            and self.mem[self.status_addr + 1] & SM_ACT_LATCH_ECAT
         ):
-            self.host.sm_event_time(regs.DC_ECAT_EVENT_TIME)
+            self.host.sm_event_time(DC_ECAT_EVENT_TIME)
 
     def ecat_read(self, off: int, out: memoryview) -> None:
         """ECAT read (caller checked ecat_may_read); the reader's last byte exchanges the
@@ -279,9 +296,9 @@ class SyncManager:
         self.reader_read(off, out)
         if (
             off + len(out) >= self.length
-            and self.mem[self.status_addr + 1] & regs.SM_ACT_LATCH_ECAT
+            and self.mem[self.status_addr + 1] & SM_ACT_LATCH_ECAT
         ):
-            self.host.sm_event_time(regs.DC_ECAT_EVENT_TIME)
+            self.host.sm_event_time(DC_ECAT_EVENT_TIME)
 
     # -- PDI face --------------------------------------------------------------------
 
