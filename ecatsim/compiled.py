@@ -43,6 +43,7 @@ CORE = (
     "ecatsim.esc.watchdog",
     "ecatsim.esc.dc",
     "ecatsim.esc.core",
+    "ecatsim.segment",
     "ecatsim.device.cia402",
     "ecatsim.device.servo",
     "ecatsim.device.drive",

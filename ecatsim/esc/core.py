@@ -19,6 +19,10 @@ from functools import cache
 from typing import TYPE_CHECKING
 
 from ecatsim.esc import regs
+from ecatsim.esc.dc import DcUnit
+from ecatsim.esc.eeprom import EepromUnit
+from ecatsim.esc.fmmu import FmmuMap, compile_fmmus, copy_bits
+from ecatsim.esc.mii import MiiUnit
 from ecatsim.esc.regs import (
     AL_EVENT_MASK,
     AL_EVENT_REQUEST,
@@ -40,12 +44,12 @@ from ecatsim.esc.regs import (
     DC_TIME_DIFF_FILTER,
     DL_CONTROL,
     DL_STATUS,
-    ECAT_EVENT_MASK,
-    ECAT_EVENT_REQUEST,
     ECAT_EV_AL_STATUS,
     ECAT_EV_DC_LATCH,
     ECAT_EV_DL_STATUS,
     ECAT_EV_SM0,
+    ECAT_EVENT_MASK,
+    ECAT_EVENT_REQUEST,
     ECAT_PU_ERROR_COUNTER,
     EEPROM_CONFIG,
     ESC_CFG_LATCH_IN,
@@ -79,10 +83,6 @@ from ecatsim.esc.regs import (
     WD_COUNTER_PDI,
     WD_STATUS_PD,
 )
-from ecatsim.esc.dc import DcUnit
-from ecatsim.esc.eeprom import EepromUnit
-from ecatsim.esc.fmmu import FmmuMap, compile_fmmus, copy_bits
-from ecatsim.esc.mii import MiiUnit
 from ecatsim.esc.sm import SyncManager
 from ecatsim.esc.watchdog import Watchdog
 from ecatsim.spec.tables import load_registers
@@ -120,7 +120,6 @@ PASSIVE_SIDE_EFFECTS = frozenset(
 _LRD = int(Cmd.LRD)
 _LWR = int(Cmd.LWR)
 _LRW = int(Cmd.LRW)
-
 
 
 def _get32(m: bytearray, a: int) -> int:
@@ -866,7 +865,7 @@ class Esc:
 
     def _ew_rx_error_counter(self, ra: int, rs: int, old: bytes) -> None:
         """Writing any RX error counter clears 0x0300-0x030B. Ref: TMC8460 §5.33, §5.34."""
-        self.mem[RX_ERROR_COUNTER : ECAT_PU_ERROR_COUNTER] = bytes(12)
+        self.mem[RX_ERROR_COUNTER:ECAT_PU_ERROR_COUNTER] = bytes(12)
 
     def _ew_ecat_pu_error_counter(self, ra: int, rs: int, old: bytes) -> None:
         """Writing 0x030C clears it. Ref: TMC8460 §5.35."""
@@ -1015,9 +1014,7 @@ class Esc:
         the EEPROM is loaded (0x0110.0 = 1); it can always give it back. Ref: Table 72."""
         m = self.mem
         take = m[ra] & 0x01 and not old[0] & 0x01
-        if take and (
-            m[MII_ECAT_ACCESS] & 0x01 or old[0] & 0x02 or not m[DL_STATUS] & 0x01
-        ):
+        if take and (m[MII_ECAT_ACCESS] & 0x01 or old[0] & 0x02 or not m[DL_STATUS] & 0x01):
             m[ra] = old[0]
         self.mii.ownership_changed()
 
@@ -1249,10 +1246,7 @@ class Esc:
             return False
         m = self.mem
         m[DC_LATCH0_STATUS + unit] &= ~(1 << (idx & 1)) & 0xFF
-        for u in (0, 1):
-            if self._latch_pdi(u) == pdi and m[DC_LATCH0_STATUS + u] & 0x03:
-                return False
-        return True
+        return not any(self._latch_pdi(u) == pdi and m[DC_LATCH0_STATUS + u] & 0x03 for u in (0, 1))
 
     def _er_dc_latch_time(self, ra: int, rs: int) -> None:
         """ECAT read of an ECAT-controlled latch time clears its status flag, and the DC

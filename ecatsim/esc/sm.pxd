@@ -1,14 +1,12 @@
 # The compiled core's declarations for sm.py (Cython, pure-Python mode): the SyncManager's
 # state as typed fields. sm.py stays the one source of the behaviour; this file only
 # gives types. Decisions P2, P13.
-from ecatsim.esc.core cimport Esc
-
 # the register bits, imported from regs.py: C constants here
 cdef long long DC_ECAT_EVENT_TIME, SM_ACT_LATCH_ECAT, SM_CTRL_ECAT_IRQ, SM_CTRL_PDI_IRQ, SM_CTRL_WATCHDOG, SM_DIR_MASK, SM_DIR_WRITE, SM_MODE_MAILBOX, SM_MODE_MASK, SM_ST_BUF_SHIFT, SM_ST_IRQ_READ, SM_ST_IRQ_WRITE, SM_ST_MBX_FULL, SM_ST_READ_OPEN, SM_ST_WRITE_OPEN
 
 
 cdef class SyncManager:
-    cdef public Esc host
+    cdef public object host
     cdef unsigned char[:] mv
     cdef public bytearray mem
     cdef public long long n, status_addr, start, length, control

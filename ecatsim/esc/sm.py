@@ -280,10 +280,7 @@ class SyncManager:
         self.writer_write(off, data)
         if self.control & SM_CTRL_WATCHDOG:
             self.host.wd_pd_trigger()
-        if (
-            off + len(data) >= self.length
-            and self.mem[self.status_addr + 1] & SM_ACT_LATCH_ECAT
-        ):
+        if off + len(data) >= self.length and self.mem[self.status_addr + 1] & SM_ACT_LATCH_ECAT:
             self.host.sm_event_time(DC_ECAT_EVENT_TIME)
 
     def ecat_read(self, off: int, out: memoryview) -> None:
@@ -294,10 +291,7 @@ class SyncManager:
             out[:] = self.mv[base + off : base + off + len(out)]
             return
         self.reader_read(off, out)
-        if (
-            off + len(out) >= self.length
-            and self.mem[self.status_addr + 1] & SM_ACT_LATCH_ECAT
-        ):
+        if off + len(out) >= self.length and self.mem[self.status_addr + 1] & SM_ACT_LATCH_ECAT:
             self.host.sm_event_time(DC_ECAT_EVENT_TIME)
 
     # -- PDI face --------------------------------------------------------------------

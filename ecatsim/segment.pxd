@@ -1,0 +1,38 @@
+# The compiled core's declarations for segment.py (Cython, pure-Python mode): the
+# segment's state as typed fields and the frame walk's locals as C integers. segment.py
+# stays the one source of the behaviour; this file only gives types. Decisions P2, P13.
+cimport cython
+
+from ecatsim.esc.core cimport Esc, FrameContext
+
+
+cdef long long NOP, APRD, APWR, APRW, FPRD, FPWR, FPRW, BRD, BWR, BRW, LRD, LWR, LRW, ARMW, FRMW
+cdef long long CIRCULATING, LEN_MASK, MORE_FOLLOWS
+
+
+cdef class Segment:
+    cdef public bytearray _dc_after, _dc_before
+    cdef public long long _dc_pending, _dc_reach, _dc_reader
+    cdef public object _next_sync, _pulse_hint
+    cdef public list _sync_escs
+    cdef public dict addr_map
+    cdef public object awake
+    cdef public long long bad_frames
+    cdef public object clock
+    cdef public bint compiled
+    cdef public FrameContext ctx
+    cdef public list escs, firmware, logical
+    cdef public long long frames
+    cdef public long long irq
+    cdef public object persist
+    cdef public bint port0_closed
+    cdef public long long reach
+    cdef public bint reply_first
+    cdef public long long sync0_late_ns, sync0_ticks
+
+    @cython.locals(ctx=FrameContext, escs=list, reach="long long", cmd="long long",
+                   lf="long long", dlen="long long", d0="long long", w="long long",
+                   data="unsigned char[:]", inc="long long", adp="long long",
+                   ado="long long", lad="long long", done="long long", esc=Esc,
+                   k="long long", i="long long", irq="long long", wkc="long long")
+    cpdef void _walk(self, bytearray buf, long long p) except *
