@@ -36,3 +36,9 @@ cdef class Segment:
                    ado="long long", lad="long long", done="long long", esc=Esc,
                    k="long long", i="long long", irq="long long", wkc="long long")
     cpdef void _walk(self, bytearray buf, long long p) except *
+
+    @cython.locals(n="long long", reader="long long", reach="long long", i="long long",
+                   escs=list)
+    cpdef void after_reply(self) except *
+    @cython.locals(ctx=FrameContext, esc=Esc, k="long long")
+    cpdef void sync_until(self, object t) except *

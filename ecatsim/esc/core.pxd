@@ -78,5 +78,7 @@ cdef class Esc:
     cpdef void _pdi_irq(self, long long request) except *
     cpdef void sm_status_changed(self, SyncManager sm) except *
     cpdef void wd_pd_trigger(self) except *
+    cpdef void sync0_tick(self, object now_ns) except *
+    cpdef void sync1_tick(self) except *
     cpdef long long ecat_read(self, long long ado, object out) except -1
     cpdef long long ecat_write(self, long long ado, object data) except -1
