@@ -64,12 +64,6 @@ TWINS: list[tuple[str, list[str], list[str], list[str]]] = [
         ["-Wall", "-Wextra"],
     ),
     (
-        "ecatsim.esc._dcloop",
-        ["ecatsim/esc/_dcloop.c"],
-        ["ecatsim/_attr.h", "ecatsim/esc/_windows.h", "ecatsim/esc/_events.h", "ecatsim/_module.h"],
-        ["-Wall", "-Wextra"],
-    ),
-    (
         "ecatsim.slave._cycle",
         ["ecatsim/slave/_cycle.c"],
         [

@@ -16,11 +16,9 @@ from ecatsim.clock import Clock
 from ecatsim.compiled import load
 from ecatsim.esc import regs
 from ecatsim.esc.core import Esc, FrameContext
-from ecatsim.esc.dc import DcUnit
 from ecatsim.wire.datagram import CIRCULATING, LEN_MASK, MORE_FOLLOWS
 
 _logical = load("ecatsim.esc._logical")  # decision P6; None: Python serves
-_dcloop = load("ecatsim.esc._dcloop")  # decisions P11, P12; None: Python serves
 
 #: overdue SYNC0 pulses fired one by one before the rest are skipped (a stall this long,
 #: or a forward jump of the system time, is not caught up). Decision DC2.
@@ -260,12 +258,6 @@ class Segment:
         n = self._dc_pending
         if not n:
             return
-        if (
-            _dcloop is not None
-            and self.compiled
-            and _dcloop.time_loops(self, Esc._ew_dc_system_time)
-        ):
-            return  # every writer served compiled (decision P11)
         self._dc_pending = 0
         reader = self._dc_reader
         reach = self._dc_reach
@@ -423,8 +415,6 @@ class Segment:
         frame that arrived at ``t`` is processed, and from the timers.
         Ref: TMC8460 §5.50.4 (SYNC0 generation); ETG.1000.6 §5.3 (DC synchronous mode).
         """
-        if _dcloop is not None and self.compiled and _dcloop.pulses(self, t, Esc, DcUnit):
-            return  # SYNC0-only units, served compiled (decision P12)
         ctx = self.ctx
         nxt = NO_DEADLINE
         for esc in self.sync_escs:

@@ -1,22 +1,47 @@
 # The compiled core's declarations for dc.py (Cython, pure-Python mode): the DC unit's
-# state as typed fields. The clock's reference, its host time and the SYNC deadlines stay
-# Python integers (the arithmetic is modulo 2^64 on unbounded values, as in dc.py); the
-# rates are C doubles, computed in the same order as Python (built -ffp-contract=off).
-# Decisions P2, P13.
+# state as typed fields. The clock is C integers: dc.py keeps every value of it modulo
+# 2^64 in the source, so Python's unbounded integers and C's agree; the rates are C
+# doubles computed in the same order as Python (built -ffp-contract=off). The SYNC
+# deadlines stay Python integers (None while off). Decisions P2, P13.
+cimport cython
+
+cdef unsigned long long MASK64, HALF64
+cdef long long HALF32
+
+
+@cython.locals(k="long long")
+cdef long long _trunc(double x) except? -1
+cdef long long _signed64(unsigned long long x)
+@cython.locals(v="unsigned long long", i="long long")
+cdef unsigned long long _get64(bytearray m, long long a) except? 0
+cdef unsigned long long _get32(bytearray m, long long a) except? 0
+@cython.locals(i="long long")
+cdef void _put64(bytearray m, long long a, unsigned long long v) except *
+@cython.locals(i="long long")
+cdef void _put32(bytearray m, long long a, unsigned long long v) except *
+
+
 cdef class DcUnit:
     cdef public bytearray mem
     cdef public long long position, hop_ns, turnaround_ns, sync1_countdown
     cdef public double drift_ppm, rate_ppb, spd
-    cdef public object moved_ns, t_ref, local_ref, next_sync0, next_sync1
+    cdef public long long moved_ns, t_ref
+    cdef public unsigned long long local_ref
+    cdef public object next_sync0, next_sync1
 
-    cpdef object arrival_ns(self, object frame_t_ns)
-    cpdef object local_time(self, object t_ns)
+    cpdef long long arrival_ns(self, long long frame_t_ns) except? -1
+    cpdef unsigned long long local_time(self, long long t_ns) except? 0
     cpdef void _set_rate(self, double rate_ppb) except *
-    cpdef object offset(self)
-    cpdef object system_time(self, object t_ns)
-    cpdef void refresh_system_time(self, object frame_t_ns) except *
-    cpdef bint system_time_written(self, object frame_t_ns, object value, long long nbytes) except -1
-    cpdef object host_time_of(self, object system_ns)
+    cpdef unsigned long long offset(self) except? 0
+    cpdef unsigned long long system_time(self, long long t_ns) except? 0
+    cpdef void refresh_system_time(self, long long frame_t_ns) except *
+    @cython.locals(t="long long", m=bytearray, delay="unsigned long long",
+                   offset="unsigned long long", local_now="unsigned long long",
+                   local="unsigned long long", diff="long long", start="long long",
+                   gain=double, step="long long", mag="long long")
+    cpdef bint system_time_written(self, long long frame_t_ns, unsigned long long value, long long nbytes) except -1
+    @cython.locals(local="long long")
+    cpdef long long host_time_of(self, object system_ns) except? -1
     cpdef object sync0_deadline(self)
     cpdef bint sync0_pulse(self, object now_ns) except -1
     cpdef void _schedule_sync1(self, object sync0_time, object cycle0) except *

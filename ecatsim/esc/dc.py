@@ -15,12 +15,47 @@ from ecatsim.esc import regs
 _U32 = struct.Struct("<I")
 _U64 = struct.Struct("<Q")
 MASK64 = (1 << 64) - 1
+HALF64 = 1 << 63
+HALF32 = 1 << 31
 #: a local-clock correction larger than this invalidates cached SYNC deadlines (ns); the
 #: segment's pulse hint keeps a larger margin (segment.PULSE_HINT_MARGIN_NS)
 MOVE_NS = 50_000
 #: the near future of the start time plausibility check (0x0981.6 = 1 / 0). Ref: Table 105
 NEAR_FUTURE_SHORT = 1 << 31
 NEAR_FUTURE_LONG = 1 << 63
+
+
+def _trunc(x: float) -> int:
+    """``int(x)``: toward zero (C arithmetic in the compiled core; |x| < 2^63 here)."""
+    k = int(x)
+    return k
+
+
+def _signed64(x: int) -> int:
+    """``x`` (0 <= x < 2^64) as a two's complement 64-bit value."""
+    return x if x < HALF64 else -((MASK64 - x) + 1)
+
+
+def _get64(m: bytearray, a: int) -> int:
+    """The little-endian 64-bit register at ``a``."""
+    v = 0
+    for i in range(7, -1, -1):
+        v = (v << 8) | m[a + i]
+    return v
+
+
+def _get32(m: bytearray, a: int) -> int:
+    return m[a] | (m[a + 1] << 8) | (m[a + 2] << 16) | (m[a + 3] << 24)
+
+
+def _put64(m: bytearray, a: int, v: int) -> None:
+    for i in range(8):
+        m[a + i] = (v >> (8 * i)) & 0xFF
+
+
+def _put32(m: bytearray, a: int, v: int) -> None:
+    for i in range(4):
+        m[a + i] = (v >> (8 * i)) & 0xFF
 
 
 class DcUnit:
@@ -64,7 +99,7 @@ class DcUnit:
         # The local clock is piecewise linear: local_ref at host time t_ref, running at
         # spd since. Corrections rebase it, so a rate change never jumps the time.
         self.t_ref = 0
-        self.local_ref = start_ns
+        self.local_ref = start_ns & MASK64
         #: system time of the next SYNC0 pulse, or None while the SYNC unit is off
         self.next_sync0: int | None = None
         #: system time of the next SYNC1 pulse (None: none scheduled), and how many more
@@ -78,14 +113,14 @@ class DcUnit:
 
     def local_time(self, t_ns: int) -> int:
         """Local clock at host time ``t_ns`` (drift and control-loop correction applied)."""
-        return (self.local_ref + int((t_ns - self.t_ref) * self.spd)) & MASK64
+        return (self.local_ref + _trunc((t_ns - self.t_ref) * self.spd)) & MASK64
 
     def _set_rate(self, rate_ppb: float) -> None:
         self.rate_ppb = rate_ppb
         self.spd = 1.0 + self.drift_ppm * 1e-6 + rate_ppb * 1e-9
 
     def offset(self) -> int:
-        return int(_U64.unpack_from(self.mem, regs.DC_SYSTEM_TIME_OFFSET)[0])
+        return _get64(self.mem, regs.DC_SYSTEM_TIME_OFFSET)
 
     def system_time(self, t_ns: int) -> int:
         """Local copy of the system time = local time + offset 0x0920. Ref: Table 96."""
@@ -111,7 +146,7 @@ class DcUnit:
 
         Ref: TMC8460 §5.50.2 Table 95.
         """
-        _U64.pack_into(self.mem, regs.DC_SYSTEM_TIME, self.system_time(self.arrival_ns(frame_t_ns)))
+        _put64(self.mem, regs.DC_SYSTEM_TIME, self.system_time(self.arrival_ns(frame_t_ns)))
 
     def system_time_written(self, frame_t_ns: int, value: int, nbytes: int) -> bool:
         """Compare the written system time with the local copy and feed the control loop.
@@ -124,31 +159,32 @@ class DcUnit:
         """
         t = self.arrival_ns(frame_t_ns)
         m = self.mem
-        delay = int(_U32.unpack_from(m, regs.DC_SYSTEM_TIME_DELAY)[0])
-        offset = int(_U64.unpack_from(m, regs.DC_SYSTEM_TIME_OFFSET)[0])
+        delay = _get32(m, regs.DC_SYSTEM_TIME_DELAY)
+        offset = _get64(m, regs.DC_SYSTEM_TIME_OFFSET)
         local_now = self.local_time(t)
-        local = ((local_now + offset) & MASK64) - delay
+        local = (local_now + offset - delay) & MASK64
         if nbytes < 8:
-            diff = ((local - value + (1 << 31)) & 0xFFFFFFFF) - (1 << 31)
+            diff = ((local - value + HALF32) & 0xFFFFFFFF) - HALF32
         else:
-            diff = ((local - value + (1 << 63)) & MASK64) - (1 << 63)
+            diff = _signed64((local - value) & MASK64)
         # Proportional step on the time and integral action on the rate: the loop the
         # speed counter implements, with a bandwidth from 0x0930 (larger = smoother).
-        start = int(struct.unpack_from("<H", m, regs.DC_SPEED_COUNTER_START)[0]) & 0x7FFF
+        start = (
+            m[regs.DC_SPEED_COUNTER_START] | (m[regs.DC_SPEED_COUNTER_START + 1] << 8)
+        ) & 0x7FFF
         gain = 1.0 / max(2.0, start / 0x400)
-        self.local_ref = local_now  # rebase at t
-        self.t_ref = t
+        self.t_ref = t  # rebase at t
         if abs(diff) > 1_000_000:
             step = diff  # far off: jump, as after a new offset
         else:
-            step = int(diff * gain)
+            step = _trunc(diff * gain)
             self._set_rate(max(-1e6, min(1e6, self.rate_ppb - diff * gain * 5.0)))
-        self.local_ref -= step
+        self.local_ref = (local_now - step) & MASK64
         mag = min(abs(diff), 0x7FFFFFFF)
-        _U32.pack_into(m, regs.DC_SYSTEM_TIME_DIFF, mag | (0x80000000 if diff < 0 else 0))
+        _put32(m, regs.DC_SYSTEM_TIME_DIFF, mag | (0x80000000 if diff < 0 else 0))
         self._speed_counter_diff(start)
         # 0x0910 reads back the corrected local copy (refresh_system_time at time t)
-        _U64.pack_into(m, regs.DC_SYSTEM_TIME, (self.local_ref + offset) & MASK64)
+        _put64(m, regs.DC_SYSTEM_TIME, (self.local_ref + offset) & MASK64)
         self.moved_ns += abs(step)
         if self.moved_ns > MOVE_NS:
             self.moved_ns = 0
@@ -157,10 +193,8 @@ class DcUnit:
 
     def host_time_of(self, system_ns: int) -> int:
         """Inverse of system_time(): when the host clock reaches ``system_ns`` here."""
-        local = (system_ns - self.offset() - self.local_ref) & MASK64
-        if local >= 1 << 63:
-            local -= 1 << 64
-        return self.t_ref + int(local / self.spd)
+        local = _signed64(((system_ns & MASK64) - self.offset() - self.local_ref) & MASK64)
+        return self.t_ref + _trunc(local / self.spd)
 
     # -- SYNC out unit ---------------------------------------------------------------
 

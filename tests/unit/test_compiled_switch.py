@@ -13,8 +13,7 @@ import pytest
 PROBE = """
 import ecatsim.slave.cycle as cycle, ecatsim.segment as segment
 import ecatsim.daemon as daemon
-print(*(m is not None for m in (cycle.compiled, segment._logical, daemon._serve,
-                                segment._dcloop)))
+print(*(m is not None for m in (cycle.compiled, segment._logical, daemon._serve)))
 """
 
 
@@ -28,15 +27,15 @@ def probe(**env: str) -> str:
 
 
 def test_pure_python_switches_every_compiled_path_off() -> None:
-    assert probe(ECATSIM_PURE_PYTHON="1") == "False False False False"
+    assert probe(ECATSIM_PURE_PYTHON="1") == "False False False"
 
 
 def test_compiled_paths_are_used_where_built() -> None:
     if os.environ.get("ECATSIM_PURE_PYTHON", "") not in ("", "0"):
         pytest.skip("the pure-Python core runs (ECATSIM_PURE_PYTHON)")
     got = probe()
-    if got != "True True True True":
-        names = "cycle, logical, serve, dcloop"
+    if got != "True True True":
+        names = "cycle, logical, serve"
         msg = f"not every extension was built ({names}: {got})"
         if os.environ.get("CI"):
             pytest.fail(msg, pytrace=False)
@@ -53,10 +52,9 @@ def test_a_free_threaded_interpreter_loads_no_extension(
     monkeypatch.delenv("ECATSIM_PURE_PYTHON", raising=False)
     monkeypatch.setattr(compiled, "free_threaded", lambda: True)
     monkeypatch.setattr(compiled, "_said_free_threaded", False)
-    monkeypatch.delitem(sys.modules, "ecatsim.esc._dcloop", raising=False)
-    assert compiled.load("ecatsim.esc._dcloop") is None
+    monkeypatch.delitem(sys.modules, "ecatsim.esc._logical", raising=False)
     assert compiled.load("ecatsim.esc._logical") is None
-    assert "ecatsim.esc._dcloop" not in sys.modules
+    assert "ecatsim.esc._logical" not in sys.modules
     assert capsys.readouterr().out.count("compiled_paths_off") == 1
 
 
