@@ -28,7 +28,10 @@ cdef long long SM_BASE, SM_CTRL_WATCHDOG, SM_STRIDE, WD_COUNTER_PD
 cdef long long WD_COUNTER_PDI, WD_STATUS_PD
 
 
+@cython.locals(b3="long long")
 cdef long long _get32(bytearray m, long long a) except? -1
+@cython.locals(i="long long")
+cdef long long _first(bytes hooked, long long s, long long e) except? -2
 cdef void _put16(bytearray m, long long a, long long v) except *
 cdef void _put32(bytearray m, long long a, long long v) except *
 
@@ -73,6 +76,8 @@ cdef class Esc:
     cpdef void _set_ecat_event(self, long long bits) except *
     cpdef void _clr_ecat_event(self, long long bits) except *
     cpdef void _irq_update(self) except *
+    cpdef long long al_event(self) except -1
+    cpdef void pdi_buffer_event(self, SyncManager sm, bint first, bint last) except *
     cpdef void set_al_event(self, long long bits) except *
     cpdef void clr_al_event(self, long long bits) except *
     cpdef void _pdi_irq(self, long long request) except *
@@ -80,5 +85,21 @@ cdef class Esc:
     cpdef void wd_pd_trigger(self) except *
     cpdef void sync0_tick(self, object now_ns) except *
     cpdef void sync1_tick(self) except *
+    @cython.locals(end="long long", ws="long long", we="long long")
     cpdef long long ecat_read(self, long long ado, object out) except -1
+    @cython.locals(end="long long", ws="long long", we="long long")
     cpdef long long ecat_write(self, long long ado, object data) except -1
+    @cython.locals(end="long long", e="long long")
+    cpdef bint _plain_write(self, long long ado, object data) except -1
+    @cython.locals(end="long long", e="long long")
+    cpdef bint _plain_read(self, long long ado, object out) except -1
+    @cython.locals(e="long long", i="long long", k="long long", m="long long",
+                   wmask=bytes, hooked=bytes, mem=bytearray, ra="long long", rs="long long")
+    cpdef void reg_write(self, long long s, const unsigned char[:] data, bint pdi) except *
+    @cython.locals(lo="long long", hi="long long")
+    cpdef bytes old_reg(self, long long ra, long long rs, bytes old, long long s)
+    @cython.locals(i="long long", hooked=bytes, ra="long long", rs="long long")
+    cpdef void reg_read_hooks(self, long long s, long long e, bint pdi) except *
+    @cython.locals(value="unsigned long long", lo="unsigned long long", hi="unsigned long long",
+                   nbytes="long long")
+    cpdef void _ew_dc_system_time(self, long long ra, long long rs, object old) except *

@@ -124,7 +124,16 @@ _LRW = int(Cmd.LRW)
 
 def _get32(m: bytearray, a: int) -> int:
     """The little-endian 32-bit register at ``a``."""
-    return m[a] | (m[a + 1] << 8) | (m[a + 2] << 16) | (m[a + 3] << 24)
+    b3 = m[a + 3]  # compiled: a 64-bit integer, so bit 31 does not sign-extend
+    return m[a] | (m[a + 1] << 8) | (m[a + 2] << 16) | (b3 << 24)
+
+
+def _first(hooked: bytes, s: int, e: int) -> int:
+    """The first address in [s, e) whose register has a side effect (-1: none)."""
+    for i in range(s, e):
+        if hooked[i]:
+            return i
+    return -1
 
 
 def _put16(m: bytearray, a: int, v: int) -> None:
@@ -687,10 +696,10 @@ class Esc:
     def _plain_write(self, ado: int, data: memoryview) -> bool:
         end = ado + len(data)
         if end <= REGISTER_END:
-            self._reg_write(ado, data)
+            self.reg_write(ado, data, False)
             return True
         if ado < REGISTER_END:
-            self._reg_write(ado, data[: REGISTER_END - ado])
+            self.reg_write(ado, data[: REGISTER_END - ado], False)
             data = data[REGISTER_END - ado :]
             ado = REGISTER_END
         if not self.pdram_ok:
@@ -719,10 +728,12 @@ class Esc:
     def _plain_read(self, ado: int, out: memoryview) -> bool:
         end = ado + len(out)
         if end <= REGISTER_END:
-            self._reg_read(ado, out)
+            self.reg_read_hooks(ado, end, False)
+            out[:] = self.mem[ado:end]
             return True
         if ado < REGISTER_END:
-            self._reg_read(ado, out[: REGISTER_END - ado])
+            self.reg_read_hooks(ado, REGISTER_END, False)
+            out[: REGISTER_END - ado] = self.mem[ado:REGISTER_END]
             out = out[REGISTER_END - ado :]
             ado = REGISTER_END
         if not self.pdram_ok:
@@ -734,43 +745,60 @@ class Esc:
             out[max(e, ado) - ado :] = bytes(end - max(e, ado))
         return True
 
-    def _reg_write(self, s: int, data: memoryview) -> None:
-        """Masked register write, then the side-effect hooks of the registers touched."""
+    def reg_write(self, s: int, data: memoryview | bytes, pdi: bool) -> None:
+        """Masked register write from the ECAT (``pdi`` False) or the PDI side: each byte
+        keeps the bits its side may not write (the table's write masks), then the side
+        effects of the registers touched run, each with its register's old value.
+        Ref: TMC8460 §5 (register table, ECAT/PDI access columns)."""
         e = s + len(data)
         t = self.t
+        if pdi:
+            wmask = t.pdi_wmask
+            hooked = t.pdi_w_hooked
+        else:
+            wmask = t.ecat_wmask
+            hooked = t.ecat_w_hooked
         mem = self.mem
-        old = bytes(mem[s:e])
-        mi = int.from_bytes(t.ecat_wmask[s:e], "little")
-        if mi:
-            oi = int.from_bytes(old, "little")
-            ni = int.from_bytes(data, "little")
-            mem[s:e] = ((oi & ~mi) | (ni & mi)).to_bytes(e - s, "little")
+        i = _first(hooked, s, e)
+        old = bytes(mem[s:e]) if i >= 0 else b""
+        for k in range(e - s):
+            m = wmask[s + k]
+            if m:
+                mem[s + k] = (mem[s + k] & ~m) | (data[k] & m)
         self.wr_s = s
         self.wr_e = e
-        i = t.ecat_w_hooked.find(1, s, e)
+        if i < 0:
+            return
+        hooks = t.pdi_w if pdi else t.ecat_w
         while i >= 0:
-            entry = t.ecat_w[i]
+            entry = hooks[i]
             if entry is None:  # pragma: no cover - bitmap and list are built together
                 break
             fn, ra, rs = entry
             fn(self, ra, rs, self.old_reg(ra, rs, old, s))
-            i = t.ecat_w_hooked.find(1, ra + rs, e) if ra + rs < e else -1
+            i = _first(hooked, ra + rs, e) if ra + rs < e else -1
 
-    def _reg_read(self, s: int, out: memoryview) -> None:
-        e = s + len(out)
+    def reg_read_hooks(self, s: int, e: int, pdi: bool) -> None:
+        """The read side effects of the registers in [s, e) for the ECAT (``pdi`` False)
+        or the PDI side, before the bytes are taken from memory. Ref: TMC8460 §5."""
         t = self.t
-        i = t.ecat_r_hooked.find(1, s, e)
+        hooked = t.pdi_r_hooked if pdi else t.ecat_r_hooked
+        i = _first(hooked, s, e)
+        if i < 0:
+            return
+        hooks = t.pdi_r if pdi else t.ecat_r
         while i >= 0:
-            entry = t.ecat_r[i]
+            entry = hooks[i]
             if entry is None:  # pragma: no cover
                 break
             fn, ra, rs = entry
             fn(self, ra, rs)
-            i = t.ecat_r_hooked.find(1, ra + rs, e) if ra + rs < e else -1
-        out[:] = self.mem[s:e]
+            i = _first(hooked, ra + rs, e) if ra + rs < e else -1
 
     def old_reg(self, ra: int, rs: int, old: bytes, s: int) -> bytes:
         """The register's value before the write (bytes outside the write are unchanged)."""
+        if s <= ra and ra + rs <= s + len(old):  # the write covered the whole register
+            return old[ra - s : ra - s + rs]
         lo = max(ra, s)
         hi = min(ra + rs, s + len(old))
         return bytes(self.mem[ra:lo]) + old[lo - s : hi - s] + bytes(self.mem[hi : ra + rs])
@@ -1112,7 +1140,9 @@ class Esc:
 
     def _ew_dc_system_time(self, ra: int, rs: int, old: bytes) -> None:
         """ECAT write of 0x0910 feeds the time control loop. Ref: §5.50.2 Table 95."""
-        value = int.from_bytes(self.mem[ra : ra + rs], "little")
+        lo = _get32(self.mem, ra)
+        hi = _get32(self.mem, ra + 4)
+        value = lo | (hi << 32)
         nbytes = 8 if self.wr_e >= ra + 8 else 4
         if self.wr_s > ra:
             return  # compared only if at least the first byte was written

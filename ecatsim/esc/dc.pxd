@@ -7,6 +7,8 @@ cimport cython
 
 cdef unsigned long long MASK64, HALF64
 cdef long long HALF32
+# the registers, imported from regs.py: C constants here
+cdef long long DC_ACTIVATION, DC_ACTIVATION_STATUS, DC_LATCH0_CONTROL, DC_LATCH0_POS, DC_LATCH0_STATUS, DC_NEXT_SYNC1, DC_RECV_TIME_P0, DC_RECV_TIME_P1, DC_RECV_TIME_PU, DC_SPEED_COUNTER_DIFF, DC_SPEED_COUNTER_START, DC_START_TIME, DC_SYNC0_CYCLE, DC_SYNC0_STATUS, DC_SYNC1_CYCLE, DC_SYNC1_STATUS, DC_SYSTEM_TIME, DC_SYSTEM_TIME_DELAY, DC_SYSTEM_TIME_DIFF, DC_SYSTEM_TIME_OFFSET, ESC_CFG_SYNC_OUT, ESC_CONFIG, SYNC_LATCH_CONFIG
 
 
 @cython.locals(k="long long")
@@ -14,6 +16,7 @@ cdef long long _trunc(double x) except? -1
 cdef long long _signed64(unsigned long long x)
 @cython.locals(v="unsigned long long", i="long long")
 cdef unsigned long long _get64(bytearray m, long long a) except? 0
+@cython.locals(b3="unsigned long long")
 cdef unsigned long long _get32(bytearray m, long long a) except? 0
 @cython.locals(i="long long")
 cdef void _put64(bytearray m, long long a, unsigned long long v) except *
@@ -43,8 +46,11 @@ cdef class DcUnit:
     @cython.locals(local="long long")
     cpdef long long host_time_of(self, object system_ns) except? -1
     cpdef object sync0_deadline(self)
+    @cython.locals(m=bytearray, n0="unsigned long long", cycle="long long",
+                   behind="long long")
     cpdef bint sync0_pulse(self, object now_ns) except -1
     cpdef void _schedule_sync1(self, object sync0_time, object cycle0) except *
     cpdef object sync1_deadline(self)
     cpdef bint sync1_pulse(self) except -1
+    @cython.locals(lim="long long", x="long long", m=bytearray)
     cpdef void _speed_counter_diff(self, long long start) except *

@@ -10,7 +10,31 @@ from __future__ import annotations
 
 import struct
 
-from ecatsim.esc import regs
+from ecatsim.esc.regs import (  # compiled: C constants (dc.pxd)
+    DC_ACTIVATION,
+    DC_ACTIVATION_STATUS,
+    DC_LATCH0_CONTROL,
+    DC_LATCH0_POS,
+    DC_LATCH0_STATUS,
+    DC_NEXT_SYNC1,
+    DC_RECV_TIME_P0,
+    DC_RECV_TIME_P1,
+    DC_RECV_TIME_PU,
+    DC_SPEED_COUNTER_DIFF,
+    DC_SPEED_COUNTER_START,
+    DC_START_TIME,
+    DC_SYNC0_CYCLE,
+    DC_SYNC0_STATUS,
+    DC_SYNC1_CYCLE,
+    DC_SYNC1_STATUS,
+    DC_SYSTEM_TIME,
+    DC_SYSTEM_TIME_DELAY,
+    DC_SYSTEM_TIME_DIFF,
+    DC_SYSTEM_TIME_OFFSET,
+    ESC_CFG_SYNC_OUT,
+    ESC_CONFIG,
+    SYNC_LATCH_CONFIG,
+)
 
 _U32 = struct.Struct("<I")
 _U64 = struct.Struct("<Q")
@@ -45,7 +69,8 @@ def _get64(m: bytearray, a: int) -> int:
 
 
 def _get32(m: bytearray, a: int) -> int:
-    return m[a] | (m[a + 1] << 8) | (m[a + 2] << 16) | (m[a + 3] << 24)
+    b3 = m[a + 3]  # compiled: a 64-bit integer, so bit 31 does not sign-extend
+    return m[a] | (m[a + 1] << 8) | (m[a + 2] << 16) | (b3 << 24)
 
 
 def _put64(m: bytearray, a: int, v: int) -> None:
@@ -120,7 +145,7 @@ class DcUnit:
         self.spd = 1.0 + self.drift_ppm * 1e-6 + rate_ppb * 1e-9
 
     def offset(self) -> int:
-        return _get64(self.mem, regs.DC_SYSTEM_TIME_OFFSET)
+        return _get64(self.mem, DC_SYSTEM_TIME_OFFSET)
 
     def system_time(self, t_ns: int) -> int:
         """Local copy of the system time = local time + offset 0x0920. Ref: Table 96."""
@@ -135,18 +160,18 @@ class DcUnit:
         t0 = self.arrival_ns(frame_t_ns)
         p0 = self.local_time(t0)
         m = self.mem
-        _U32.pack_into(m, regs.DC_RECV_TIME_P0, p0 & 0xFFFFFFFF)
+        _U32.pack_into(m, DC_RECV_TIME_P0, p0 & 0xFFFFFFFF)
         if slaves_behind > 0:
             back = 2 * slaves_behind * self.hop_ns + self.turnaround_ns
-            _U32.pack_into(m, regs.DC_RECV_TIME_P1, self.local_time(t0 + back) & 0xFFFFFFFF)
-        _U64.pack_into(m, regs.DC_RECV_TIME_PU, p0)
+            _U32.pack_into(m, DC_RECV_TIME_P1, self.local_time(t0 + back) & 0xFFFFFFFF)
+        _U64.pack_into(m, DC_RECV_TIME_PU, p0)
 
     def refresh_system_time(self, frame_t_ns: int) -> None:
         """ECAT read of 0x0910: the system time latched at this slave's frame SOF.
 
         Ref: TMC8460 §5.50.2 Table 95.
         """
-        _put64(self.mem, regs.DC_SYSTEM_TIME, self.system_time(self.arrival_ns(frame_t_ns)))
+        _put64(self.mem, DC_SYSTEM_TIME, self.system_time(self.arrival_ns(frame_t_ns)))
 
     def system_time_written(self, frame_t_ns: int, value: int, nbytes: int) -> bool:
         """Compare the written system time with the local copy and feed the control loop.
@@ -159,8 +184,8 @@ class DcUnit:
         """
         t = self.arrival_ns(frame_t_ns)
         m = self.mem
-        delay = _get32(m, regs.DC_SYSTEM_TIME_DELAY)
-        offset = _get64(m, regs.DC_SYSTEM_TIME_OFFSET)
+        delay = _get32(m, DC_SYSTEM_TIME_DELAY)
+        offset = _get64(m, DC_SYSTEM_TIME_OFFSET)
         local_now = self.local_time(t)
         local = (local_now + offset - delay) & MASK64
         if nbytes < 8:
@@ -170,7 +195,7 @@ class DcUnit:
         # Proportional step on the time and integral action on the rate: the loop the
         # speed counter implements, with a bandwidth from 0x0930 (larger = smoother).
         start = (
-            m[regs.DC_SPEED_COUNTER_START] | (m[regs.DC_SPEED_COUNTER_START + 1] << 8)
+            m[DC_SPEED_COUNTER_START] | (m[DC_SPEED_COUNTER_START + 1] << 8)
         ) & 0x7FFF
         gain = 1.0 / max(2.0, start / 0x400)
         self.t_ref = t  # rebase at t
@@ -181,10 +206,10 @@ class DcUnit:
             self._set_rate(max(-1e6, min(1e6, self.rate_ppb - diff * gain * 5.0)))
         self.local_ref = (local_now - step) & MASK64
         mag = min(abs(diff), 0x7FFFFFFF)
-        _put32(m, regs.DC_SYSTEM_TIME_DIFF, mag | (0x80000000 if diff < 0 else 0))
+        _put32(m, DC_SYSTEM_TIME_DIFF, mag | (0x80000000 if diff < 0 else 0))
         self._speed_counter_diff(start)
         # 0x0910 reads back the corrected local copy (refresh_system_time at time t)
-        _put64(m, regs.DC_SYSTEM_TIME, (self.local_ref + offset) & MASK64)
+        _put64(m, DC_SYSTEM_TIME, (self.local_ref + offset) & MASK64)
         self.moved_ns += abs(step)
         if self.moved_ns > MOVE_NS:
             self.moved_ns = 0
@@ -210,24 +235,24 @@ class DcUnit:
         Ref: TMC8460 §5.50.4 Tables 105, 107, 110; §5.26 Table 38 bit 2; decision R5-5.
         """
         m = self.mem
-        act = m[regs.DC_ACTIVATION]
+        act = m[DC_ACTIVATION]
         self.next_sync1 = None
         self.sync1_countdown = 1
         self.next_sync0 = None
-        m[regs.DC_ACTIVATION_STATUS] &= 0xF8
-        if not (act & 0x01 and act & 0x06 and m[regs.ESC_CONFIG] & regs.ESC_CFG_SYNC_OUT):
+        m[DC_ACTIVATION_STATUS] &= 0xF8
+        if not (act & 0x01 and act & 0x06 and m[ESC_CONFIG] & ESC_CFG_SYNC_OUT):
             return
         if act & 0x02:
-            m[regs.DC_ACTIVATION_STATUS] |= 0x01  # first SYNC0 pulse pending
+            m[DC_ACTIVATION_STATUS] |= 0x01  # first SYNC0 pulse pending
         if act & 0x04:
-            m[regs.DC_ACTIVATION_STATUS] |= 0x02  # first SYNC1 pulse pending
-        start = int(_U64.unpack_from(m, regs.DC_START_TIME)[0])
+            m[DC_ACTIVATION_STATUS] |= 0x02  # first SYNC1 pulse pending
+        start = int(_U64.unpack_from(m, DC_START_TIME)[0])
         ahead = (start - now_sys) & MASK64
         near = NEAR_FUTURE_SHORT if act & 0x40 else NEAR_FUTURE_LONG
         if act & 0x20 and ahead >= near:
-            m[regs.DC_ACTIVATION_STATUS] |= 0x04  # start time out of the near future
+            m[DC_ACTIVATION_STATUS] |= 0x04  # start time out of the near future
             start = now_sys & MASK64
-            _U64.pack_into(m, regs.DC_START_TIME, start)
+            _U64.pack_into(m, DC_START_TIME, start)
         elif ahead >= NEAR_FUTURE_LONG:
             return  # in the past: reached after the wrap of the 64-bit system time
         self.next_sync0 = start
@@ -235,18 +260,19 @@ class DcUnit:
     def extend_start_time(self, now_sys: int) -> None:
         """A start time written as 32 bits gets the upper 32 bits that put it nearest to
         ``now_sys`` (within +-2^31 ns). Ref: TMC8460 Table 105 bit 4, Table 110 note."""
-        low = int(_U32.unpack_from(self.mem, regs.DC_START_TIME)[0])
+        low = int(_U32.unpack_from(self.mem, DC_START_TIME)[0])
         v = (now_sys & ~0xFFFFFFFF) | low
         d = ((v - now_sys + (1 << 63)) & MASK64) - (1 << 63)
         if d >= 1 << 31:
             v -= 1 << 32
         elif d < -(1 << 31):
             v += 1 << 32
-        _U64.pack_into(self.mem, regs.DC_START_TIME, v & MASK64)
+        _U64.pack_into(self.mem, DC_START_TIME, v & MASK64)
 
     def sync0_deadline(self) -> int | None:
         """Host time of the next SYNC0 pulse."""
-        return None if self.next_sync0 is None else self.host_time_of(self.next_sync0)
+        n0 = self.next_sync0
+        return None if n0 is None else self.host_time_of(n0)
 
     def sync0_pulse(self, now_ns: int) -> bool:
         """Generate the due SYNC0 pulse; returns True if SYNC0 is mapped to 0x0220.2.
@@ -258,23 +284,25 @@ class DcUnit:
         m = self.mem
         if self.next_sync0 is None:
             return False
-        cycle = int(_U32.unpack_from(m, regs.DC_SYNC0_CYCLE)[0])
-        if m[regs.DC_ACTIVATION] & 0x04:
-            self._schedule_sync1(self.next_sync0, cycle)
-        if not m[regs.DC_ACTIVATION] & 0x02:
-            self.next_sync0 = self.next_sync0 + cycle if cycle else None  # SYNC1 only
+        n0 = self.next_sync0
+        cycle = _get32(m, DC_SYNC0_CYCLE)
+        if m[DC_ACTIVATION] & 0x04:
+            self._schedule_sync1(n0, cycle)
+        if not m[DC_ACTIVATION] & 0x02:
+            self.next_sync0 = (n0 + cycle) & MASK64 if cycle else None  # SYNC1 only
             return False
-        m[regs.DC_ACTIVATION_STATUS] &= 0xFE
-        m[regs.DC_SYNC0_STATUS] |= 0x01
+        m[DC_ACTIVATION_STATUS] &= 0xFE
+        m[DC_SYNC0_STATUS] |= 0x01
         if cycle == 0:
             self.next_sync0 = None  # single shot
         else:
-            self.next_sync0 += cycle
-            behind = self.system_time(now_ns) - self.next_sync0
+            n0 = (n0 + cycle) & MASK64
+            behind = _signed64((self.system_time(now_ns) - n0) & MASK64)
             if behind >= cycle:
-                self.next_sync0 += (behind // cycle) * cycle
-            _U64.pack_into(m, regs.DC_START_TIME, self.next_sync0 & MASK64)
-        return bool(m[regs.SYNC_LATCH_CONFIG] & 0x08)
+                n0 = (n0 + (behind // cycle) * cycle) & MASK64
+            self.next_sync0 = n0
+            _put64(m, DC_START_TIME, n0)
+        return bool(m[SYNC_LATCH_CONFIG] & 0x08)
 
     def reset_sync(self) -> None:
         """Reset: the SYNC unit stops and the time loop forgets its correction (the local
@@ -288,7 +316,7 @@ class DcUnit:
         """SYNC1 follows SYNC0: every n-th SYNC0 pulse (n = 0x09A4 // 0x09A0, at least 1)
         plus the remainder (0x09A4 mod 0x09A0) as a delay; with SYNC0 single shot, once
         at SYNC0 + 0x09A4. Ref: TMC8460 §5.50.4 Table 113; decision DC5."""
-        cycle1 = int(_U32.unpack_from(self.mem, regs.DC_SYNC1_CYCLE)[0])
+        cycle1 = int(_U32.unpack_from(self.mem, DC_SYNC1_CYCLE)[0])
         self.sync1_countdown -= 1
         if self.sync1_countdown > 0:
             return
@@ -297,7 +325,7 @@ class DcUnit:
             self.next_sync1 = sync0_time + cycle1 % cycle0
         else:
             self.next_sync1 = sync0_time + cycle1
-        _U64.pack_into(self.mem, regs.DC_NEXT_SYNC1, self.next_sync1 & MASK64)
+        _U64.pack_into(self.mem, DC_NEXT_SYNC1, self.next_sync1 & MASK64)
 
     def sync1_deadline(self) -> int | None:
         """Host time of the next SYNC1 pulse."""
@@ -308,9 +336,9 @@ class DcUnit:
         Ref: TMC8460 §5.50.4 Tables 105, 109; §5.28.2 Table 42 (0x0151 bit 7)."""
         m = self.mem
         self.next_sync1 = None
-        m[regs.DC_ACTIVATION_STATUS] &= 0xFD
-        m[regs.DC_SYNC1_STATUS] |= 0x01
-        return bool(m[regs.SYNC_LATCH_CONFIG] & 0x80)
+        m[DC_ACTIVATION_STATUS] &= 0xFD
+        m[DC_SYNC1_STATUS] |= 0x01
+        return bool(m[SYNC_LATCH_CONFIG] & 0x80)
 
     # -- latch in unit ----------------------------------------------------------------
 
@@ -320,16 +348,16 @@ class DcUnit:
         Returns True if a time was captured. Ref: TMC8460 §5.50.5 Tables 114-121.
         """
         m = self.mem
-        status = regs.DC_LATCH0_STATUS + unit
+        status = DC_LATCH0_STATUS + unit
         if rising:
             m[status] |= 0x04  # pin state
         else:
             m[status] &= 0xFB
         bit = 0x01 if rising else 0x02
-        single = m[regs.DC_LATCH0_CONTROL + unit] & bit
+        single = m[DC_LATCH0_CONTROL + unit] & bit
         if single and m[status] & bit:
             return False  # single event: only the first edge until read out
-        reg = regs.DC_LATCH0_POS + 16 * unit + (0 if rising else 8)
+        reg = DC_LATCH0_POS + 16 * unit + (0 if rising else 8)
         _U64.pack_into(m, reg, self.system_time(host_ns))
         if single:
             m[status] |= bit
@@ -342,17 +370,19 @@ class DcUnit:
         when the local clock period is the longer one (the loop speeds it up).
         Ref: TMC8460 §5.50.2 Tables 99, 100; decision R5-7."""
         lim = max(0, start - 0x7F)
-        x = int(self.rate_ppb * 5e-9 * (start + 2) * (start + 2))
+        x = _trunc(self.rate_ppb * 5e-9 * (start + 2) * (start + 2))
         x = max(-lim, min(lim, x))
-        struct.pack_into("<H", self.mem, regs.DC_SPEED_COUNTER_DIFF, x & 0xFFFF)
+        m = self.mem
+        m[DC_SPEED_COUNTER_DIFF] = x & 0xFF
+        m[DC_SPEED_COUNTER_DIFF + 1] = (x >> 8) & 0xFF
 
     def reset_speed_counter(self) -> None:
         """Writing 0x0930 resets the difference 0x092C and the speed counter: 0x0932 and
         the rate correction it shows. Ref: TMC8460 §5.50.2 Table 99."""
-        _U32.pack_into(self.mem, regs.DC_SYSTEM_TIME_DIFF, 0)
-        struct.pack_into("<H", self.mem, regs.DC_SPEED_COUNTER_DIFF, 0)
+        _U32.pack_into(self.mem, DC_SYSTEM_TIME_DIFF, 0)
+        struct.pack_into("<H", self.mem, DC_SPEED_COUNTER_DIFF, 0)
         self._set_rate(0.0)
 
     def reset_time_difference(self) -> None:
         """Writing 0x0934 resets the system time difference 0x092C. Ref: Table 101."""
-        _U32.pack_into(self.mem, regs.DC_SYSTEM_TIME_DIFF, 0)
+        _U32.pack_into(self.mem, DC_SYSTEM_TIME_DIFF, 0)

@@ -1,7 +1,8 @@
 """The PDI face of the ESC: what the firmware behind the SPI PDI can see and do.
 
-Firmware (``ecatsim.slave``) and devices import the ESC only through this module (the
-compiled firmware cycle through its C form, ``esc/_pdi.h``). Accesses follow the PDI
+Firmware (``ecatsim.slave``) and devices import the ESC only through this module, in
+Python and in the compiled core alike (``pdi.pxd`` is the only ``.pxd`` the firmware's
+declarations cimport). Accesses follow the PDI
 columns of the register table and the PDI side of the SyncManagers.
 Ref: TMC8460 §2.3.2, §3.5 (PDI SPI), §5 (PDI access columns).
 """
@@ -41,8 +42,11 @@ from ecatsim.esc.regs import (  # re-exported for the firmware
     sm_addr,
 )
 
+from ecatsim.esc.regs import REGISTER_END as _REG_END  # compiled: a C constant (pdi.pxd)
+
 if TYPE_CHECKING:
     from ecatsim.esc.core import Esc
+    from ecatsim.esc.sm import SyncManager
 
 __all__ = [
     "AL_CONTROL",
@@ -101,21 +105,6 @@ class Pdi:
     def position(self) -> int:
         return self._esc.position
 
-    def compiled_view(self, sm_out: int, sm_in: int) -> tuple[object, ...] | None:
-        """What the compiled DC cycle (ecatsim.slave.cycle, _cycle.c) needs of this ESC:
-        (esc, mem, ctx, ctx.pending, position, SM sm_out, SM sm_in). None if a register it
-        reads has a PDI read side effect other than the one it transcribes (the SYNC0
-        acknowledge, Table 106)."""
-        esc = self._esc
-        t = esc.t
-        hook = t.pdi_r[regs.DC_SYNC0_STATUS]
-        if hook is None or getattr(hook[0], "__name__", "") != "_pr_dc_sync_status":
-            return None
-        if t.pdi_r_hooked[regs.DC_ACTIVATION] or t.pdi_r_hooked[regs.DC_ACTIVATION_STATUS]:
-            return None
-        ctx = esc.ctx
-        return (esc, esc.mem, ctx, ctx.pending, esc.position, esc.sm[sm_out], esc.sm[sm_in])
-
     def latch_input(self, unit: int, level: bool, host_ns: int) -> None:
         """Drive the LATCH ``unit`` input pin (the application's signal, e.g. an encoder
         index pulse) at host time ``host_ns``. Ref: TMC8460 §5.50.5."""
@@ -143,7 +132,7 @@ class Pdi:
         """PDI read of ``n`` bytes (SM windows redirected; PDI read side effects run)."""
         esc = self._esc
         end = addr + n
-        if addr >= regs.REGISTER_END:  # SM windows lie in process RAM only (decision E22)
+        if addr >= _REG_END:  # SM windows lie in process RAM only (decision E22)
             for ws, we, sm in esc.sm_windows:
                 if ws <= addr and end <= we:
                     if not sm.pdi_may_read():
@@ -155,15 +144,7 @@ class Pdi:
             if not esc.pdram_ok:
                 return bytes(n)
             return bytes(esc.mem[addr:end])
-        t = esc.t
-        i = t.pdi_r_hooked.find(1, addr, end)
-        while i >= 0:
-            entry = t.pdi_r[i]
-            if entry is None:  # pragma: no cover
-                break
-            fn, ra, rs = entry
-            fn(esc, ra, rs)
-            i = t.pdi_r_hooked.find(1, ra + rs, end) if ra + rs < end else -1
+        esc.reg_read_hooks(addr, end, True)
         return bytes(esc.mem[addr:end])
 
     def write(self, addr: int, data: bytes) -> bool:
@@ -181,29 +162,18 @@ class Pdi:
                 sm.writer_write(addr - ws, data)
                 esc.pdi_buffer_event(sm, addr == ws, end - ws >= sm.length)
                 return True
-        if addr >= regs.REGISTER_END:
+        if addr >= _REG_END:
             if not esc.pdram_ok:
                 return False
             esc.mem[addr:end] = data
             return True
-        t = esc.t
-        mem = esc.mem
-        old = bytes(mem[addr:end])
-        mi = int.from_bytes(t.pdi_wmask[addr:end], "little")
-        if mi:
-            oi = int.from_bytes(old, "little")
-            ni = int.from_bytes(data, "little")
-            mem[addr:end] = ((oi & ~mi) | (ni & mi)).to_bytes(n, "little")
-        esc.wr_s = addr
-        esc.wr_e = end
-        i = t.pdi_w_hooked.find(1, addr, end)
-        while i >= 0:
-            entry = t.pdi_w[i]
-            if entry is None:  # pragma: no cover
-                break
-            fn, ra, rs = entry
-            fn(esc, ra, rs, esc.old_reg(ra, rs, old, addr))
-            i = t.pdi_w_hooked.find(1, ra + rs, end) if ra + rs < end else -1
+        if end > _REG_END:  # the registers' part masked, the rest is process RAM
+            split = _REG_END - addr
+            esc.reg_write(addr, data[:split], True)
+            if esc.pdram_ok:
+                esc.mem[_REG_END : end] = data[split:]
+            return True
+        esc.reg_write(addr, data, True)
         return True
 
     # -- typed helpers -------------------------------------------------------------
@@ -213,20 +183,27 @@ class Pdi:
 
     def u8(self, addr: int) -> int:
         esc = self._esc
-        if addr < regs.REGISTER_END and not esc.t.pdi_r_hooked[addr]:
+        if addr < _REG_END:  # a register: its read side effects, then the byte
+            hooked: bytes = esc.t.pdi_r_hooked
+            if hooked[addr]:
+                esc.reg_read_hooks(addr, addr + 1, True)
             return esc.mem[addr]
         return self.read(addr, 1)[0]
 
     def u16(self, addr: int) -> int:
         esc = self._esc
-        if addr + 2 <= regs.REGISTER_END and esc.t.pdi_r_hooked.find(1, addr, addr + 2) < 0:
-            return int(_U16.unpack_from(esc.mem, addr)[0])
+        hooked: bytes = esc.t.pdi_r_hooked
+        if addr + 2 <= _REG_END and not (hooked[addr] or hooked[addr + 1]):
+            m = esc.mem
+            return m[addr] | (m[addr + 1] << 8)
         return int(_U16.unpack(self.read(addr, 2))[0])
 
     def u32(self, addr: int) -> int:
         esc = self._esc
-        if addr + 4 <= regs.REGISTER_END and esc.t.pdi_r_hooked.find(1, addr, addr + 4) < 0:
-            return int(_U32.unpack_from(esc.mem, addr)[0])
+        if addr + 4 <= _REG_END and esc.t.pdi_r_hooked.find(1, addr, addr + 4) < 0:
+            m = esc.mem
+            b3 = m[addr + 3]  # compiled: a 64-bit integer, so bit 31 does not sign-extend
+            return m[addr] | (m[addr + 1] << 8) | (m[addr + 2] << 16) | (b3 << 24)
         return int(_U32.unpack(self.read(addr, 4))[0])
 
     def w16(self, addr: int, value: int) -> None:
@@ -272,23 +249,24 @@ class Pdi:
 
     def sm_read(self, n: int) -> bytes | None:
         """Read SM n's whole buffer from the PDI side, or None if not readable now."""
-        sm = self._esc.sm[n]
+        esc = self._esc
+        sm: SyncManager = esc.sm[n]
         if not sm.pdi_may_read():
             return None
-        out = bytearray(sm.length)
-        sm.reader_read(0, memoryview(out))
-        self._esc.pdi_buffer_event(sm, True, True)
-        return bytes(out)
+        data = sm.read_whole()
+        esc.pdi_buffer_event(sm, True, True)
+        return data
 
     def sm_write(self, n: int, data: bytes) -> bool:
         """Write SM n's whole buffer from the PDI side (padded/truncated to its length)."""
-        sm = self._esc.sm[n]
+        esc = self._esc
+        sm: SyncManager = esc.sm[n]
         if not sm.pdi_may_write():
             return False
         if len(data) != sm.length:
             data = bytes(data[: sm.length]).ljust(sm.length, b"\x00")
-        sm.writer_write(0, data)
-        self._esc.pdi_buffer_event(sm, True, True)
+        sm.write_whole(data)
+        esc.pdi_buffer_event(sm, True, True)
         return True
 
     def sm_deactivate(self, n: int, off: bool) -> None:

@@ -1,6 +1,8 @@
 # The compiled core's declarations for sm.py (Cython, pure-Python mode): the SyncManager's
 # state as typed fields. sm.py stays the one source of the behaviour; this file only
 # gives types. Decisions P2, P13.
+cimport cython
+
 # the register bits, imported from regs.py: C constants here
 cdef long long DC_ECAT_EVENT_TIME, SM_ACT_LATCH_ECAT, SM_CTRL_ECAT_IRQ, SM_CTRL_PDI_IRQ, SM_CTRL_WATCHDOG, SM_DIR_MASK, SM_DIR_WRITE, SM_MODE_MAILBOX, SM_MODE_MASK, SM_ST_BUF_SHIFT, SM_ST_IRQ_READ, SM_ST_IRQ_WRITE, SM_ST_MBX_FULL, SM_ST_READ_OPEN, SM_ST_WRITE_OPEN
 
@@ -29,5 +31,9 @@ cdef class SyncManager:
     cpdef bint pdi_may_read(self) except -1
     cpdef void writer_write(self, long long off, const unsigned char[:] data) except *
     cpdef void reader_read(self, long long off, unsigned char[:] out) except *
+    @cython.locals(base="long long")
+    cpdef bytes read_whole(self)
+    @cython.locals(base="long long")
+    cpdef void write_whole(self, bytes data) except *
     cpdef void ecat_write(self, long long off, const unsigned char[:] data) except *
     cpdef void ecat_read(self, long long off, unsigned char[:] out) except *

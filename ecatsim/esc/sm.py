@@ -256,6 +256,21 @@ class SyncManager:
         out[:] = self.mv[base + off : base + off + len(out)]
         self._reader_access(first, last)
 
+    def read_whole(self) -> bytes:
+        """The whole buffer read as the reading side (``reader_read`` of every byte)."""
+        self._reader_open()
+        base = self._base_for_read()
+        data = bytes(self.mem[base : base + self.length])
+        self._reader_access(True, True)
+        return data
+
+    def write_whole(self, data: bytes) -> None:
+        """The whole buffer written as the writing side (``writer_write`` of exactly
+        ``length`` bytes)."""
+        base = self._base_for_write()
+        self.mem[base : base + self.length] = data
+        self._writer_access(True, True)
+
     def peek(self, off: int, n: int) -> bytes:
         """The bytes a reader would see, without side effects (for logging and bit FMMUs)."""
         base = self._base_for_read()

@@ -28,7 +28,7 @@ from ecatsim.esc.pdi import (
     Pdi,
     SmSettings,
 )
-from ecatsim.slave import al, cycle
+from ecatsim.slave import al
 from ecatsim.slave.al import AlState, Transition
 from ecatsim.slave.app import Application
 from ecatsim.slave.coe import CoeProtocol
@@ -50,13 +50,16 @@ CTRL_MBX_IN = 0x02  # mailbox, ECAT reads
 CTRL_PD_OUT = 0x04  # buffered, ECAT writes
 CTRL_PD_IN = 0x00  # buffered, ECAT reads
 
+#: the AL states the steady cycle compares with, bound once (compiled: no enum lookups)
+_INIT = AlState.INIT
+_SAFEOP = AlState.SAFEOP
+_OP = AlState.OP
+
 #: Events the firmware serves (AL event mask). SM1 (mailbox read by the master) is only
 #: unmasked while replies are queued. Ref: TMC8460 §5.30, §5.32 Table 46.
 EV_SM1 = EV_SM0 << 1
 PD_EVENTS = (EV_SM0 << SM_PD_OUT) | (EV_SM0 << SM_PD_IN)  # outputs written, inputs read
 EVENT_MASK = EV_AL_CONTROL | EV_SM_ACTIVATION | EV_WATCHDOG_PD | EV_SYNC0 | (0x0D * EV_SM0)
-#: the event mask while DC pulses drive the process data and no mailbox reply waits
-EVENT_MASK_DC = EVENT_MASK & ~PD_EVENTS
 
 
 @dataclass(frozen=True, slots=True)
@@ -108,11 +111,6 @@ class Firmware:
         #: injected fault: refuse the next state change with this AL status code
         self.refuse_next: int | None = None
         self.bootstrap_supported = bootstrap_supported
-        #: serve SYNC0 events with the compiled DC cycle where it applies (decision P3;
-        #: tests compare it with this class, the reference)
-        self.compiled = True
-        self._cycle: cycle.Cycle | None = None
-        self._cycle_plan: object = None
         self.state = AlState.INIT
         self.error = False
         self.code = al.CODE_NONE
@@ -152,13 +150,6 @@ class Firmware:
 
     def service(self, now_ns: int) -> None:
         """Serve pending PDI events. Called after the reply to a frame has been sent."""
-        if self.compiled and cycle.compiled is not None:
-            plan = getattr(self.app, "plan", None)
-            if plan is not self._cycle_plan:  # built once per process-data plan
-                self._cycle_plan = plan
-                self._cycle = cycle.build(self, EVENT_MASK_DC)
-            if self._cycle is not None and cycle.compiled.run(self._cycle, now_ns):
-                return  # a SYNC0 event with nothing else pending, served compiled
         p = self.pdi
         if not p.operational():
             return
@@ -169,7 +160,7 @@ class Firmware:
             self._sm_activation()
         if ev & EV_WATCHDOG_PD:
             p.u16(WD_STATUS_PD)  # acknowledges the event
-            if self.state == AlState.OP:
+            if self.state is _OP:
                 self.fail(AlState.SAFEOP, al.CODE_SM_WATCHDOG, now_ns)
         pd_events = ev & PD_EVENTS
         dc = (p.u8(DC_ACTIVATION) & 0x03) == 0x03
@@ -181,7 +172,7 @@ class Firmware:
                 p.u8(DC_SYNC0_STATUS)  # acknowledges the event
                 if ev & (EV_SM0 << SM_PD_OUT):
                     out = p.sm_read(SM_PD_OUT)
-                    if out is not None and self.state == AlState.OP:
+                    if out is not None and self.state is _OP:
                         self.app.set_outputs(out, now_ns)
                 self._write_inputs(now_ns)
             elif pd_events & (EV_SM0 << SM_PD_IN) and p.u8(DC_ACTIVATION_STATUS) & 0x01:
@@ -189,7 +180,7 @@ class Firmware:
         else:
             if ev & (EV_SM0 << SM_PD_OUT):
                 out = p.sm_read(SM_PD_OUT)
-                if out is not None and self.state == AlState.OP:
+                if out is not None and self.state is _OP:
                     self.app.set_outputs(out, now_ns)  # free run: applied when SM2 is written
             if ev & EV_SYNC0:
                 p.u8(DC_SYNC0_STATUS)
@@ -226,11 +217,11 @@ class Firmware:
         """Reading the activation registers acknowledges the event. Ref: §5.49 Table 90 *."""
         for n in range(4):
             self.pdi.sm_settings(n)
-        if self.mbx is not None and self.state != AlState.INIT:
+        if self.mbx is not None and self.state is not _INIT:
             self.mbx.repeat()
 
     def _write_inputs(self, now_ns: int) -> None:
-        if self.state in (AlState.SAFEOP, AlState.OP):
+        if self.state is _SAFEOP or self.state is _OP:
             self.pdi.sm_write(SM_PD_IN, self.app.get_inputs(now_ns))
 
     # ----------------------------------------------------------------- AL control

@@ -215,10 +215,12 @@ class PdoImage:
         return self.plan.tx_size
 
     def set_outputs(self, data: bytes, now_ns: int) -> None:
-        c = self.plan.rx_codec
+        c: Codec | None = self.plan.rx_codec
         if c is not None and len(data) >= c.st.size:
-            for e, v in zip(c.entries, c.st.unpack_from(data), strict=True):
-                e.value = v
+            entries: tuple[Entry, ...] = c.entries
+            values: tuple[int, ...] = c.st.unpack_from(data)
+            for i in range(len(entries)):
+                entries[i].value = values[i]
         else:
             for f in self.plan.rx:
                 if f.entry is not None:
@@ -231,10 +233,10 @@ class PdoImage:
 
     def pack_inputs(self) -> bytes:
         """The input image from the OD values, as they are now."""
-        c = self.plan.tx_codec
+        c: Codec | None = self.plan.tx_codec
         if c is not None:
             try:
-                return c.st.pack(*[e.value for e in c.entries])
+                return c.st.pack(*[e.value for e in c.entries])  # type: ignore[no-any-return]
             except struct.error:
                 pass  # a value out of its type's range: encoded (masked) entry by entry
         out = bytearray(self.plan.tx_size)

@@ -120,8 +120,6 @@ class CspCycle:
         self.responder = responder
         self.seg, self.clock = segment_of(drives, device=device)
         self.seg.compiled = compiled  # the compiled logical walk (decision P6)
-        for fw in self.seg.firmware:
-            fw.compiled = compiled  # the compiled DC cycle (decision P3) or the reference
         t = self.master = TinyMaster(self.seg)
         configure_to_op(t, drives, ecat_irq)
         self.link: LoopbackLink | SocketLink = SocketLink() if responder else LoopbackLink()

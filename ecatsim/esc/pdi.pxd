@@ -1,0 +1,34 @@
+# The compiled core's declarations for pdi.py (Cython, pure-Python mode): the PDI face as
+# a typed class, so the compiled firmware reaches the ESC through these calls and nothing
+# else. pdi.py stays the one source of the behaviour; this file only gives types.
+# Decisions P2, P13.
+cimport cython
+
+from ecatsim.esc.core cimport Esc
+from ecatsim.esc.sm cimport SyncManager
+
+cdef long long _REG_END
+
+
+cdef class Pdi:
+    cdef public Esc _esc
+
+    cpdef bint operational(self) except -1
+    @cython.locals(esc=Esc, end="long long", ws="long long", we="long long", sm=SyncManager)
+    cpdef bytes read(self, long long addr, long long n)
+    @cython.locals(esc=Esc, end="long long", ws="long long", we="long long", sm=SyncManager,
+                   n="long long", split="long long")
+    cpdef bint write(self, long long addr, object data) except -1
+    @cython.locals(esc=Esc, hooked=bytes)
+    cpdef long long u8(self, long long addr) except -1
+    @cython.locals(esc=Esc, hooked=bytes, m=bytearray)
+    cpdef long long u16(self, long long addr) except -1
+    @cython.locals(esc=Esc, m=bytearray, b3="long long")
+    cpdef long long u32(self, long long addr) except -1
+    cpdef void w16(self, long long addr, long long value) except *
+    cpdef void w32(self, long long addr, long long value) except *
+    cpdef long long al_event(self) except -1
+    @cython.locals(esc=Esc, sm=SyncManager)
+    cpdef object sm_read(self, long long n)
+    @cython.locals(esc=Esc, sm=SyncManager)
+    cpdef bint sm_write(self, long long n, object data) except -1

@@ -1,0 +1,34 @@
+# The compiled core's declarations for firmware.py (Cython, pure-Python mode): the
+# firmware's state as typed fields and its event service on C integers, reaching the ESC
+# through the typed PDI face only (pdi.pxd; tests/unit/test_layering.py checks the
+# cimports). firmware.py stays the one source of the behaviour. Decisions P2, P3, P13.
+cimport cython
+
+from ecatsim.esc.pdi cimport Pdi
+
+# the registers and events, imported through pdi.py: C constants here
+cdef long long AL_CONTROL, AL_EVENT_MASK, AL_STATUS, AL_STATUS_CODE, DC_ACTIVATION
+cdef long long DC_ACTIVATION_STATUS, DC_SYNC0_STATUS, EV_AL_CONTROL, EV_SM0
+cdef long long EV_SM_ACTIVATION, EV_SYNC0, EV_WATCHDOG_PD, WD_STATUS_PD
+cdef long long SM_MBX_OUT, SM_MBX_IN, SM_PD_OUT, SM_PD_IN
+cdef long long EV_SM1, PD_EVENTS, EVENT_MASK
+
+
+cdef class Firmware:
+    cdef public Pdi pdi
+    cdef public object app, mailbox, mbx
+    cdef public long long event_mask
+    cdef public object od, emergency, device, coe
+    cdef public bint pd_masked
+    cdef public object refuse_next
+    cdef public bint bootstrap_supported
+    cdef public object state
+    cdef public bint error
+    cdef public long long code
+    cdef public object log
+
+    @cython.locals(p=Pdi, ev="long long", pd_events="long long", dc=bint)
+    cpdef void service(self, long long now_ns) except *
+    @cython.locals(want="long long")
+    cpdef void service_mailbox(self, long long ev, long long now_ns) except *
+    cpdef void _write_inputs(self, long long now_ns) except *

@@ -1,0 +1,14 @@
+# The compiled core's declarations for pdo.py (Cython, pure-Python mode): the process
+# image copy of a CoE slave's DC cycle (decoded into and packed from the OD entries) as
+# compiled code. pdo.py stays the one source of the behaviour. Decisions P2, P3, P13.
+cimport cython
+
+
+cdef class PdoImage:
+    cdef public object od, device, plan
+
+    @cython.locals(c=object, entries=tuple, values=tuple, i="Py_ssize_t")
+    cpdef void set_outputs(self, object data, object now_ns) except *
+    cpdef bytes get_inputs(self, object now_ns)
+    @cython.locals(c=object)
+    cpdef bytes pack_inputs(self)
