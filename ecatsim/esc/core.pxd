@@ -3,7 +3,7 @@
 # behaviour; this file only gives types. Decisions P2, P13.
 from ecatsim.esc.dc cimport DcUnit
 from ecatsim.esc.fmmu cimport FmmuMap
-from ecatsim.esc.sm cimport SyncManager
+from ecatsim.esc.sm cimport SmHost, SyncManager
 from ecatsim.esc.watchdog cimport Watchdog
 
 
@@ -43,12 +43,13 @@ cdef class FrameContext:
     cdef public set pending, flush
 
 
-cdef class Esc:
+cdef class Esc(SmHost):
     cdef public long long position
     cdef public bint pdi_emulation
     cdef public FrameContext ctx
     cdef public bytearray mem
     cdef public object t
+    cdef public bytes pdi_r_hooked
     cdef public list sm
     cdef public object eeprom
     cdef public DcUnit dc
@@ -73,16 +74,23 @@ cdef class Esc:
                    sm=SyncManager, view="unsigned char[:]", b0="long long", b1="long long", nb="long long",
                    pb="long long", ps="long long", pe="long long", fb="long long")
     cpdef bint _fmmu_xfer(self, FmmuMap f, long long lad, unsigned char[:] data, bint write) except -1
+    @cython.locals(m=bytearray, v="long long")
     cpdef void _set_ecat_event(self, long long bits) except *
+    @cython.locals(m=bytearray, v="long long")
     cpdef void _clr_ecat_event(self, long long bits) except *
+    @cython.locals(m=bytearray, req="long long", mask="long long", irq="long long")
     cpdef void _irq_update(self) except *
     cpdef long long al_event(self) except -1
     cpdef void pdi_buffer_event(self, SyncManager sm, bint first, bint last) except *
+    @cython.locals(m=bytearray, v="long long")
     cpdef void set_al_event(self, long long bits) except *
+    @cython.locals(m=bytearray, v="long long")
     cpdef void clr_al_event(self, long long bits) except *
     cpdef void _pdi_irq(self, long long request) except *
+    @cython.locals(mirror="long long", ebit="long long", abit="long long")
     cpdef void sm_status_changed(self, SyncManager sm) except *
     cpdef void wd_pd_trigger(self) except *
+    cpdef void sm_event_time(self, long long reg) except *
     cpdef void sync0_tick(self, object now_ns) except *
     cpdef void sync1_tick(self) except *
     @cython.locals(end="long long", ws="long long", we="long long")

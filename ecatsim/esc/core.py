@@ -83,7 +83,7 @@ from ecatsim.esc.regs import (
     WD_COUNTER_PDI,
     WD_STATUS_PD,
 )
-from ecatsim.esc.sm import SyncManager
+from ecatsim.esc.sm import SmHost, SyncManager
 from ecatsim.esc.watchdog import Watchdog
 from ecatsim.spec.tables import load_registers
 from ecatsim.wire.datagram import Cmd
@@ -253,7 +253,7 @@ def hook_names() -> set[str]:
     return out
 
 
-class Esc:
+class Esc(SmHost):
     """One TMC8460 ESC instance (64 KiB address space, 6 FMMUs, 6 SMs)."""
 
     #: fixed attributes: the compiled paths read them as slots (ecatsim/_attr.h)
@@ -270,6 +270,7 @@ class Esc:
         "mii",
         "on_reset",
         "pdi_emulation",
+        "pdi_r_hooked",
         "pdram_ok",
         "port0_open",
         "port1_closed",
@@ -301,6 +302,8 @@ class Esc:
         self.ctx = ctx
         self.mem = bytearray(0x10000)
         self.t = tables()
+        #: the PDI read side effects' bitmap (the PDI face's hot test)
+        self.pdi_r_hooked = self.t.pdi_r_hooked
         self.sm = [SyncManager(self, n) for n in range(N_SM)]
         self.eeprom = EepromUnit(self.mem, sii, self._eeprom_written)
         self.dc = DcUnit(
@@ -494,6 +497,9 @@ class Esc:
             self.ctx.pending.add(self.position)
         else:
             self.ctx.pending.discard(self.position)
+
+    def memory(self) -> bytearray:
+        return self.mem
 
     def sm_status_changed(self, sm: SyncManager) -> None:
         """Mirror an SM's interrupt bits (``sm.mirror``, bit 0 ECAT, bit 1 PDI) into 0x0210

@@ -43,8 +43,10 @@ cdef class DcUnit:
                    local="unsigned long long", diff="long long", start="long long",
                    gain=double, step="long long", mag="long long")
     cpdef bint system_time_written(self, long long frame_t_ns, unsigned long long value, long long nbytes) except -1
-    @cython.locals(local="long long")
     cpdef long long host_time_of(self, object system_ns) except? -1
+    @cython.locals(local="long long")
+    cpdef long long _host_time(self, unsigned long long system_ns) except? -1
+    @cython.locals(n0="unsigned long long")
     cpdef object sync0_deadline(self)
     @cython.locals(m=bytearray, n0="unsigned long long", cycle="long long",
                    behind="long long")

@@ -218,7 +218,11 @@ class DcUnit:
 
     def host_time_of(self, system_ns: int) -> int:
         """Inverse of system_time(): when the host clock reaches ``system_ns`` here."""
-        local = _signed64(((system_ns & MASK64) - self.offset() - self.local_ref) & MASK64)
+        return self._host_time(system_ns & MASK64)
+
+    def _host_time(self, system_ns: int) -> int:
+        """host_time_of() of a system time in [0, 2^64)."""
+        local = _signed64((system_ns - self.offset() - self.local_ref) & MASK64)
         return self.t_ref + _trunc(local / self.spd)
 
     # -- SYNC out unit ---------------------------------------------------------------
@@ -271,8 +275,10 @@ class DcUnit:
 
     def sync0_deadline(self) -> int | None:
         """Host time of the next SYNC0 pulse."""
-        n0 = self.next_sync0
-        return None if n0 is None else self.host_time_of(n0)
+        if self.next_sync0 is None:
+            return None
+        n0 = self.next_sync0  # kept in [0, 2^64) by sync0_pulse and activation_written
+        return self._host_time(n0)
 
     def sync0_pulse(self, now_ns: int) -> bool:
         """Generate the due SYNC0 pulse; returns True if SYNC0 is mapped to 0x0220.2.

@@ -7,7 +7,7 @@ cimport cython
 from ecatsim.esc.core cimport Esc
 from ecatsim.esc.sm cimport SyncManager
 
-cdef long long _REG_END
+cdef long long _REG_END, _DL_STATUS
 
 
 cdef class Pdi:

@@ -42,7 +42,8 @@ from ecatsim.esc.regs import (  # re-exported for the firmware
     sm_addr,
 )
 
-from ecatsim.esc.regs import REGISTER_END as _REG_END  # compiled: a C constant (pdi.pxd)
+from ecatsim.esc.regs import DL_STATUS as _DL_STATUS  # compiled: C constants (pdi.pxd)
+from ecatsim.esc.regs import REGISTER_END as _REG_END
 
 if TYPE_CHECKING:
     from ecatsim.esc.core import Esc
@@ -124,7 +125,7 @@ class Pdi:
 
     def operational(self) -> bool:
         """DL status 0x0110.0: EEPROM loaded, PDI operational. Ref: §5.19 Table 30."""
-        return bool(self._esc.mem[regs.DL_STATUS] & 0x01)
+        return bool(self._esc.mem[_DL_STATUS] & 0x01)
 
     # -- raw access with PDI rules ----------------------------------------------------
 
@@ -184,7 +185,7 @@ class Pdi:
     def u8(self, addr: int) -> int:
         esc = self._esc
         if addr < _REG_END:  # a register: its read side effects, then the byte
-            hooked: bytes = esc.t.pdi_r_hooked
+            hooked: bytes = esc.pdi_r_hooked
             if hooked[addr]:
                 esc.reg_read_hooks(addr, addr + 1, True)
             return esc.mem[addr]
@@ -192,7 +193,7 @@ class Pdi:
 
     def u16(self, addr: int) -> int:
         esc = self._esc
-        hooked: bytes = esc.t.pdi_r_hooked
+        hooked: bytes = esc.pdi_r_hooked
         if addr + 2 <= _REG_END and not (hooked[addr] or hooked[addr + 1]):
             m = esc.mem
             return m[addr] | (m[addr + 1] << 8)

@@ -7,8 +7,17 @@ cimport cython
 cdef long long DC_ECAT_EVENT_TIME, SM_ACT_LATCH_ECAT, SM_CTRL_ECAT_IRQ, SM_CTRL_PDI_IRQ, SM_CTRL_WATCHDOG, SM_DIR_MASK, SM_DIR_WRITE, SM_MODE_MAILBOX, SM_MODE_MASK, SM_ST_BUF_SHIFT, SM_ST_IRQ_READ, SM_ST_IRQ_WRITE, SM_ST_MBX_FULL, SM_ST_READ_OPEN, SM_ST_WRITE_OPEN
 
 
+cdef class SyncManager
+
+
+cdef class SmHost:
+    cpdef void sm_status_changed(self, SyncManager sm) except *
+    cpdef void wd_pd_trigger(self) except *
+    cpdef void sm_event_time(self, long long reg) except *
+
+
 cdef class SyncManager:
-    cdef public object host
+    cdef public SmHost host
     cdef unsigned char[:] mv
     cdef public bytearray mem
     cdef public long long n, status_addr, start, length, control
@@ -17,11 +26,14 @@ cdef class SyncManager:
     cdef public bint r_open, w_open
     cdef public long long status, mirror, irq_to_ecat, irq_to_pdi
 
+    @cython.locals(st="long long", mirror="long long")
     cpdef void _sync(self) except *
+    @cython.locals(latest="long long")
     cpdef void _writer_access(self, bint first, bint last) except *
     cpdef void _reader_open(self) except *
     cpdef void _reader_access(self, bint first, bint last) except *
     cpdef long long _base_for_write(self) except? -1
+    @cython.locals(b="long long")
     cpdef long long _base_for_read(self) except? -1
     cpdef bint writer_may(self) except -1
     cpdef bint reader_may(self) except -1
@@ -33,7 +45,7 @@ cdef class SyncManager:
     cpdef void reader_read(self, long long off, unsigned char[:] out) except *
     @cython.locals(base="long long")
     cpdef bytes read_whole(self)
-    @cython.locals(base="long long")
+    @cython.locals(base="long long", mem=bytearray, i="long long")
     cpdef void write_whole(self, bytes data) except *
     cpdef void ecat_write(self, long long off, const unsigned char[:] data) except *
     cpdef void ecat_read(self, long long off, unsigned char[:] out) except *

@@ -10,8 +10,6 @@ Ref: TMC8460 §5.49 Tables 85-91; ETG.1000.4 §6.7 (SyncManager).
 
 from __future__ import annotations
 
-from typing import Protocol
-
 from ecatsim.esc import regs
 from ecatsim.esc.regs import (
     DC_ECAT_EVENT_TIME,
@@ -32,20 +30,27 @@ from ecatsim.esc.regs import (
 )
 
 
-class SmHost(Protocol):
-    """What an SM needs from its ESC: memory and event lines."""
+class SmHost:
+    """What an SM needs from its ESC: memory and event lines. The ESC derives from this
+    class (compiled: the SM calls these through the C method table, sm.pxd)."""
 
-    mem: bytearray
+    __slots__ = ()
+
+    def memory(self) -> bytearray:
+        """The ESC memory the SM's windows and buffers live in."""
+        raise NotImplementedError
 
     def sm_status_changed(self, sm: SyncManager) -> None:
         """The SM's event bits (``sm.mirror``) changed: update the event registers."""
-        ...
+        raise NotImplementedError
 
-    def wd_pd_trigger(self) -> None: ...
+    def wd_pd_trigger(self) -> None:
+        """A write of the SM's buffer triggers the process-data watchdog."""
+        raise NotImplementedError
 
     def sm_event_time(self, reg: int) -> None:
         """Take the SyncManager event time ``reg`` (0x09F0, 0x09F8 or 0x09FC) now."""
-        ...
+        raise NotImplementedError
 
 
 class SyncManager:
@@ -80,8 +85,8 @@ class SyncManager:
     def __init__(self, host: SmHost, n: int) -> None:
         self.host = host
         #: the ESC memory the windows and buffers live in (the host's, for its lifetime)
-        self.mem = host.mem
-        self.mv = memoryview(host.mem)
+        self.mem = host.memory()
+        self.mv = memoryview(self.mem)
         self.n = n
         self.status_addr = regs.sm_addr(n, 5)
         self.start = 0
@@ -268,7 +273,9 @@ class SyncManager:
         """The whole buffer written as the writing side (``writer_write`` of exactly
         ``length`` bytes)."""
         base = self._base_for_write()
-        self.mem[base : base + self.length] = data
+        mem = self.mem
+        for i in range(self.length):
+            mem[base + i] = data[i]
         self._writer_access(True, True)
 
     def peek(self, off: int, n: int) -> bytes:

@@ -5,10 +5,12 @@ cimport cython
 
 
 cdef class PdoImage:
-    cdef public object od, device, plan
+    cdef public object od, device
+    cdef object _plan
+    cdef object _rx_st, _tx_st
+    cdef tuple _rx_entries, _tx_entries
 
-    @cython.locals(c=object, entries=tuple, values=tuple, i="Py_ssize_t")
+    @cython.locals(entries=tuple, values=tuple, i="Py_ssize_t")
     cpdef void set_outputs(self, object data, object now_ns) except *
     cpdef bytes get_inputs(self, object now_ns)
-    @cython.locals(c=object)
     cpdef bytes pack_inputs(self)

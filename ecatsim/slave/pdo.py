@@ -197,6 +197,21 @@ class PdoImage:
         self.plan = compile_plan(od)
         install(od)
 
+    @property
+    def plan(self) -> Plan:
+        """The copy plan in use (compiled at PREOP->SAFEOP)."""
+        return self._plan
+
+    @plan.setter
+    def plan(self, plan: Plan) -> None:
+        self._plan = plan
+        rx, tx = plan.rx_codec, plan.tx_codec
+        #: the one-struct codecs' parts, bound once per plan (the DC cycle's hot path)
+        self._rx_st = rx.st if rx is not None else None
+        self._rx_entries = rx.entries if rx is not None else ()
+        self._tx_st = tx.st if tx is not None else None
+        self._tx_entries = tx.entries if tx is not None else ()
+
     def prepare(self) -> int:
         """Compile the plan at PREOP->SAFEOP; an invalid mapping is an AL status code.
 
@@ -215,14 +230,14 @@ class PdoImage:
         return self.plan.tx_size
 
     def set_outputs(self, data: bytes, now_ns: int) -> None:
-        c: Codec | None = self.plan.rx_codec
-        if c is not None and len(data) >= c.st.size:
-            entries: tuple[Entry, ...] = c.entries
-            values: tuple[int, ...] = c.st.unpack_from(data)
+        st = self._rx_st
+        if st is not None and len(data) >= st.size:
+            entries: tuple[Entry, ...] = self._rx_entries
+            values: tuple[int, ...] = st.unpack_from(data)
             for i in range(len(entries)):
                 entries[i].value = values[i]
         else:
-            for f in self.plan.rx:
+            for f in self._plan.rx:
                 if f.entry is not None:
                     f.entry.value = f.entry.decode(data[f.offset : f.offset + f.size])
         self.device.outputs_applied(now_ns)
@@ -233,10 +248,10 @@ class PdoImage:
 
     def pack_inputs(self) -> bytes:
         """The input image from the OD values, as they are now."""
-        c: Codec | None = self.plan.tx_codec
-        if c is not None:
+        st = self._tx_st
+        if st is not None:
             try:
-                return c.st.pack(*[e.value for e in c.entries])  # type: ignore[no-any-return]
+                return st.pack(*[e.value for e in self._tx_entries])  # type: ignore[no-any-return]
             except struct.error:
                 pass  # a value out of its type's range: encoded (masked) entry by entry
         out = bytearray(self.plan.tx_size)
