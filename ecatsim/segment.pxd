@@ -7,7 +7,7 @@ from ecatsim.esc.core cimport Esc, FrameContext
 
 
 cdef long long NOP, APRD, APWR, APRW, FPRD, FPWR, FPRW, BRD, BWR, BRW, LRD, LWR, LRW, ARMW, FRMW
-cdef long long CIRCULATING, LEN_MASK, MORE_FOLLOWS
+cdef long long CIRCULATING, LEN_MASK, MORE_FOLLOWS, _DC_SYSTEM_TIME
 
 
 cdef class Segment:
@@ -38,7 +38,7 @@ cdef class Segment:
     cpdef void _walk(self, bytearray buf, long long p) except *
 
     @cython.locals(n="long long", reader="long long", reach="long long", i="long long",
-                   escs=list)
+                   escs=list, esc=Esc, before=bytes, after=bytes)
     cpdef void after_reply(self) except *
     @cython.locals(ctx=FrameContext, esc=Esc, k="long long")
     cpdef void sync_until(self, object t) except *

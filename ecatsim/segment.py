@@ -16,6 +16,7 @@ from ecatsim.clock import Clock
 from ecatsim.compiled import load
 from ecatsim.esc import regs
 from ecatsim.esc.core import Esc, FrameContext
+from ecatsim.esc.regs import DC_SYSTEM_TIME as _DC_SYSTEM_TIME  # compiled: a C constant
 from ecatsim.wire.datagram import CIRCULATING, LEN_MASK, MORE_FOLLOWS
 
 _logical = load("ecatsim.esc._logical")  # decision P6; None: Python serves
@@ -245,7 +246,7 @@ class Segment:
             self._dc_before[:n] = data
         inc = 0
         if reader < reach:
-            inc += self.escs[reader].ecat_read(regs.DC_SYSTEM_TIME, data)
+            inc += self.escs[reader].ecat_read(_DC_SYSTEM_TIME, data)
         if reader + 1 < reach:
             self._dc_after[:n] = data
         self._dc_pending = n
@@ -261,11 +262,13 @@ class Segment:
         self._dc_pending = 0
         reader = self._dc_reader
         reach = self._dc_reach
-        before = memoryview(self._dc_before)[:n]
-        after = memoryview(self._dc_after)[:n]
+        before = bytes(self._dc_before[:n])
+        after = bytes(self._dc_after[:n])
+        escs = self.escs
         for i in range(reach):
             if i != reader:
-                self.escs[i].ecat_write(regs.DC_SYSTEM_TIME, before if i < reader else after)
+                esc = escs[i]
+                esc.ecat_write(_DC_SYSTEM_TIME, before if i < reader else after)
 
     def _circulate(self, buf: bytearray, p: int) -> bool:
         """A frame passing an ESC whose port 0 is closed gets the circulating bit; one that
@@ -353,7 +356,7 @@ class Segment:
                 readers = self.addr_map.get(adp, ())
                 if (
                     self.reply_first
-                    and ado == regs.DC_SYSTEM_TIME
+                    and ado == _DC_SYSTEM_TIME
                     and not lf & MORE_FOLLOWS
                     and len(readers) <= 1
                     and dlen in (4, 8)

@@ -49,6 +49,7 @@ cdef class Esc(SmHost):
     cdef public FrameContext ctx
     cdef public bytearray mem
     cdef public object t
+    cdef public bytes ecat_wmask, pdi_wmask, ecat_w_hooked, pdi_w_hooked, ecat_r_hooked
     cdef public bytes pdi_r_hooked
     cdef public list sm
     cdef public object eeprom
@@ -103,7 +104,7 @@ cdef class Esc(SmHost):
     cpdef bint _plain_read(self, long long ado, object out) except -1
     @cython.locals(e="long long", i="long long", k="long long", m="long long",
                    wmask=bytes, hooked=bytes, mem=bytearray, ra="long long", rs="long long")
-    cpdef void reg_write(self, long long s, const unsigned char[:] data, bint pdi) except *
+    cpdef void reg_write(self, long long s, bytes data, bint pdi) except *
     @cython.locals(lo="long long", hi="long long")
     cpdef bytes old_reg(self, long long ra, long long rs, bytes old, long long s)
     @cython.locals(i="long long", hooked=bytes, ra="long long", rs="long long")

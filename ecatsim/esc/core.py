@@ -270,7 +270,12 @@ class Esc(SmHost):
         "mii",
         "on_reset",
         "pdi_emulation",
+        "ecat_r_hooked",
+        "ecat_w_hooked",
+        "ecat_wmask",
         "pdi_r_hooked",
+        "pdi_w_hooked",
+        "pdi_wmask",
         "pdram_ok",
         "port0_open",
         "port1_closed",
@@ -301,9 +306,14 @@ class Esc(SmHost):
         self.pdi_emulation = pdi_emulation
         self.ctx = ctx
         self.mem = bytearray(0x10000)
-        self.t = tables()
-        #: the PDI read side effects' bitmap (the PDI face's hot test)
-        self.pdi_r_hooked = self.t.pdi_r_hooked
+        t = self.t = tables()
+        #: the tables' masks and side-effect bitmaps, bound here (typed in the compiled core)
+        self.ecat_wmask = t.ecat_wmask
+        self.pdi_wmask = t.pdi_wmask
+        self.ecat_w_hooked = t.ecat_w_hooked
+        self.pdi_w_hooked = t.pdi_w_hooked
+        self.ecat_r_hooked = t.ecat_r_hooked
+        self.pdi_r_hooked = t.pdi_r_hooked
         self.sm = [SyncManager(self, n) for n in range(N_SM)]
         self.eeprom = EepromUnit(self.mem, sii, self._eeprom_written)
         self.dc = DcUnit(
@@ -702,10 +712,10 @@ class Esc(SmHost):
     def _plain_write(self, ado: int, data: memoryview) -> bool:
         end = ado + len(data)
         if end <= REGISTER_END:
-            self.reg_write(ado, data, False)
+            self.reg_write(ado, bytes(data), False)
             return True
         if ado < REGISTER_END:
-            self.reg_write(ado, data[: REGISTER_END - ado], False)
+            self.reg_write(ado, bytes(data[: REGISTER_END - ado]), False)
             data = data[REGISTER_END - ado :]
             ado = REGISTER_END
         if not self.pdram_ok:
@@ -751,19 +761,18 @@ class Esc(SmHost):
             out[max(e, ado) - ado :] = bytes(end - max(e, ado))
         return True
 
-    def reg_write(self, s: int, data: memoryview | bytes, pdi: bool) -> None:
+    def reg_write(self, s: int, data: bytes, pdi: bool) -> None:
         """Masked register write from the ECAT (``pdi`` False) or the PDI side: each byte
         keeps the bits its side may not write (the table's write masks), then the side
         effects of the registers touched run, each with its register's old value.
         Ref: TMC8460 §5 (register table, ECAT/PDI access columns)."""
         e = s + len(data)
-        t = self.t
         if pdi:
-            wmask = t.pdi_wmask
-            hooked = t.pdi_w_hooked
+            wmask = self.pdi_wmask
+            hooked = self.pdi_w_hooked
         else:
-            wmask = t.ecat_wmask
-            hooked = t.ecat_w_hooked
+            wmask = self.ecat_wmask
+            hooked = self.ecat_w_hooked
         mem = self.mem
         i = _first(hooked, s, e)
         old = bytes(mem[s:e]) if i >= 0 else b""
@@ -775,6 +784,7 @@ class Esc(SmHost):
         self.wr_e = e
         if i < 0:
             return
+        t = self.t
         hooks = t.pdi_w if pdi else t.ecat_w
         while i >= 0:
             entry = hooks[i]
@@ -787,11 +797,11 @@ class Esc(SmHost):
     def reg_read_hooks(self, s: int, e: int, pdi: bool) -> None:
         """The read side effects of the registers in [s, e) for the ECAT (``pdi`` False)
         or the PDI side, before the bytes are taken from memory. Ref: TMC8460 §5."""
-        t = self.t
-        hooked = t.pdi_r_hooked if pdi else t.ecat_r_hooked
+        hooked = self.pdi_r_hooked if pdi else self.ecat_r_hooked
         i = _first(hooked, s, e)
         if i < 0:
             return
+        t = self.t
         hooks = t.pdi_r if pdi else t.ecat_r
         while i >= 0:
             entry = hooks[i]

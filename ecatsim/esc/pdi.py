@@ -170,11 +170,11 @@ class Pdi:
             return True
         if end > _REG_END:  # the registers' part masked, the rest is process RAM
             split = _REG_END - addr
-            esc.reg_write(addr, data[:split], True)
+            esc.reg_write(addr, bytes(data[:split]), True)
             if esc.pdram_ok:
                 esc.mem[_REG_END : end] = data[split:]
             return True
-        esc.reg_write(addr, data, True)
+        esc.reg_write(addr, bytes(data), True)
         return True
 
     # -- typed helpers -------------------------------------------------------------
