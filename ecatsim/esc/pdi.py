@@ -144,9 +144,9 @@ class Pdi:
                     return bytes(out)
             if not esc.pdram_ok:
                 return bytes(n)
-            return bytes(esc.mem[addr:end])
-        esc.reg_read_hooks(addr, end, True)
-        return bytes(esc.mem[addr:end])
+            return bytes(esc.mem[addr:end]).ljust(n, b"\x00")  # past 0xFFFF: zeros
+        esc.reg_read_hooks(addr, min(end, _REG_END), True)
+        return bytes(esc.mem[addr:end]).ljust(n, b"\x00")
 
     def write(self, addr: int, data: bytes) -> bool:
         """PDI write (SM windows redirected; masks and PDI write side effects apply).
@@ -166,7 +166,11 @@ class Pdi:
         if addr >= _REG_END:
             if not esc.pdram_ok:
                 return False
-            esc.mem[addr:end] = data
+            mem = esc.mem
+            if end > len(mem):  # the address space ends at 0xFFFF: the rest is lost
+                data = data[: len(mem) - addr]
+                end = len(mem)
+            mem[addr:end] = data
             return True
         if end > _REG_END:  # the registers' part masked, the rest is process RAM
             split = _REG_END - addr
