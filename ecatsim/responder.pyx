@@ -315,7 +315,6 @@ cdef int answer(int fd, bytearray buf, long n, object seg, object recorder,
     """Daemon.handle_frame and Daemon._answer for a frame served whole: record it, fire
     the SYNC pulses due before it, process it, then send the reply (or not: DROPPED).
     FRAME: not an EtherCAT frame (Python ignores it). Ref: ETG.1000.4 §5.3-5.4."""
-    cdef uint8_t *b = <uint8_t *>(<char *>buf)
     off = ecat_offset(buf, n, True)
     if off < 0:
         return FRAME
@@ -328,7 +327,7 @@ cdef int answer(int fd, bytearray buf, long n, object seg, object recorder,
     if not reply:
         return DROPPED
     mark_processed(buf)
-    if send(fd, b, <size_t>n, 0) < 0 and errno not in (ENOBUFS, EAGAIN, ENETDOWN, ENXIO):
+    if send(fd, <char *>buf, <size_t>n, 0) < 0 and errno not in (ENOBUFS, EAGAIN, ENETDOWN, ENXIO):
         PyErr_SetFromErrno(OSError)
     sched_yield()  # a master woken on this CPU takes the reply first (Daemon._answer)
     return REPLIED
