@@ -327,8 +327,9 @@ cdef int answer(int fd, bytearray buf, long n, object seg, object recorder,
     if not reply:
         return DROPPED
     mark_processed(buf)
-    if send(fd, <char *>buf, <size_t>n, 0) < 0 and errno not in (ENOBUFS, EAGAIN, ENETDOWN, ENXIO):
-        PyErr_SetFromErrno(OSError)
+    if send(fd, <char *>buf, <size_t>n, 0) < 0:
+        if errno not in (ENOBUFS, EAGAIN, ENETDOWN, ENXIO):  # dropped, as a wire would
+            PyErr_SetFromErrno(OSError)
     sched_yield()  # a master woken on this CPU takes the reply first (Daemon._answer)
     return REPLIED
 
