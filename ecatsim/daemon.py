@@ -90,6 +90,8 @@ class Daemon:
         #: serve with the compiled responder where it applies (a raw link, the OS clock);
         #: tests compare it with the Python path
         self.compiled = True
+        #: the frame as received, kept by the compiled responder for the recorder
+        self._rx_copy = bytearray(MAX_FRAME)
         #: the compiled responder's timer fd (armed once per deadline), made on first use
         self._timer_fd = -1
         #: runs the daemon on the master's CPU (decision K5); None: stays where it is
@@ -303,27 +305,31 @@ class Daemon:
         assert srv is not None
         if self._timer_fd < 0:
             self._timer_fd = srv.timer()
+        rx_copy = self._rx_copy
         seg = self.segment if self._fast_ok() else None
         try:
             code, n, t_rx = srv.serve(
                 self._fd,
                 self._watch,
                 buf,
+                rx_copy,
                 deadline_ns,
                 self.busy_poll,
                 seg,
-                self.recorder,
                 t_rx_ns,
                 self._timer_fd,
             )
         except srv.SegmentError as exc:  # the loop never dies on a frame
+            self.recorder.record(rx_copy, exc.args[0])
             self._failure("process", exc.__cause__ or exc)
             return int(srv.DROPPED)  # the frame was handled: by a failure, as in handle_frame
         if code == srv.REPLIED:
+            self.recorder.record(rx_copy, n)
             self.replies += 1
             self.compiled_replies += 1
             self._after(t_rx)
         elif code == srv.DROPPED:
+            self.recorder.record(rx_copy, n)
             self._after(t_rx)
         elif code == srv.FRAME:
             self.handle_frame(buf, n, t_rx)

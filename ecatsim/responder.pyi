@@ -1,6 +1,5 @@
 """Type stub of the daemon's compiled responder (ecatsim/responder.pyx, decision P9)."""
 
-from ecatsim.recorder import FrameRecorder
 from ecatsim.segment import Segment
 
 TIMEOUT: int
@@ -10,16 +9,17 @@ REPLIED: int
 DROPPED: int
 
 class SegmentError(Exception):
-    """Segment.pulses_due or Segment.process raised on a frame (its ``__cause__``)."""
+    """Segment.pulses_due or Segment.process raised on a frame (its ``__cause__``);
+    ``args[0]``: the frame's length."""
 
 def serve(
     fd: int,
     others: tuple[int, ...],
     buf: bytearray,
+    rx_copy: bytearray,
     deadline_ns: int,
     busy: bool,
     seg: Segment | None,
-    recorder: FrameRecorder | None,
     t_rx: int,
     timer_fd: int,
 ) -> tuple[int, int, int]: ...

@@ -3,13 +3,14 @@
 its kernel time stamp, and the send of its reply in one call, with no Python bytecode run
 between the frame's arrival and its reply but the segment's own (compiled) walk.
 
-What happens to the frame is :meth:`Daemon.handle_frame`'s, through the same calls: the
-recorder keeps it, ``Segment.pulses_due`` fires the SYNC pulses due before it,
-``Segment.process`` walks it (ETG.1000.4 §5.3-5.4) and ``mark_processed`` patches it. Only
-the I/O is here: ppoll(2) (or a busy spin) on the raw socket, the other descriptors and a
-timerfd_create(2) timer armed once per deadline; recvmsg(2) on the packet(7) socket with
-its SO_TIMESTAMPNS receive time (socket(7)) and the 802.1Q tag from PACKET_AUXDATA, as
-``RawLink.recv_into`` receives (ecatsim/link/raw.py); send(2) as ``RawLink.send``.
+What happens to the frame is :meth:`Daemon.handle_frame`'s, through the same calls:
+``Segment.pulses_due`` fires the SYNC pulses due before it and ``Segment.process`` walks it
+(ETG.1000.4 §5.3-5.4); the frame as received is copied for the recorder, which Python
+fills after the reply. Only the I/O is here: ppoll(2) (or a busy spin) on the raw socket,
+the other descriptors and a timerfd_create(2) timer armed once per deadline; recvmsg(2) on
+the packet(7) socket with its SO_TIMESTAMPNS receive time (socket(7)) and the 802.1Q tag
+from PACKET_AUXDATA, as ``RawLink.recv_into`` receives (ecatsim/link/raw.py); send(2) as
+``RawLink.send``. Nothing interpreted runs before the reply is sent.
 
 Compiled only (no ``.py`` twin): where it is not built the daemon's select(2) loop serves.
 """
@@ -25,8 +26,6 @@ from posix.uio cimport iovec
 from posix.unistd cimport close, read
 
 from os import strerror
-
-from ecatsim.wire.frame import ecat_offset, mark_processed
 
 
 cdef extern from "Python.h":
@@ -123,6 +122,11 @@ cdef enum:
     #: a receive time stamp older than this: the wall clock was stepped (raw.py)
     MAX_RX_AGE_NS = 1_000_000_000
     ETH_P_8021Q = 0x8100
+    #: EtherCAT frame layout (ecatsim/wire/frame.py). Ref: ETG.1000.4 §5.3; IEEE 802.1Q
+    ETH_HEADER_LEN = 14
+    VLAN_TAG_LEN = 4
+    ECAT_HEADER_LEN = 2
+    ETHERTYPE_ECAT = 0x88A4
     #: an error was raised (the Python error indicator is set)
     ERROR = -1000
 
@@ -132,7 +136,8 @@ cdef long long armed[MAX_TIMER_FD]
 
 class SegmentError(Exception):
     """``Segment.pulses_due`` or ``Segment.process`` raised on a frame (the cause): the
-    frame's failure, told apart from a failure of the socket (an OSError of serve())."""
+    frame's failure, told apart from a failure of the socket (an OSError of serve()).
+    ``args[0]``: the frame's length (it is in rx_copy as received)."""
 
 
 cdef long long clock_ns(int clock_id) noexcept nogil:
@@ -310,38 +315,55 @@ def timer() -> int:
     return tfd
 
 
-cdef int answer(int fd, bytearray buf, long n, object seg, object recorder,
+cdef long ecat_offset(const uint8_t *b, long n) noexcept:
+    """Offset of the EtherCAT header in an Ethernet frame, -1: not EtherCAT, as
+    ecatsim/wire/frame.py ``ecat_offset``. Ref: ETG.1000.4 §5.3.1; IEEE 802.1Q."""
+    if n < ETH_HEADER_LEN + ECAT_HEADER_LEN:
+        return -1
+    if (b[12] << 8 | b[13]) == ETHERTYPE_ECAT:
+        return ETH_HEADER_LEN
+    if ((b[12] << 8 | b[13]) == ETH_P_8021Q
+            and n >= ETH_HEADER_LEN + VLAN_TAG_LEN + ECAT_HEADER_LEN
+            and (b[16] << 8 | b[17]) == ETHERTYPE_ECAT):
+        return ETH_HEADER_LEN + VLAN_TAG_LEN
+    return -1
+
+
+cdef int answer(int fd, bytearray buf, bytearray rx_copy, long n, object seg,
                 long long t_rx) except -1:
-    """Daemon.handle_frame and Daemon._answer for a frame served whole: record it, fire
-    the SYNC pulses due before it, process it, then send the reply (or not: DROPPED).
-    FRAME: not an EtherCAT frame (Python ignores it). Ref: ETG.1000.4 §5.3-5.4."""
-    off = ecat_offset(buf, n, True)
+    """Daemon.handle_frame and Daemon._answer for a frame served whole: keep it as
+    received in ``rx_copy``, fire the SYNC pulses due before it, process it, then send the
+    reply (or not: DROPPED). FRAME: not an EtherCAT frame (Python ignores it).
+    Ref: ETG.1000.4 §5.3-5.4."""
+    cdef uint8_t *b = <uint8_t *>(<char *>buf)
+    cdef long off = ecat_offset(b, n)
     if off < 0:
         return FRAME
-    recorder.record(buf, n)
+    memcpy(<char *>rx_copy, b, <size_t>n)
     try:
         seg.pulses_due(t_rx)  # pulses due before this frame arrived come first
         reply = seg.process(buf, off, n, t_rx)
     except Exception as exc:
-        raise SegmentError() from exc
+        raise SegmentError(n) from exc
     if not reply:
         return DROPPED
-    mark_processed(buf)
-    if send(fd, <char *>buf, <size_t>n, 0) < 0:
+    b = <uint8_t *>(<char *>buf)
+    b[6] |= 0x02  # processed: ecatsim/wire/frame.py mark_processed (TMC8460 §5.17)
+    if send(fd, b, <size_t>n, 0) < 0:
         if errno not in (ENOBUFS, EAGAIN, ENETDOWN, ENXIO):  # dropped, as a wire would
             PyErr_SetFromErrno(OSError)
     sched_yield()  # a master woken on this CPU takes the reply first (Daemon._answer)
     return REPLIED
 
 
-def serve(int fd, tuple others not None, bytearray buf not None, long long deadline_ns,
-          bint busy, seg, recorder, long long t_rx, int timer_fd):
+def serve(int fd, tuple others not None, bytearray buf not None, bytearray rx_copy not None,
+          long long deadline_ns, bint busy, seg, long long t_rx, int timer_fd):
     """Wait until a frame arrives, ``deadline_ns`` (host monotonic) passes or one of
     ``others`` (fds) is readable, and serve the frame with ``seg`` (a Segment; None: hand
-    every frame back as FRAME) and ``recorder`` (its FrameRecorder). ``busy``: spin
-    instead of sleeping in ppoll(2). ``t_rx``: the frame's arrival time (host monotonic
-    ns; 0: from the kernel's receive time stamp). ``timer_fd``: from timer(), or -1 (a
-    ppoll timeout instead).
+    every frame back as FRAME). ``rx_copy`` (as large as ``buf``): the frame as received,
+    for the recorder, when served here. ``busy``: spin instead of sleeping in ppoll(2).
+    ``t_rx``: the frame's arrival time (host monotonic ns; 0: from the kernel's receive
+    time stamp). ``timer_fd``: from timer(), or -1 (a ppoll timeout instead).
 
     Returns (code, n, t_rx): TIMEOUT or WAKE with n = 0, else the frame's length in buf
     and its arrival time. Raises SegmentError (from the segment's exception) where
@@ -351,6 +373,8 @@ def serve(int fd, tuple others not None, bytearray buf not None, long long deadl
     cdef Py_ssize_t i
     cdef long long stamp = 0
     cdef long n
+    if len(rx_copy) < len(buf):
+        raise TypeError("rx_copy: smaller than buf")
     if nothers > MAX_WATCH:
         raise ValueError("too many fds to watch")
     if timer_fd >= MAX_TIMER_FD:
@@ -372,4 +396,4 @@ def serve(int fd, tuple others not None, bytearray buf not None, long long deadl
         t_rx = rx_time(stamp)
     if seg is None:
         return (FRAME, n, t_rx)
-    return (answer(fd, buf, n, seg, recorder, t_rx), n, t_rx)
+    return (answer(fd, buf, rx_copy, n, seg, t_rx), n, t_rx)

@@ -62,16 +62,16 @@ def test_waits_until_the_deadline(
     deadline, so a second wait for the same deadline must still end), or spinning."""
     tfd = srv.timer() if timer else -1
     try:
-        buf = bytearray(2048)
+        buf, copy = bytearray(2048), bytearray(2048)
         for _ in range(2):
             t0 = time.monotonic_ns()
             deadline = t0 + 20_000_000
-            code, n, _t = srv.serve(link.fileno(), (), buf, deadline, busy, None, None, 0, tfd)
+            code, n, _t = srv.serve(link.fileno(), (), buf, copy, deadline, busy, None, 0, tfd)
             waited = time.monotonic_ns() - t0
             assert (code, n) == (TIMEOUT, 0)
             assert 20_000_000 <= waited < 2_000_000_000  # a wide guard, not a timing test
         # the same deadline again, now passed: no wait at all
-        code, *_ = srv.serve(link.fileno(), (), buf, deadline, busy, None, None, 0, tfd)
+        code, *_ = srv.serve(link.fileno(), (), buf, copy, deadline, busy, None, 0, tfd)
         assert code == TIMEOUT
     finally:
         if tfd >= 0:
@@ -84,13 +84,13 @@ def test_timer_armed_once_per_deadline(srv: ModuleType, link: SocketLink) -> Non
     tfd = srv.timer()
     r, w = os.pipe()
     try:
-        buf = bytearray(2048)
+        buf, copy = bytearray(2048), bytearray(2048)
         deadline = time.monotonic_ns() + 30_000_000
         os.write(w, b"x")
-        code, *_ = srv.serve(link.fileno(), (r,), buf, deadline, False, None, None, 0, tfd)
+        code, *_ = srv.serve(link.fileno(), (r,), buf, copy, deadline, False, None, 0, tfd)
         assert code == WAKE
         os.read(r, 1)
-        code, *_ = srv.serve(link.fileno(), (r,), buf, deadline, False, None, None, 0, tfd)
+        code, *_ = srv.serve(link.fileno(), (r,), buf, copy, deadline, False, None, 0, tfd)
         assert code == TIMEOUT
         assert deadline <= time.monotonic_ns() < deadline + 2_000_000_000
     finally:
@@ -108,7 +108,7 @@ def test_a_frame_ends_a_timer_wait(srv: ModuleType, link: SocketLink) -> None:
         sender.start()
         t0 = time.monotonic_ns()
         code, n, _t = srv.serve(
-            link.fileno(), (), bytearray(2048), t0 + 10**10, False, None, None, 0, tfd
+            link.fileno(), (), bytearray(2048), bytearray(2048), t0 + 10**10, False, None, 0, tfd
         )
         assert (code, n) == (FRAME, len(frame))
         assert time.monotonic_ns() - t0 < 5 * 10**9
@@ -124,7 +124,7 @@ def test_another_descriptor_ends_the_wait(srv: ModuleType, link: SocketLink, bus
         os.write(w, b"x")
         t0 = time.monotonic_ns()
         code, _n, _t = srv.serve(
-            link.fileno(), (r,), bytearray(64), t0 + 10**10, busy, None, None, 0, -1
+            link.fileno(), (r,), bytearray(64), bytearray(64), t0 + 10**10, busy, None, 0, -1
         )
         assert code == WAKE
         assert time.monotonic_ns() - t0 < 5 * 10**9
@@ -137,23 +137,25 @@ def test_a_frame_waiting_comes_before_the_deadline(srv: ModuleType, link: Socket
     """Without a segment the frame is handed over as received, with its arrival time."""
     frame = dg.ethernet_frame([dg.build(dg.Cmd.BRD, 0, 0x0130, bytes(2))])
     link.master_send(frame)
-    buf = bytearray(2048)
+    buf, copy = bytearray(2048), bytearray(2048)
     before = time.monotonic_ns()
-    code, n, t_rx = srv.serve(link.fileno(), (), buf, 0, False, None, None, 0, -1)
+    code, n, t_rx = srv.serve(link.fileno(), (), buf, copy, 0, False, None, 0, -1)
     assert (code, n) == (FRAME, len(frame))
     assert bytes(buf[:n]) == frame
     assert before - 10**9 < t_rx <= time.monotonic_ns()
+    assert copy == bytearray(2048)  # nothing served, nothing kept
     assert link.master_recv() is None  # nothing sent
 
 
 def test_bad_arguments_raise(srv: ModuleType, link: SocketLink) -> None:
-    for buf in (bytes(64), None):
+    buf = bytearray(64)
+    for bad, copy in ((bytes(64), buf), (None, buf), (buf, bytearray(8)), (buf, None)):
         with pytest.raises(TypeError):
-            srv.serve(link.fileno(), (), buf, 0, False, None, None, 0, -1)
+            srv.serve(link.fileno(), (), bad, copy, 0, False, None, 0, -1)
     with pytest.raises(ValueError):
-        srv.serve(link.fileno(), tuple(range(9)), bytearray(64), 0, False, None, None, 0, -1)
+        srv.serve(link.fileno(), tuple(range(9)), buf, bytearray(64), 0, False, None, 0, -1)
     with pytest.raises(ValueError):
-        srv.serve(link.fileno(), (), bytearray(64), 0, False, None, None, 0, 1 << 20)
+        srv.serve(link.fileno(), (), buf, bytearray(64), 0, False, None, 0, 1 << 20)
 
 
 def pair_of_cycles() -> tuple[CspCycle, CspCycle]:
@@ -182,10 +184,12 @@ def state(c: CspCycle) -> tuple[object, ...]:
 
 def other_frames(c: CspCycle) -> list[bytes]:
     """Frames beside the cyclic one: a broadcast read, a write of the AL control register,
-    a truncated frame and a too-long datagram (destroyed), a header of another type (sent
-    back unprocessed), a frame too short for an EtherCAT header (ignored)."""
+    the cyclic frame behind an 802.1Q tag, a truncated frame and a too-long datagram
+    (destroyed), a header of another type (sent back unprocessed), a frame too short for
+    an EtherCAT header (ignored)."""
     cyclic = c.frame(0x0F)
     return [
+        cyclic[:12] + b"\x81\x00\x00\x05" + cyclic[12:],
         dg.ethernet_frame([dg.build(dg.Cmd.BRD, 0, 0x0130, bytes(2))]),
         dg.ethernet_frame([dg.build(dg.Cmd.APWR, 0, 0x0120, b"\x08\x00")]),
         cyclic[:40],
@@ -220,7 +224,7 @@ def test_responder_answers_as_handle_frame(
             c.t += MS
     assert a.daemon.replies == b.daemon.replies
     assert a.daemon.compiled_replies == a.daemon.replies, "every reply sent by the responder"
-    assert [r[0] for r in answered].count(REPLIED) == 12 + 3
+    assert [r[0] for r in answered].count(REPLIED) == 12 + 4
     assert [r[0] for r in answered].count(DROPPED) == 2
     assert [r[0] for r in answered].count(FRAME) == 1  # not EtherCAT: ignored by Python
 
@@ -258,8 +262,9 @@ def test_a_failing_frame_is_counted_as_in_handle_frame(srv: ModuleType, link: So
     assert link.master_recv() is None
     with pytest.raises(srv.SegmentError) as err:
         link.master_send(frame)
-        srv.serve(link.fileno(), (), bytearray(2048), 0, False, failing, d.recorder, 0, -1)
+        srv.serve(link.fileno(), (), bytearray(2048), bytearray(2048), 0, False, failing, 0, -1)
     assert isinstance(err.value.__cause__, RuntimeError)
+    assert err.value.args == (len(frame),)
 
 
 def test_daemon_run_serves_through_the_responder(srv: ModuleType, link: SocketLink) -> None:

@@ -84,11 +84,12 @@ class ResponderLink(RawLink):
         assert daemon.responder is not None
         self._responder = daemon.responder
         self._timer = self._responder.timer()
+        self._rx_copy = bytearray(2048)
 
     def recv_into(self, buf: bytearray) -> int:
         srv = self._responder
         code, n, t_rx = srv.serve(
-            self.fileno(), (), buf, time.monotonic_ns(), False, None, None, 0, self._timer
+            self.fileno(), (), buf, self._rx_copy, time.monotonic_ns(), False, None, 0, self._timer
         )
         if code != srv.FRAME:
             assert code == srv.TIMEOUT, code
