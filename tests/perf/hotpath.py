@@ -119,7 +119,7 @@ class CspCycle:
         #: frames go through the compiled responder (decision P9) over a socket pair
         self.responder = responder
         self.seg, self.clock = segment_of(drives, device=device)
-        self.seg.compiled = compiled  # the compiled responder may serve it (decision P9)
+        self.seg.compiled = compiled  # the compiled logical walk (decision P6)
         for fw in self.seg.firmware:
             fw.compiled = compiled  # the compiled DC cycle (decision P3) or the reference
         t = self.master = TinyMaster(self.seg)
