@@ -52,18 +52,6 @@ def twins() -> list[Extension]:
 
 TWINS: list[tuple[str, list[str], list[str], list[str]]] = [
     (
-        "ecatsim.esc._logical",
-        ["ecatsim/esc/_logical.c"],
-        [
-            "ecatsim/esc/_logical.h",
-            "ecatsim/esc/_sm.h",
-            "ecatsim/esc/_events.h",
-            "ecatsim/_attr.h",
-            "ecatsim/_module.h",
-        ],
-        ["-Wall", "-Wextra"],
-    ),
-    (
         "ecatsim.slave._cycle",
         ["ecatsim/slave/_cycle.c"],
         [
@@ -75,25 +63,14 @@ TWINS: list[tuple[str, list[str], list[str], list[str]]] = [
         ],
         ["-Wall", "-Wextra"],
     ),
-    (
-        "ecatsim._serve",
-        ["ecatsim/_serve.c"],
-        [
-            "ecatsim/esc/_logical.h",
-            "ecatsim/esc/_sm.h",
-            "ecatsim/link/_rawio.h",
-            "ecatsim/_attr.h",
-            "ecatsim/esc/_windows.h",
-            "ecatsim/esc/_events.h",
-            "ecatsim/_module.h",
-        ],
-        ["-Wall", "-Wextra"],
-    ),
 ]
+#: compiled-only Cython modules (a .pyx, no .py twin): the daemon's responder (decision P9)
+PYX = ["ecatsim.responder"]
 
 
 def core() -> list[Extension]:
-    """The Cython-compiled core, or nothing where Cython is not installed."""
+    """The Cython-compiled core and the compiled-only modules (``PYX``), or nothing where
+    Cython is not installed."""
     from setuptools import Extension
 
     try:
@@ -103,6 +80,9 @@ def core() -> list[Extension]:
     exts = [
         Extension(name, [name.replace(".", "/") + ".py"], optional=True, extra_compile_args=CFLAGS)
         for name in core_modules()
+    ] + [
+        Extension(name, [name.replace(".", "/") + ".pyx"], optional=True, extra_compile_args=CFLAGS)
+        for name in PYX
     ]
     built = list(
         cythonize(

@@ -169,7 +169,7 @@ def say_if_pure() -> None:
 
 
 def load(name: str) -> ModuleType | None:
-    """The hand-written C extension ``name`` (e.g. ``ecatsim.esc._logical``), or None where
+    """The optional extension ``name`` (e.g. ``ecatsim.responder``), or None where
     it was not built (no C compiler), the environment asks for pure Python, or the
     interpreter is free-threaded."""
     global _said_free_threaded

@@ -2,8 +2,9 @@
 
 Blocking wake-up by default (select(2) on the link's fd with the next timer as timeout,
 decision P1); ``busy_poll`` spins on a non-blocking receive instead. On a raw link the
-compiled responder (``_serve.c``, decision P9) waits, receives and answers the cyclic
-frames itself and hands every other frame to :meth:`Daemon.handle_frame`, the reference.
+compiled responder (ecatsim/responder.pyx, decision P9) waits, receives and answers each
+frame through the same segment calls as :meth:`Daemon.handle_frame`, the reference, and
+hands a frame to it where something watches or alters frames (trace, faults).
 A failure while processing a frame is counted and logged once with the last frames; the
 loop carries on.
 Ref: docs/architecture.md "Frame path".
@@ -30,7 +31,7 @@ from ecatsim.recorder import FrameRecorder
 from ecatsim.segment import Segment
 from ecatsim.wire.frame import ecat_offset, mark_processed
 
-_serve = load("ecatsim._serve")  # decision P9; None: Python serves
+responder = load("ecatsim.responder")  # decision P9; None: the select(2) loop serves
 
 log = structlog.get_logger("ecatsim.daemon")
 
@@ -97,7 +98,7 @@ class Daemon:
         self.follower: CpuFollower | None = None
         self.failures = 0
         self.replies = 0
-        #: replies the compiled responder sent (served whole in C)
+        #: replies the compiled responder sent
         self.compiled_replies = 0
         self._failure_logged: set[str] = set()
         self._stop = False
@@ -256,7 +257,7 @@ class Daemon:
         socket (one frame per receive and per send) and the segment runs on the OS
         monotonic clock the receive time stamps are converted to."""
         return (
-            _serve is not None
+            responder is not None
             and self.compiled
             and getattr(self.link, "raw_socket", False)
             and isinstance(self.segment.clock, MonotonicClock)
@@ -299,15 +300,15 @@ class Daemon:
         (host monotonic) passes or another descriptor is readable, and serve what came. A
         frame waiting is always served before the timers, as in :meth:`_run_select`.
         ``t_rx_ns``: the frame's arrival time (0: the kernel's receive time stamp).
-        Returns the responder's code (``_serve.REPLIED`` ...)."""
-        srv = _serve
+        Returns the responder's code (``responder.REPLIED`` ...)."""
+        srv = responder
         assert srv is not None
         if self._timer_fd < 0:
             self._timer_fd = srv.timer()
         rx_copy = self._rx_copy
         seg = self.segment if self._fast_ok() else None
         try:
-            code, n, t_rx, p = srv.serve(
+            code, n, t_rx = srv.serve(
                 self._fd,
                 self._watch,
                 buf,
@@ -318,20 +319,20 @@ class Daemon:
                 t_rx_ns,
                 self._timer_fd,
             )
-        except OSError:
-            raise  # the socket failed: as from link.recv_into
-        except Exception as exc:  # the loop never dies on a frame
-            self._failure("process", exc)
-            return int(srv.FRAME)  # the frame was handled: by a failure, as in handle_frame
+        except srv.SegmentError as exc:  # the loop never dies on a frame
+            self.recorder.record(rx_copy, exc.args[0])
+            self._failure("process", exc.__cause__ or exc)
+            return int(srv.DROPPED)  # the frame was handled: by a failure, as in handle_frame
         if code == srv.REPLIED:
             self.recorder.record(rx_copy, n)
             self.replies += 1
             self.compiled_replies += 1
             self._after(t_rx)
+        elif code == srv.DROPPED:
+            self.recorder.record(rx_copy, n)
+            self._after(t_rx)
         elif code == srv.FRAME:
             self.handle_frame(buf, n, t_rx)
-        elif code == srv.RESUME:
-            self._resume(buf, n, t_rx, p)
         else:  # TIMEOUT, WAKE: no frame is waiting
             if code == srv.WAKE:
                 ready, _, _ = select.select(self._watch, (), (), 0)
@@ -340,8 +341,9 @@ class Daemon:
         return int(code)
 
     def _fast_ok(self) -> bool:
-        """The compiled responder may process frames: nothing that watches or alters them
-        (frame trace, injected faults) is on, and the segment walks compiled."""
+        """The compiled responder may serve frames whole: nothing that watches or alters
+        them (frame trace, injected faults) is on, and the daemon sends each reply before
+        the segment's work after it (decision P7)."""
         return (
             self.segment.compiled
             and self.segment.reply_first
@@ -349,16 +351,6 @@ class Daemon:
             and not self.faults.active
             and not self.faults.wire_live
         )
-
-    def _resume(self, buf: bytearray, n: int, t_rx: int, p: int) -> None:
-        """A frame the compiled responder began: the rest of its walk, then the reply."""
-        self.recorder.record(self._rx_copy, n)
-        try:
-            reply = self.segment.resume(buf, p)
-        except Exception as exc:
-            self._failure("process", exc)
-            return
-        self._answer(buf, ecat_offset(buf, n, self.link.ethernet), n, reply, t_rx)
 
     def _serve_others(self, ready: list[int]) -> None:
         """The wake-up pipe and the control socket, when readable."""

@@ -33,7 +33,7 @@ cdef class Segment:
     @cython.locals(ctx=FrameContext, escs=list, reach="long long", cmd="long long",
                    lf="long long", dlen="long long", d0="long long", w="long long",
                    data="unsigned char[:]", inc="long long", adp="long long",
-                   ado="long long", lad="long long", done="long long", esc=Esc,
+                   ado="long long", lad="long long", esc=Esc,
                    k="long long", i="long long", irq="long long", wkc="long long")
     cpdef void _walk(self, bytearray buf, long long p) except *
 

@@ -13,13 +13,10 @@ from collections.abc import Callable, Sequence
 from typing import Protocol
 
 from ecatsim.clock import Clock
-from ecatsim.compiled import load
 from ecatsim.esc import regs
 from ecatsim.esc.core import Esc, FrameContext
 from ecatsim.esc.regs import DC_SYSTEM_TIME as _DC_SYSTEM_TIME  # compiled: a C constant
 from ecatsim.wire.datagram import CIRCULATING, LEN_MASK, MORE_FOLLOWS
-
-_logical = load("ecatsim.esc._logical")  # decision P6; None: Python serves
 
 #: overdue SYNC0 pulses fired one by one before the rest are skipped (a stall this long,
 #: or a forward jump of the system time, is not caught up). Decision DC2.
@@ -45,7 +42,7 @@ class Serviceable(Protocol):
 class Segment:
     """N slaves in wire order; one call per received frame."""
 
-    #: fixed attributes: the compiled paths read them as slots (ecatsim/_attr.h)
+    #: fixed attributes (the compiled core declares them in segment.pxd)
     __slots__ = (
         "_dc_after",
         "_dc_before",
@@ -94,7 +91,8 @@ class Segment:
         self.reach = len(self.escs)
         self.addr_map: dict[int, tuple[int, ...]] = {}
         self.logical: list[Esc] = []
-        #: LRD/LWR/LRW through the compiled walk where it applies; tests compare
+        #: the daemon's compiled responder may serve this segment's frames (decision P9);
+        #: tests compare it with the Python path
         self.compiled = True
         #: the caller sends the reply before it calls after_reply() (the daemon does):
         #: the DC time loops of an FRMW of 0x0910 may wait until then (decision P7)
@@ -225,13 +223,6 @@ class Segment:
         self._walk(buf, off + 2)
         return True
 
-    def resume(self, buf: bytearray, p: int) -> bool:
-        """Walk the rest of a frame the compiled responder began: the datagrams from offset
-        ``p`` on (those before it are done, with process()'s checks and bookkeeping).
-        Returns True: the frame is to be sent back. Decision P9."""
-        self._walk(buf, p)
-        return True
-
     def _frmw_system_time(self, data: memoryview, readers: Sequence[int], reach: int) -> int:
         """The DC time distribution (FRMW of 0x0910, the frame's last datagram) with the
         writers' time loops after the reply (decision P7): the reference's read is all the
@@ -288,9 +279,6 @@ class Segment:
         mv = memoryview(buf)
         ctx = self.ctx
         escs = self.escs
-        walk = _logical.run if _logical is not None and self.compiled else None
-        if type(buf) is not bytearray:
-            walk = None
         while True:
             if ctx.topology_dirty or ctx.addr_dirty or ctx.logical_dirty or ctx.irq_dirty:
                 self._refresh()
@@ -306,12 +294,8 @@ class Segment:
             ado = buf[p + 4] | (buf[p + 5] << 8)
             if cmd in (LRW, LRD, LWR):
                 lad = adp | (ado << 16)
-                done = walk(self.logical, cmd, lad, buf, d0, dlen) if walk is not None else -1
-                if done >= 0:
-                    inc = done  # compiled: every FMMU met goes to one SM (decision P6)
-                else:
-                    for esc in self.logical:
-                        inc += esc.ecat_logical(cmd, lad, data)
+                for esc in self.logical:
+                    inc += esc.ecat_logical(cmd, lad, data)
             elif cmd in (FPRD, FPWR, FPRW):
                 for i in self.addr_map.get(adp, ()):
                     inc += _physical(escs[i], cmd - FPRD, ado, data)

@@ -215,8 +215,8 @@ class RawLink:
 
     def recv_into(self, buf: bytearray) -> int:
         """One frame into ``buf``; 0 if none was waiting (or it was our own outgoing one).
-        The daemon's compiled responder receives the same way in C (``_rawio.h``, decision
-        P4); tests/unit/link/test_links.py runs both."""
+        The daemon's compiled responder receives the same way (ecatsim/responder.pyx,
+        decision P4); tests/unit/link/test_links.py runs both."""
         while True:
             try:
                 n, anc, _flags, addr = self.sock.recvmsg_into([buf], self._anc_size)

@@ -41,7 +41,7 @@ def test_dc_csp_cycle_not_regressed(drives: int) -> None:
 @pytest.mark.parametrize("drives", [1, 16])
 def test_dc_csp_cycle_through_the_responder_not_regressed(drives: int) -> None:
     """The same DC cycle with the frame answered by the compiled responder (decision P9)."""
-    require_built(daemon_mod._serve, "ecatsim._serve")
+    require_built(daemon_mod.responder, "ecatsim.responder")
     unit = calibrate()
     ratio = csp_cycle_cost(drives, cycles=200, responder=True) / unit
     base = BASELINE[f"dc_csp_responder_{drives}"]

@@ -1,7 +1,9 @@
-"""The compiled responder's wait (decision P9): the deadline, the other descriptors, the
-busy mode, a frame handed over untouched, and Daemon.run serving through it. What it does
-to frames is compared with Python in tests/unit/slave/test_cycle_compiled.py.
-Ref: ecatsim/_serve.c; ecatsim/daemon.py Daemon.serve_once."""
+"""The compiled responder (decision P9): its wait (the deadline, the other descriptors,
+the busy mode), a frame handed over untouched, the same frames answered by it and by
+Daemon.handle_frame with the same replies, recorder and counters, and Daemon.run serving
+through it. Over whole DC cycles it is compared with Python in
+tests/unit/slave/test_cycle_compiled.py.
+Ref: ecatsim/responder.pyx; ecatsim/daemon.py Daemon.serve_once, Daemon.handle_frame."""
 
 from __future__ import annotations
 
@@ -18,18 +20,21 @@ from ecatsim.build import build_segment
 from ecatsim.clock import MonotonicClock
 from ecatsim.config import SegmentConfig, SlaveConfig
 from ecatsim.daemon import Daemon
+from ecatsim.segment import Segment
 from ecatsim.wire import datagram as dg
-from tests.support.compiled import require_built
+from tests.perf.hotpath import MS, CspCycle
+from tests.support.compiled import record_results, require_built
 from tests.support.socketlink import SocketLink
+from tests.support.tinymaster import segment_of
 
-TIMEOUT, WAKE, FRAME, REPLIED, RESUME = 0, 1, 2, 3, 4
+TIMEOUT, WAKE, FRAME, REPLIED, DROPPED = 0, 1, 2, 3, 4
 
 
 @pytest.fixture
 def srv() -> ModuleType:
-    require_built(daemon_mod._serve, "ecatsim._serve")
-    assert daemon_mod._serve is not None
-    return daemon_mod._serve
+    require_built(daemon_mod.responder, "ecatsim.responder")
+    assert daemon_mod.responder is not None
+    return daemon_mod.responder
 
 
 @pytest.fixture
@@ -40,12 +45,12 @@ def link() -> Iterator[SocketLink]:
 
 
 def test_codes(srv: ModuleType) -> None:
-    assert (srv.TIMEOUT, srv.WAKE, srv.FRAME, srv.REPLIED, srv.RESUME) == (
+    assert (srv.TIMEOUT, srv.WAKE, srv.FRAME, srv.REPLIED, srv.DROPPED) == (
         TIMEOUT,
         WAKE,
         FRAME,
         REPLIED,
-        RESUME,
+        DROPPED,
     )
 
 
@@ -61,7 +66,7 @@ def test_waits_until_the_deadline(
         for _ in range(2):
             t0 = time.monotonic_ns()
             deadline = t0 + 20_000_000
-            code, n, _t, _p = srv.serve(link.fileno(), (), buf, copy, deadline, busy, None, 0, tfd)
+            code, n, _t = srv.serve(link.fileno(), (), buf, copy, deadline, busy, None, 0, tfd)
             waited = time.monotonic_ns() - t0
             assert (code, n) == (TIMEOUT, 0)
             assert 20_000_000 <= waited < 2_000_000_000  # a wide guard, not a timing test
@@ -102,7 +107,7 @@ def test_a_frame_ends_a_timer_wait(srv: ModuleType, link: SocketLink) -> None:
     try:
         sender.start()
         t0 = time.monotonic_ns()
-        code, n, _t, _p = srv.serve(
+        code, n, _t = srv.serve(
             link.fileno(), (), bytearray(2048), bytearray(2048), t0 + 10**10, False, None, 0, tfd
         )
         assert (code, n) == (FRAME, len(frame))
@@ -118,7 +123,7 @@ def test_another_descriptor_ends_the_wait(srv: ModuleType, link: SocketLink, bus
     try:
         os.write(w, b"x")
         t0 = time.monotonic_ns()
-        code, _n, _t, _p = srv.serve(
+        code, _n, _t = srv.serve(
             link.fileno(), (r,), bytearray(64), bytearray(64), t0 + 10**10, busy, None, 0, -1
         )
         assert code == WAKE
@@ -134,28 +139,137 @@ def test_a_frame_waiting_comes_before_the_deadline(srv: ModuleType, link: Socket
     link.master_send(frame)
     buf, copy = bytearray(2048), bytearray(2048)
     before = time.monotonic_ns()
-    code, n, t_rx, p = srv.serve(link.fileno(), (), buf, copy, 0, False, None, 0, -1)
-    assert (code, n, p) == (FRAME, len(frame), 0)
+    code, n, t_rx = srv.serve(link.fileno(), (), buf, copy, 0, False, None, 0, -1)
+    assert (code, n) == (FRAME, len(frame))
     assert bytes(buf[:n]) == frame
     assert before - 10**9 < t_rx <= time.monotonic_ns()
-    assert copy == bytearray(2048)  # nothing processed, nothing kept
+    assert copy == bytearray(2048)  # nothing served, nothing kept
     assert link.master_recv() is None  # nothing sent
 
 
 def test_bad_arguments_raise(srv: ModuleType, link: SocketLink) -> None:
-    with pytest.raises(TypeError):
-        srv.serve(link.fileno(), (), bytearray(64), bytearray(8), 0, False, None, 0, -1)
+    buf = bytearray(64)
+    for bad, copy in ((bytes(64), buf), (None, buf), (buf, bytearray(8)), (buf, None)):
+        with pytest.raises(TypeError):
+            srv.serve(link.fileno(), (), bad, copy, 0, False, None, 0, -1)
     with pytest.raises(ValueError):
-        srv.serve(
-            link.fileno(), tuple(range(9)), bytearray(64), bytearray(64), 0, False, None, 0, -1
-        )
+        srv.serve(link.fileno(), tuple(range(9)), buf, bytearray(64), 0, False, None, 0, -1)
     with pytest.raises(ValueError):
-        srv.serve(link.fileno(), (), bytearray(64), bytearray(64), 0, False, None, 0, 1 << 20)
+        srv.serve(link.fileno(), (), buf, bytearray(64), 0, False, None, 0, 1 << 20)
+
+
+def pair_of_cycles() -> tuple[CspCycle, CspCycle]:
+    """Two identical drives in OP with SYNC0 running: one served by the responder over a
+    socket pair, one by Daemon.handle_frame over a loopback link."""
+    return CspCycle(1, responder=True), CspCycle(1)
+
+
+def state(c: CspCycle) -> tuple[object, ...]:
+    """What serving a frame leaves behind: the reply counters, the recorder, the segment's
+    counters, pending DC work, SYNC pulses and the ESC's memory."""
+    seg, d = c.seg, c.daemon
+    return (
+        d.replies,
+        d.failures,
+        d.recorder.last(),
+        seg.frames,
+        seg.bad_frames,
+        seg.ctx.frame_no,
+        seg.ctx.t_ns,
+        seg._dc_pending,
+        seg.sync0_ticks,
+        bytes(seg.escs[0].mem),
+    )
+
+
+def other_frames(c: CspCycle) -> list[bytes]:
+    """Frames beside the cyclic one: a broadcast read, a write of the AL control register,
+    the cyclic frame behind an 802.1Q tag, a truncated frame and a too-long datagram
+    (destroyed), a header of another type (sent back unprocessed), a frame too short for
+    an EtherCAT header (ignored)."""
+    cyclic = c.frame(0x0F)
+    return [
+        cyclic[:12] + b"\x81\x00\x00\x05" + cyclic[12:],
+        dg.ethernet_frame([dg.build(dg.Cmd.BRD, 0, 0x0130, bytes(2))]),
+        dg.ethernet_frame([dg.build(dg.Cmd.APWR, 0, 0x0120, b"\x08\x00")]),
+        cyclic[:40],
+        cyclic[:14] + bytes([0xFF, 0x17]) + cyclic[16:],
+        cyclic[:15] + bytes([0x50]) + cyclic[16:],
+        cyclic[:15],
+    ]
+
+
+def test_responder_answers_as_handle_frame(
+    srv: ModuleType, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The same frames through the responder (serve_once) and the Python path
+    (handle_frame): the same replies, recorder, counters and memory, frame by frame,
+    including a frame with a SYNC0 pulse due before it and frames the segment destroys."""
+    a, b = pair_of_cycles()
+    answered = record_results(monkeypatch, daemon_mod, "responder", "serve")
+    assert a.daemon._fast_ok()
+    assert state(a)[3:] == state(b)[3:]
+    for k in range(12):
+        if k % 4:
+            a.pulse()  # every fourth frame finds its pulse still due
+            b.pulse()
+        for c in (a, b):
+            c.clock.t = c.t + MS // 2
+        frames = [a.frame(0x0F), *(other_frames(a) if k == 5 else ())]
+        for raw in frames:
+            ra, rb = a.deliver(raw), b.deliver(raw)
+            assert ra == rb, (k, raw.hex())
+            assert state(a)[1:] == state(b)[1:], (k, raw.hex())
+        for c in (a, b):
+            c.t += MS
+    assert a.daemon.replies == b.daemon.replies
+    assert a.daemon.compiled_replies == a.daemon.replies, "every reply sent by the responder"
+    assert [r[0] for r in answered].count(REPLIED) == 12 + 4
+    assert [r[0] for r in answered].count(DROPPED) == 2
+    assert [r[0] for r in answered].count(FRAME) == 1  # not EtherCAT: ignored by Python
+
+
+def test_a_traced_daemon_serves_in_python(srv: ModuleType) -> None:
+    """With the frame trace on (or a fault armed) the responder hands every frame to
+    Daemon.handle_frame untouched, and the replies are the same."""
+    a, b = pair_of_cycles()
+    a.daemon.trace_frames = True
+    assert not a.daemon._fast_ok()
+    served = a.daemon.compiled_replies  # the constructor's cycles
+    for _ in range(3):
+        assert a.step() == b.step()
+    assert (a.daemon.compiled_replies, a.daemon.replies) == (served, served + 3)
+    assert state(a)[1:] == state(b)[1:]
+
+
+class Failing(Segment):
+    """A segment whose frame processing fails."""
+
+    def process(self, buf: bytearray, off: int, n: int, t_ns: int = 0) -> bool:
+        raise RuntimeError("broken segment")
+
+
+def test_a_failing_frame_is_counted_as_in_handle_frame(srv: ModuleType, link: SocketLink) -> None:
+    """The segment raises while processing: the daemon counts and logs the failure with the
+    frame recorded, sends nothing and carries on, as handle_frame does."""
+    seg, _ = segment_of(1)
+    failing = Failing(seg.escs, seg.ctx, MonotonicClock())
+    d = Daemon(link, failing)
+    frame = dg.ethernet_frame([dg.build(dg.Cmd.BRD, 0, 0x0130, bytes(2))])
+    link.master_send(frame)
+    assert d.serve_once(bytearray(2048), time.monotonic_ns() + 10**9) == DROPPED
+    assert (d.failures, d.replies, d.recorder.last()) == (1, 0, [frame])
+    assert link.master_recv() is None
+    with pytest.raises(srv.SegmentError) as err:
+        link.master_send(frame)
+        srv.serve(link.fileno(), (), bytearray(2048), bytearray(2048), 0, False, failing, 0, -1)
+    assert isinstance(err.value.__cause__, RuntimeError)
+    assert err.value.args == (len(frame),)
 
 
 def test_daemon_run_serves_through_the_responder(srv: ModuleType, link: SocketLink) -> None:
-    """Daemon.run on a raw-socket link and the OS clock: a logical frame is answered in C,
-    a broadcast read by Python, and stop() ends the loop from another thread."""
+    """Daemon.run on a raw-socket link and the OS clock: a logical frame and a broadcast
+    read are answered by the responder, and stop() ends the loop from another thread."""
     seg = build_segment(SegmentConfig((SlaveConfig(device="echo", serial=1),)), MonotonicClock())
     d = Daemon(link, seg)
     assert d.responder_applies()
@@ -182,4 +296,4 @@ def test_daemon_run_serves_through_the_responder(srv: ModuleType, link: SocketLi
     processed[6] |= 0x02
     assert replies[0] == processed and replies[2] == processed
     assert replies[1] is not None and replies[1][26:30] == b"\x01\x00\x01\x00"
-    assert (d.replies, d.compiled_replies, d.failures) == (3, 2, 0)
+    assert (d.replies, d.compiled_replies, d.failures) == (3, 3, 0)

@@ -75,20 +75,20 @@ def pair() -> Iterator[NetnsPair]:
 
 
 class ResponderLink(RawLink):
-    """A RawLink whose receive is the daemon's compiled responder's (``_serve.serve`` with
-    no segment: wait until the deadline, receive with ``_rawio.h``, hand the frame back),
-    so the tests below run the C receive and the Python reference alike."""
+    """A RawLink whose receive is the daemon's compiled responder's (``responder.serve``
+    with no segment: wait until the deadline, receive, hand the frame back), so the tests
+    below run the compiled receive and the Python reference alike."""
 
     def __init__(self, iface: str) -> None:
         super().__init__(iface)
-        assert daemon._serve is not None
-        self._serve = daemon._serve
-        self._timer = self._serve.timer()
+        assert daemon.responder is not None
+        self._responder = daemon.responder
+        self._timer = self._responder.timer()
         self._rx_copy = bytearray(2048)
 
     def recv_into(self, buf: bytearray) -> int:
-        srv = self._serve
-        code, n, t_rx, _ = srv.serve(
+        srv = self._responder
+        code, n, t_rx = srv.serve(
             self.fileno(), (), buf, self._rx_copy, time.monotonic_ns(), False, None, 0, self._timer
         )
         if code != srv.FRAME:
@@ -109,7 +109,7 @@ def raw_pair(
     """A RawLink on the slave end, receiving as the compiled responder does (decision P4)
     or through Python's socket module; a plain ETH_P_ALL socket on the master end."""
     if request.param:
-        require_built(daemon._serve, "ecatsim._serve")
+        require_built(daemon.responder, "ecatsim.responder")
     with in_netns(pair.slave_ns):
         link = ResponderLink(pair.slave_if) if request.param else RawLink(pair.slave_if)
     with in_netns(pair.master_ns):

@@ -1,4 +1,4 @@
-"""Type stub of the compiled responder (ecatsim/_serve.c)."""
+"""Type stub of the daemon's compiled responder (ecatsim/responder.pyx, decision P9)."""
 
 from ecatsim.segment import Segment
 
@@ -6,7 +6,11 @@ TIMEOUT: int
 WAKE: int
 FRAME: int
 REPLIED: int
-RESUME: int
+DROPPED: int
+
+class SegmentError(Exception):
+    """Segment.pulses_due or Segment.process raised on a frame (its ``__cause__``);
+    ``args[0]``: the frame's length."""
 
 def serve(
     fd: int,
@@ -18,7 +22,5 @@ def serve(
     seg: Segment | None,
     t_rx: int,
     timer_fd: int,
-    /,
-) -> tuple[int, int, int, int]: ...
+) -> tuple[int, int, int]: ...
 def timer() -> int: ...
-def slot_offset(obj: object, name: str, /) -> int: ...
