@@ -34,36 +34,6 @@ def core_modules() -> list[str]:
     raise SystemExit("setup.py: no CORE tuple in ecatsim/compiled.py")
 
 
-def twins() -> list[Extension]:
-    """The hand-written C paths still in use (decisions P3-P12)."""
-    from setuptools import Extension
-
-    return [
-        Extension(
-            name,
-            sources,
-            depends=depends,
-            optional=True,
-            extra_compile_args=[*CFLAGS, *extra],
-        )
-        for name, sources, depends, extra in TWINS
-    ]
-
-
-TWINS: list[tuple[str, list[str], list[str], list[str]]] = [
-    (
-        "ecatsim.slave._cycle",
-        ["ecatsim/slave/_cycle.c"],
-        [
-            "ecatsim/esc/_pdi.h",
-            "ecatsim/esc/_sm.h",
-            "ecatsim/esc/_events.h",
-            "ecatsim/_attr.h",
-            "ecatsim/_module.h",
-        ],
-        ["-Wall", "-Wextra"],
-    ),
-]
 #: compiled-only Cython modules (a .pyx, no .py twin): the daemon's responder (decision P9)
 PYX = ["ecatsim.responder"]
 
@@ -109,4 +79,4 @@ def core() -> list[Extension]:
 if __name__ == "__main__":  # setuptools runs setup.py as __main__; a test reads CORE
     from setuptools import setup
 
-    setup(ext_modules=[*twins(), *core()])
+    setup(ext_modules=core())

@@ -256,13 +256,16 @@ def hook_names() -> set[str]:
 class Esc(SmHost):
     """One TMC8460 ESC instance (64 KiB address space, 6 FMMUs, 6 SMs)."""
 
-    #: fixed attributes: the compiled paths read them as slots (ecatsim/_attr.h)
+    #: fixed attributes (compiled: the typed fields of core.pxd)
     __slots__ = (
         "_scratch",
         "al_control_locked",
         "ctx",
         "dc",
         "ecat_irq",
+        "ecat_r_hooked",
+        "ecat_w_hooked",
+        "ecat_wmask",
         "eeprom",
         "fmmus",
         "link_down",
@@ -270,9 +273,6 @@ class Esc(SmHost):
         "mii",
         "on_reset",
         "pdi_emulation",
-        "ecat_r_hooked",
-        "ecat_w_hooked",
-        "ecat_wmask",
         "pdi_r_hooked",
         "pdi_w_hooked",
         "pdi_wmask",
@@ -557,7 +557,7 @@ class Esc(SmHost):
         )
         return 1
 
-    def ecat_write(self, ado: int, data: memoryview) -> int:
+    def ecat_write(self, ado: int, data: memoryview | bytes) -> int:
         """Physical write from ``data``; returns the WKC increment (0 or 1)."""
         end = ado + len(data)
         for ws, we, _sm in self.sm_windows:
@@ -638,7 +638,7 @@ class Esc(SmHost):
     def _hits(self, ado: int, end: int) -> list[tuple[int, int, SyncManager]]:
         return [w for w in self.sm_windows if w[0] < end and ado < w[1]]
 
-    def _ecat_write_sm(self, ado: int, data: memoryview) -> int:
+    def _ecat_write_sm(self, ado: int, data: memoryview | bytes) -> int:
         end = ado + len(data)
         hits = self._hits(ado, end)
         for _ws, _we, sm in hits:
@@ -709,7 +709,7 @@ class Esc(SmHost):
 
     # -- plain memory ------------------------------------------------------------------
 
-    def _plain_write(self, ado: int, data: memoryview) -> bool:
+    def _plain_write(self, ado: int, data: memoryview | bytes) -> bool:
         end = ado + len(data)
         if end <= REGISTER_END:
             self.reg_write(ado, bytes(data), False)

@@ -194,9 +194,7 @@ class DcUnit:
             diff = _signed64((local - value) & MASK64)
         # Proportional step on the time and integral action on the rate: the loop the
         # speed counter implements, with a bandwidth from 0x0930 (larger = smoother).
-        start = (
-            m[DC_SPEED_COUNTER_START] | (m[DC_SPEED_COUNTER_START + 1] << 8)
-        ) & 0x7FFF
+        start = (m[DC_SPEED_COUNTER_START] | (m[DC_SPEED_COUNTER_START + 1] << 8)) & 0x7FFF
         gain = 1.0 / max(2.0, start / 0x400)
         self.t_ref = t  # rebase at t
         if abs(diff) > 1_000_000:

@@ -41,7 +41,6 @@ from ecatsim.esc.regs import (  # re-exported for the firmware
     WD_STATUS_PD,
     sm_addr,
 )
-
 from ecatsim.esc.regs import DL_STATUS as _DL_STATUS  # compiled: C constants (pdi.pxd)
 from ecatsim.esc.regs import REGISTER_END as _REG_END
 
@@ -176,7 +175,7 @@ class Pdi:
             split = _REG_END - addr
             esc.reg_write(addr, bytes(data[:split]), True)
             if esc.pdram_ok:
-                esc.mem[_REG_END : end] = data[split:]
+                esc.mem[_REG_END:end] = data[split:]
             return True
         esc.reg_write(addr, bytes(data), True)
         return True

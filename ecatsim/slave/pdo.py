@@ -251,7 +251,7 @@ class PdoImage:
         st = self._tx_st
         if st is not None:
             try:
-                return st.pack(*[e.value for e in self._tx_entries])  # type: ignore[no-any-return]
+                return st.pack(*[e.value for e in self._tx_entries])
             except struct.error:
                 pass  # a value out of its type's range: encoded (masked) entry by entry
         out = bytearray(self.plan.tx_size)

@@ -117,33 +117,37 @@ def test_setup_py_builds_the_core_list() -> None:
     assert tuple(setup["core_modules"]()) == compiled.CORE
 
 
-def test_every_extension_is_optional(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Where no C compiler exists pip still installs ecatsim, and the pure-Python core runs:
-    every extension setup.py declares is optional, including those cythonize makes anew."""
+def _cythonize_calls(monkeypatch: pytest.MonkeyPatch) -> tuple[list[Any], dict[str, Any]]:
+    """setup.py's extensions as cythonize would get them (Cython replaced by a recorder),
+    and the options it was called with."""
     setuptools = pytest.importorskip("setuptools")
     build = pytest.importorskip("Cython.Build")
+    seen: dict[str, Any] = {}
 
-    def fake_cythonize(exts: list[Any], **_: Any) -> list[Any]:
-        return [setuptools.Extension(e.name, [e.sources[0][:-3] + ".c"]) for e in exts]
+    def fake_cythonize(exts: list[Any], **kw: Any) -> list[Any]:
+        seen.update(kw)
+        return [setuptools.Extension(e.name, [e.sources[0].rsplit(".", 1)[0] + ".c"]) for e in exts]
 
     monkeypatch.setattr(build, "cythonize", fake_cythonize)
     setup = runpy.run_path(str(Path(compiled.__file__).parents[1] / "setup.py"), run_name="probe")
-    exts = [*setup["twins"](), *setup["core"]()]
-    assert {e.name for e in exts} >= set(compiled.CORE)
+    return setup["core"](), seen
+
+
+def test_every_extension_is_optional(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Where no C compiler exists pip still installs ecatsim, and the pure-Python core runs:
+    every extension setup.py declares is optional, including those cythonize makes anew.
+    They are all Cython modules: no hand-written C is left."""
+    exts, _ = _cythonize_calls(monkeypatch)
+    assert {e.name for e in exts} == {*compiled.CORE, "ecatsim.responder"}
     assert [e.name for e in exts if not e.optional] == []
+    root = Path(compiled.__file__).parent
+    assert sorted(p.name for p in root.rglob("*.[ch]")) == []
 
 
-def test_every_hand_written_extension_declares_its_gil_use() -> None:
-    """Each C extension initialises in phases with the slots of ecatsim/_module.h: Py_mod_gil
-    says it needs the GIL (the loader does not import it on a free-threaded interpreter),
-    and it is not loaded in a subinterpreter."""
-    root = Path(compiled.__file__).parents[1]
-    setup = runpy.run_path(str(root / "setup.py"), run_name="probe")
-    header = (root / "ecatsim" / "_module.h").read_text()
-    assert "{Py_mod_gil, Py_MOD_GIL_USED}" in header
-    assert "Py_MOD_MULTIPLE_INTERPRETERS_NOT_SUPPORTED" in header
-    for name, sources, depends, _extra in setup["TWINS"]:
-        text = (root / sources[0]).read_text()
-        assert "ecatsim/_module.h" in depends, name
-        assert "ECATSIM_MODULE_SLOTS(exec_module)" in text, name
-        assert "PyModuleDef_Init(&module)" in text and "PyModule_Create" not in text, name
+def test_every_extension_declares_that_it_needs_the_gil(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Cython declares Py_mod_gil as Py_MOD_GIL_USED for modules not marked free-threading
+    compatible: on a free-threaded interpreter the loader does not import them (the
+    pure-Python core runs, ecatsim/compiled.py), and an import would not turn the GIL on
+    silently."""
+    _, seen = _cythonize_calls(monkeypatch)
+    assert seen["compiler_directives"]["freethreading_compatible"] is False

@@ -70,4 +70,3 @@ def test_the_compiled_and_the_pure_python_core_give_the_same_bytes() -> None:
     assert ref[2] == got[2] == 0  # no frame or firmware failure either way
     assert ref[1] == got[1] == 3 * 405  # every SYNC0 pulse once (5 cycles to enable)
     assert got[3] == ref[3], "compiled and pure-Python cores differ (a C typing slip?)"
-

@@ -12,8 +12,8 @@ from pathlib import Path
 import ecatsim
 
 ROOT = Path(ecatsim.__file__).parent
-#: the PDI face: esc/pdi.py, and esc/_pdi.h for compiled firmware
-ALLOWED_ESC = {"ecatsim.esc.pdi", "ecatsim.esc._pdi"}
+#: the PDI face: esc/pdi.py (and its declarations esc/pdi.pxd for the compiled firmware)
+ALLOWED_ESC = {"ecatsim.esc.pdi"}
 
 
 CIMPORT = re.compile(r"^\s*(?:from\s+([\w.]+)\s+cimport|cimport\s+([\w.]+))", re.M)

@@ -2,7 +2,7 @@
 the busy mode), a frame handed over untouched, the same frames answered by it and by
 Daemon.handle_frame with the same replies, recorder and counters, and Daemon.run serving
 through it. Over whole DC cycles it is compared with Python in
-tests/unit/slave/test_cycle_compiled.py.
+tests/unit/test_responder_lockstep.py.
 Ref: ecatsim/responder.pyx; ecatsim/daemon.py Daemon.serve_once, Daemon.handle_frame."""
 
 from __future__ import annotations

@@ -1,11 +1,10 @@
-"""The compiled paths against the Python model, their reference: two identical segments,
-one with every compiled path (the DC cycle _cycle.c, and with ``responder`` the daemon's
-compiled responder, ecatsim/responder.pyx) and one in pure Python, run the same frames
-and must agree on every byte of ESC memory, every SM and event state, every OD value, the
-drive's state and every reply, through enable, motion, mode changes, a fault with its
-emergency, SAFEOP and back.
-Ref: ecatsim/slave/cycle.py; ecatsim/slave/firmware.py Firmware.service; ecatsim/daemon.py
-Daemon.serve_once; decisions P3, P9."""
+"""The compiled responder against the daemon's Python path, over whole DC cycles: two
+receive and send in compiled code) and one through Daemon.handle_one, run the same
+frames and must agree on every byte of ESC memory, every SM and event state, every OD
+value, the drive's state and every reply, through enable, motion, mode changes, a fault
+with its emergency, SAFEOP and back. (The core itself is one source: the compiled and
+pure-Python cores are compared in tests/unit/test_core_one_source.py.)
+Ref: ecatsim/daemon.py Daemon.serve_once, Daemon.handle_frame; decision P9."""
 
 from __future__ import annotations
 
@@ -19,8 +18,7 @@ import pytest
 
 from ecatsim import daemon as daemon_mod
 from ecatsim.esc import regs
-from ecatsim.slave import cycle
-from ecatsim.slave.pdo import Codec, Field, codec
+from ecatsim.slave.pdo import Field, codec
 from ecatsim.wire import datagram as dg
 from ecatsim.wire.frame import ecat_offset
 from tests.perf.hotpath import CSP, IN, MS, OUT, CspCycle
@@ -34,13 +32,7 @@ LOCAL = {"_snapshot_hits", "_published"}
 
 @pytest.fixture(autouse=True)
 def _require_compiled() -> None:
-    require_built(cycle.compiled, "ecatsim.slave._cycle")
-
-
-@pytest.fixture
-def served(monkeypatch: pytest.MonkeyPatch) -> list[bool]:
-    """Every result of _cycle.run (True: served compiled)."""
-    return record_results(monkeypatch, cycle, "compiled", "run")
+    require_built(daemon_mod.responder, "ecatsim.responder")
 
 
 @pytest.fixture
@@ -96,7 +88,8 @@ def snapshot(c: CspCycle) -> dict[str, Any]:
     return out
 
 
-def lockstep(n: int, ecat_irq: bool = False, responder: bool = False) -> tuple[CspCycle, CspCycle]:
+def lockstep(n: int, ecat_irq: bool = False, responder: bool = True) -> tuple[CspCycle, CspCycle]:
+    """(through the responder, through Daemon.handle_one with the DC time loops inline)"""
     return (
         CspCycle(n, compiled=True, ecat_irq=ecat_irq, responder=responder),
         CspCycle(n, compiled=False, ecat_irq=ecat_irq),
@@ -131,19 +124,14 @@ def al_request(state: int) -> Callable[[CspCycle], bytes | None]:
     return go
 
 
-@pytest.mark.parametrize("responder", [False, True], ids=["walk", "responder"])
-def test_compiled_cycle_matches_python_firmware(
-    served: list[bool],
+def test_responder_matches_python_over_the_drive_cycle(
     answered: list[tuple[int, int, int]],
-    responder: bool,
 ) -> None:
-    a, b = lockstep(2, responder=responder)
+    a, b = lockstep(2)
     same(a, b, lambda c: None)  # enabled by the constructors
     for _ in range(40):  # csp motion
         both(a, b)
-    assert served and all(served[-40:]), "the compiled cycle served the steady state"
-    if responder:
-        assert codes(answered) == [REPLIED] * 45, "every cyclic frame answered compiled"
+    assert codes(answered) == [REPLIED] * 45, "every cyclic frame answered compiled"
 
     def od(*values: tuple[int, int]) -> Callable[[CspCycle], None]:
         """OD writes on every drive, as an SDO download would make them."""
@@ -201,10 +189,8 @@ def test_compiled_cycle_matches_python_firmware(
 
     same(a, b, take_reply)
     assert a.seg.escs[0].al_event() & (regs.EV_SM0 << 1), "SM1 event raised, stays raised"
-    before = len(served)
     for _ in range(3):
         both(a, b)
-    assert served[before:] == [True] * 6, "served compiled with the SM1 event up"
     same(a, b, fault(False))
     for cw in (0x80, 0x00, 0x06, 0x07, 0x0F, 0x0F):
         both(a, b, cw)
@@ -246,17 +232,13 @@ def test_compiled_cycle_matches_python_firmware(
     same(a, b, od((0x6065, 0xFFFFFFFF)))
     for cw in (0x80, 0x00, 0x06, 0x07, 0x0F, 0x0F):
         both(a, b, cw)
-    assert served.count(True) >= 2 * 60
-    assert served.count(False) >= 2, "the fallback paths ran too"
-    if responder:
-        assert set(codes(answered)) == {REPLIED}, "the mailbox and AL work ran after replies"
+    assert set(codes(answered)) == {REPLIED}, "the mailbox and AL work ran after replies"
 
 
-@pytest.mark.parametrize("responder", [False, True], ids=["walk", "responder"])
-def test_compiled_cycle_with_ecat_events_and_padding(served: list[bool], responder: bool) -> None:
+def test_responder_with_ecat_events_and_padding() -> None:
     """SM events routed to the ECAT side as well (0x0210 and the IRQ field), and an input
     image with a padding byte, which must be written as 0."""
-    a, b = lockstep(1, ecat_irq=True, responder=responder)
+    a, b = lockstep(1, ecat_irq=True)
     both(a, b)
 
     def pad(c: CspCycle) -> None:
@@ -271,89 +253,13 @@ def test_compiled_cycle_with_ecat_events_and_padding(served: list[bool], respond
     for _ in range(8):
         both(a, b)
     assert a.seg.escs[0].ecat_irq != 0
-    assert served[-8:] == [True] * 8
 
 
-def test_compiled_cycle_leaves_other_events_to_python(served: list[bool]) -> None:
-    """An AL control request pending with SYNC0: the C code changes nothing, Python serves."""
-    a, b = lockstep(1)
-    for _ in range(3):
-        both(a, b)
-
-    def request(c: CspCycle) -> None:
-        c.master.one(dg.build(dg.Cmd.APWR, 0, regs.AL_CONTROL, b"\x04\x00"), service=False)
-
-    before = len(served)
-    same(a, b, request)
-    both(a, b)
-    assert False in served[before:]
-    assert a.seg.firmware[0].state.name == "SAFEOP"
-
-
-def test_sm_event_times_leave_the_compiled_cycle_to_python(served: list[bool]) -> None:
-    """SM2/SM3 with the latch event bits (0x0806+8n bits 6/7): their event times 0x09F0,
-    0x09F8 and 0x09FC are kept by the Python path only, so the compiled DC cycle
-    (sm_pdi_ok) declines and both segments agree on every byte.
-    Ref: TMC8460 §5.49 Table 90, §5.50.6 Tables 122-124."""
-    a, b = lockstep(1)
-    for _ in range(3):
-        both(a, b)
-    assert served[-3:] == [True] * 3
-
-    def latch_events(c: CspCycle) -> None:
-        for sm in (2, 3):
-            c.master.apwr(0, regs.sm_addr(sm, 6), b"\xc1")  # enable + ECAT + PDI events
-
-    same(a, b, latch_events)
-    assert all(f.sm is None for f in a.seg.escs[0].fmmus)
-    mem = a.seg.escs[0].mem
-    assert mem[0x09F0:0x0A00] == bytes(16)
-    before_s = len(served)
-    for _ in range(4):
-        both(a, b)
-    assert served[before_s:] and not any(served[before_s:])
-    assert mem[0x09F0:0x09F4] != bytes(4) and mem[0x09F8:0x0A00] != bytes(8)
-
-    def no_events(c: CspCycle) -> None:
-        for sm in (2, 3):
-            c.master.apwr(0, regs.sm_addr(sm, 6), b"\x01")
-
-    same(a, b, no_events)
-    for _ in range(3):
-        both(a, b)
-    assert served[-3:] == [True] * 3
-
-
-def test_constants_agree_with_the_register_map() -> None:
-    assert cycle.compiled is not None
-    k = cycle.compiled.constants()
-    for name, value in k.items():
-        if name in ("MEM_SIZE", "N_ITEMS"):
-            continue
-        assert getattr(regs, name) == value, name
-    assert k["MEM_SIZE"] == 0x10000
-
-
-def test_layout_follows_the_struct_format() -> None:
-    from ecatsim.slave.od import Entry
-
-    e8, e16 = Entry(1, "a", "INTEGER8"), Entry(2, "b", "UNSIGNED16")
-    e32 = Entry(3, "c", "INTEGER32")
-    fields = (Field(0, 1, e8), Field(1, 1, None), Field(2, 2, e16), Field(6, 4, e32))
-    c = codec(fields, 12)
-    assert isinstance(c, Codec)
-    assert c.st.format == "<b1xH2xi2x"
-    assert cycle.layout(c) == b"\x00\x00b\x02\x00H\x06\x00i"
-
-
-@pytest.mark.parametrize("responder", [False, True], ids=["walk", "responder"])
-def test_compiled_walk_matches_python_on_other_maps(
-    answered: list[tuple[int, int, int]], responder: bool
-) -> None:
+def test_responder_matches_python_on_other_maps(answered: list[tuple[int, int, int]]) -> None:
     """FMMUs beyond the usual pair: a read/write map over SM2 (the master reads its outputs
     back), partial accesses that leave a buffer open across a pulse, a bit-wise map and a
     map onto plain memory. The frames go through the daemon."""
-    a, b = lockstep(1, responder=responder)
+    a, b = lockstep(1)
     for _ in range(3):
         both(a, b)
 
@@ -386,8 +292,7 @@ def test_compiled_walk_matches_python_on_other_maps(
     same(a, b, frame(dg.build_logical(dg.Cmd.LRD, 12, bytes(1))))
     both(a, b)
     same(a, b, frame(dg.build_logical(dg.Cmd.LRD, 13, bytes(16))))
-    if responder:  # a frame with a SYNC0 pulse due before it (after both()) as well
-        assert codes(answered)[-6:] == [REPLIED] * 6
+    assert codes(answered)[-6:] == [REPLIED] * 6
     # a bit-wise map and one onto plain memory (behind an LRD of SM3)
     same(a, b, program(3, fmmu(3, 0x9000, 1, 0x1100, 1, lsb=1)))
     for _ in range(2):
@@ -396,8 +301,7 @@ def test_compiled_walk_matches_python_on_other_maps(
     for _ in range(2):
         same(a, b, frame(lrd_sm3, dg.build_logical(dg.Cmd.LRW, 0x9000, b"\x01\x02\x03\x04")))
     same(a, b, frame(dg.build_logical(dg.Cmd.LRD, 0x9000, bytes(4))))
-    if responder:
-        assert codes(answered)[-5:] == [REPLIED] * 5
+    assert codes(answered)[-5:] == [REPLIED] * 5
     for _ in range(3):
         both(a, b)
 
@@ -407,7 +311,7 @@ def test_responder_serves_a_reference_behind_an_sm_window(
 ) -> None:
     """An SM window over the reference's 0x0910 (Esc.ecat_read then goes to the SM): the
     responder's walk is the segment's, and both sides agree."""
-    a, b = lockstep(2, responder=True)
+    a, b = lockstep(2)
     for _ in range(3):
         both(a, b)
     assert codes(answered)[-1] == REPLIED
@@ -426,7 +330,7 @@ def test_responder_serves_every_reference_clock(
     get the master's and the reference's data), to no slave at all (every slave writes),
     and 4 bytes long, each carrying the DC time of the master's last frame: the compiled
     responder and Python agree on replies and state."""
-    a, b = lockstep(3, responder=True)
+    a, b = lockstep(3)
     for _ in range(3):
         both(a, b)
     lrw = 3 * (OUT + IN)
@@ -492,16 +396,13 @@ def test_dc_time_loops_wait_for_the_reply() -> None:
     assert all(t != r for t, r in zip(after[1:], rebased[1:], strict=True))
 
 
-@pytest.mark.parametrize("responder", [False, True], ids=["walk", "responder"])
-def test_compiled_paths_agree_on_mutated_frames(
-    answered: list[tuple[int, int, int]], responder: bool
-) -> None:
+def test_responder_and_python_agree_on_mutated_frames(answered: list[tuple[int, int, int]]) -> None:
     """Differential fuzz: mutated cyclic frames (truncated, extended, bit flips, broken
     headers and lengths, unknown commands, random tails; a few with changed logical
     addresses so FMMUs are met in part) go through both segments, with SYNC0 pulses
     between them. Replies and every state must agree, and both must still run."""
     rng = random.Random(7)
-    a, b = lockstep(2, responder=responder)
+    a, b = lockstep(2)
     for _ in range(3):
         both(a, b)
 
@@ -525,7 +426,6 @@ def test_compiled_paths_agree_on_mutated_frames(
     for _ in range(3):
         both(a, b)
     assert a.seg.firmware[0].device.state.name == b.seg.firmware[0].device.state.name  # type: ignore[attr-defined]
-    if responder:
-        seen = codes(answered)
-        assert seen.count(REPLIED) > 100, "the compiled responder answered many of them"
-        assert seen.count(DROPPED) > 20, "and destroyed the malformed ones, as Python does"
+    seen = codes(answered)
+    assert seen.count(REPLIED) > 100, "the compiled responder answered many of them"
+    assert seen.count(DROPPED) > 20, "and destroyed the malformed ones, as Python does"
