@@ -8,8 +8,8 @@ or no Cython at install) the ``.py`` runs.
 ``ECATSIM_PURE_PYTHON=1`` in the environment makes ``ecatsim`` import the ``.py`` files
 instead of the extensions (a meta-path finder installed by ``ecatsim/__init__.py``), so the
 daemon runs the pure-Python core: to rule the compiled code in or out when something looks
-wrong, at some cost in speed. It also switches off the hand-written C paths still loaded
-through :func:`load`.
+wrong, at some cost in speed. It also leaves out the compiled-only responder
+(``ecatsim/responder.pyx``, loaded through :func:`load`).
 
 On a free-threaded interpreter (``python3.13t``) the compiled modules are not imported:
 they declare that they need the GIL (``Py_mod_gil``), and the core is not declared safe
