@@ -105,6 +105,8 @@ class SpiSocket:
         self._buf = bytearray()
         self.frames = 0
         self.dropped = 0
+        #: frames whose transfer failed inside ecatsim (answered with zeros, counted)
+        self.failures = 0
 
     def fds(self) -> list[int]:
         return self.spi.fds() + self.irq.fds()
@@ -152,7 +154,7 @@ class SpiSocket:
                 break
             mosi = bytes(buf[p + LEN_BYTES : p + LEN_BYTES + n])
             p += LEN_BYTES + n
-            out += self._transfer(mosi)
+            out += self._answer(mosi)
             self.frames += 1
         del buf[:p]
         if len(buf) > MAX_PENDING:  # pragma: no cover - a frame is at most 64 KiB
@@ -162,6 +164,24 @@ class SpiSocket:
             return
         if out:
             self._send(conn, bytes(out))
+
+    def _answer(self, mosi: bytes) -> bytes:
+        """MISO for one frame. A failure inside ecatsim never stalls the client: the frame
+        is answered with zeros (as the SPI data line reads when nothing drives it), counted
+        and logged once per kind, and the frames after it are served."""
+        try:
+            return self._transfer(mosi)
+        except Exception as exc:
+            self.failures += 1
+            if self.failures == 1 or self.failures & (self.failures - 1) == 0:
+                log.error(
+                    "spi_transfer_failed",
+                    socket=str(self.spi.path),
+                    error=repr(exc),
+                    count=self.failures,
+                    exc_info=exc,
+                )
+            return bytes(len(mosi))
 
     def _send(self, conn: socket.socket, data: bytes) -> None:
         """Answer; a client that does not read its answers is dropped, never waited for."""
@@ -195,6 +215,7 @@ class SpiSocket:
             "client": self.spi.client is not None,
             "irq_client": self.irq.client is not None,
             "frames": self.frames,
+            "failures": self.failures,
             "refused": self.spi.refused + self.irq.refused,
         }
 

@@ -84,6 +84,41 @@ def test_frames_over_the_socket(tmp_path: Path) -> None:
     assert not path.exists()
 
 
+def test_a_failing_transfer_is_answered_with_zeros_and_the_next_frames_are_served(
+    tmp_path: Path,
+) -> None:
+    """A fault inside ecatsim while it serves one frame (here: the slave's transfer raises)
+    answers that frame with zeros and counts it; the frames after it are served."""
+    _seg, _, host, path = setup(tmp_path)
+    door = host.doors["pdi0"]
+    sock = door.socket  # type: ignore[attr-defined]
+    real = sock._transfer
+    calls: list[bytes] = []
+    answers: list[bytes] = []
+
+    def flaky(mosi: bytes) -> bytes:
+        calls.append(mosi)
+        if len(calls) == 1:
+            raise RuntimeError("boom")
+        answers.append(real(mosi))
+        return answers[-1]
+
+    sock._transfer = flaky
+    try:
+        c = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        c.connect(str(path))
+        host.serve()
+        c.sendall(frame(b"\x09\x02\x00\xff") + frame(b"\x09\x02\x00\xff"))
+        got = recv_exactly(c, 8, host)
+        assert got[:4] == bytes(4)  # the failed frame
+        assert len(calls) == 2 and got[4:] == answers[0]  # the next one served
+        status = host.status()["pdi0"]
+        assert status["frames"] == 2 and status["failures"] == 1
+        c.close()
+    finally:
+        host.close()
+
+
 def test_the_irq_line_rises_once_per_edge(tmp_path: Path) -> None:
     seg, _, host, path = setup(tmp_path)
     try:
