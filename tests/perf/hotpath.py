@@ -119,7 +119,7 @@ class CspCycle:
         #: frames go through the compiled responder (decision P9) over a socket pair
         self.responder = responder
         self.seg, self.clock = segment_of(drives, device=device)
-        self.seg.compiled = compiled  # the compiled logical walk (decision P6)
+        self.seg.compiled = compiled  # the responder may serve the segment (decision P9)
         t = self.master = TinyMaster(self.seg)
         configure_to_op(t, drives, ecat_irq)
         self.link: LoopbackLink | SocketLink = SocketLink() if responder else LoopbackLink()
