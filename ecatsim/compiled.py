@@ -46,6 +46,7 @@ CORE = (
     "ecatsim.esc.pdi",
     "ecatsim.slave.pdo",
     "ecatsim.slave.firmware",
+    "ecatsim.wire.frame",
     "ecatsim.segment",
     "ecatsim.device.cia402",
     "ecatsim.device.servo",

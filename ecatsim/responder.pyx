@@ -25,6 +25,8 @@ from posix.types cimport time_t
 from posix.uio cimport iovec
 from posix.unistd cimport close, read
 
+from ecatsim.wire.frame cimport ecat_offset, mark_processed
+
 from os import strerror
 
 
@@ -122,11 +124,6 @@ cdef enum:
     #: a receive time stamp older than this: the wall clock was stepped (raw.py)
     MAX_RX_AGE_NS = 1_000_000_000
     ETH_P_8021Q = 0x8100
-    #: EtherCAT frame layout (ecatsim/wire/frame.py). Ref: ETG.1000.4 §5.3; IEEE 802.1Q
-    ETH_HEADER_LEN = 14
-    VLAN_TAG_LEN = 4
-    ECAT_HEADER_LEN = 2
-    ETHERTYPE_ECAT = 0x88A4
     #: an error was raised (the Python error indicator is set)
     ERROR = -1000
 
@@ -315,20 +312,6 @@ def timer() -> int:
     return tfd
 
 
-cdef long ecat_offset(const uint8_t *b, long n) noexcept:
-    """Offset of the EtherCAT header in an Ethernet frame, -1: not EtherCAT, as
-    ecatsim/wire/frame.py ``ecat_offset``. Ref: ETG.1000.4 §5.3.1; IEEE 802.1Q."""
-    if n < ETH_HEADER_LEN + ECAT_HEADER_LEN:
-        return -1
-    if (b[12] << 8 | b[13]) == ETHERTYPE_ECAT:
-        return ETH_HEADER_LEN
-    if ((b[12] << 8 | b[13]) == ETH_P_8021Q
-            and n >= ETH_HEADER_LEN + VLAN_TAG_LEN + ECAT_HEADER_LEN
-            and (b[16] << 8 | b[17]) == ETHERTYPE_ECAT):
-        return ETH_HEADER_LEN + VLAN_TAG_LEN
-    return -1
-
-
 cdef int answer(int fd, bytearray buf, bytearray rx_copy, long n, object seg,
                 long long t_rx) except -1:
     """Daemon.handle_frame and Daemon._answer for a frame served whole: keep it as
@@ -336,7 +319,7 @@ cdef int answer(int fd, bytearray buf, bytearray rx_copy, long n, object seg,
     reply (or not: DROPPED). FRAME: not an EtherCAT frame (Python ignores it).
     Ref: ETG.1000.4 §5.3-5.4."""
     cdef uint8_t *b = <uint8_t *>(<char *>buf)
-    cdef long off = ecat_offset(b, n)
+    cdef long long off = ecat_offset(buf, n, True)
     if off < 0:
         return FRAME
     memcpy(<char *>rx_copy, b, <size_t>n)
@@ -347,8 +330,8 @@ cdef int answer(int fd, bytearray buf, bytearray rx_copy, long n, object seg,
         raise SegmentError(n) from exc
     if not reply:
         return DROPPED
+    mark_processed(buf)
     b = <uint8_t *>(<char *>buf)
-    b[6] |= 0x02  # processed: ecatsim/wire/frame.py mark_processed (TMC8460 §5.17)
     if send(fd, b, <size_t>n, 0) < 0:
         if errno not in (ENOBUFS, EAGAIN, ENETDOWN, ENXIO):  # dropped, as a wire would
             PyErr_SetFromErrno(OSError)

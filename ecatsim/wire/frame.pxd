@@ -1,0 +1,6 @@
+# The compiled core's declarations for frame.py (Cython, pure-Python mode): the frame
+# header helpers as C calls for the responder (responder.pyx cimports them), so the
+# daemon's Python path and the responder share one source. Decisions P2, P9.
+
+cpdef long long ecat_offset(const unsigned char[:] buf, long long n, bint ethernet) except? -2
+cpdef void mark_processed(unsigned char[:] buf) except *
