@@ -51,6 +51,7 @@ cdef class Esc(SmHost):
     cdef public object t
     cdef public bytes ecat_wmask, pdi_wmask, ecat_w_hooked, pdi_w_hooked, ecat_r_hooked
     cdef public bytes pdi_r_hooked
+    cdef public tuple ecat_w_hooks, pdi_w_hooks
     cdef public list sm
     cdef public object eeprom
     cdef public DcUnit dc
@@ -103,7 +104,7 @@ cdef class Esc(SmHost):
     @cython.locals(end="long long", e="long long")
     cpdef bint _plain_read(self, long long ado, object out) except -1
     @cython.locals(e="long long", i="long long", k="long long", m="long long",
-                   wmask=bytes, hooked=bytes, mem=bytearray, ra="long long", rs="long long")
+                   wmask=bytes, hooked=bytes, mem=bytearray, hooks=tuple, entry=tuple)
     cpdef void reg_write(self, long long s, bytes data, bint pdi) except *
     @cython.locals(lo="long long", hi="long long")
     cpdef bytes old_reg(self, long long ra, long long rs, bytes old, long long s)

@@ -265,6 +265,7 @@ class Esc(SmHost):
         "ecat_irq",
         "ecat_r_hooked",
         "ecat_w_hooked",
+        "ecat_w_hooks",
         "ecat_wmask",
         "eeprom",
         "fmmus",
@@ -275,6 +276,7 @@ class Esc(SmHost):
         "pdi_emulation",
         "pdi_r_hooked",
         "pdi_w_hooked",
+        "pdi_w_hooks",
         "pdi_wmask",
         "pdram_ok",
         "port0_open",
@@ -314,6 +316,8 @@ class Esc(SmHost):
         self.pdi_w_hooked = t.pdi_w_hooked
         self.ecat_r_hooked = t.ecat_r_hooked
         self.pdi_r_hooked = t.pdi_r_hooked
+        self.ecat_w_hooks = t.ecat_w
+        self.pdi_w_hooks = t.pdi_w
         self.sm = [SyncManager(self, n) for n in range(N_SM)]
         self.eeprom = EepromUnit(self.mem, sii, self._eeprom_written)
         self.dc = DcUnit(
@@ -541,7 +545,8 @@ class Esc(SmHost):
     def ecat_read(self, ado: int, out: memoryview) -> int:
         """Physical read into ``out``; returns the WKC increment (0 or 1)."""
         end = ado + len(out)
-        for ws, we, _sm in self.sm_windows:
+        # SM windows lie in process RAM only (_compile_sm_windows): registers skip the look
+        for ws, we, _sm in self.sm_windows if end > PDRAM_START else ():
             if ws < end and ado < we:
                 return self._ecat_read_sm(ado, out)
         return 1 if self._plain_read(ado, out) else 0
@@ -560,7 +565,7 @@ class Esc(SmHost):
     def ecat_write(self, ado: int, data: memoryview | bytes) -> int:
         """Physical write from ``data``; returns the WKC increment (0 or 1)."""
         end = ado + len(data)
-        for ws, we, _sm in self.sm_windows:
+        for ws, we, _sm in self.sm_windows if end > PDRAM_START else ():
             if ws < end and ado < we:
                 return self._ecat_write_sm(ado, data)
         return 1 if self._plain_write(ado, data) else 0
@@ -784,8 +789,7 @@ class Esc(SmHost):
         self.wr_e = e
         if i < 0:
             return
-        t = self.t
-        hooks = t.pdi_w if pdi else t.ecat_w
+        hooks = self.pdi_w_hooks if pdi else self.ecat_w_hooks
         while i >= 0:
             entry = hooks[i]
             if entry is None:  # pragma: no cover - bitmap and list are built together
