@@ -4,10 +4,11 @@
 cimport cython
 
 from ecatsim.esc.core cimport Esc, FrameContext
+from ecatsim.esc.dc cimport DcUnit
 
 
 cdef long long NOP, APRD, APWR, APRW, FPRD, FPWR, FPRW, BRD, BWR, BRW, LRD, LWR, LRW, ARMW, FRMW
-cdef long long CIRCULATING, LEN_MASK, MORE_FOLLOWS, _DC_SYSTEM_TIME
+cdef long long CIRCULATING, LEN_MASK, MORE_FOLLOWS, _DC_SYSTEM_TIME, NO_DEADLINE, MAX_SYNC0_CATCHUP
 
 
 cdef class Segment:
@@ -40,5 +41,6 @@ cdef class Segment:
     @cython.locals(n="long long", reader="long long", reach="long long", i="long long",
                    escs=list, esc=Esc, before=bytes, after=bytes)
     cpdef void after_reply(self) except *
-    @cython.locals(ctx=FrameContext, esc=Esc, k="long long")
-    cpdef void sync_until(self, object t) except *
+    @cython.locals(ctx=FrameContext, esc=Esc, dc=DcUnit, k="long long", nxt="long long",
+                   d="long long", d1="long long")
+    cpdef void sync_until(self, long long t) except *

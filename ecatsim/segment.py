@@ -408,12 +408,13 @@ class Segment:
             dc = esc.dc
             fw = self.firmware[esc.position] if self.firmware else None
             for k in range(MAX_SYNC0_CATCHUP + 1):
-                d1 = dc.sync1_deadline() if dc.next_sync1 is not None else None
-                d = dc.sync0_deadline()
-                if d1 is not None and d1 <= t and (d is None or d1 < d):
+                # NO_DEADLINE: no pulse scheduled (later than any host time t)
+                d1 = dc.sync1_deadline_or(NO_DEADLINE)
+                d = dc.sync0_deadline_or(NO_DEADLINE)
+                if d1 <= t and d1 < d:
                     esc.sync1_tick()  # registers only: the firmware acts on SYNC0
                     continue
-                if d is None or d > t:
+                if d > t:
                     break
                 if k == MAX_SYNC0_CATCHUP:
                     d = t  # too far behind: fire once now, the missed pulses are skipped
@@ -425,11 +426,9 @@ class Segment:
                     ctx.pdi_ns = d
                     fw.service(d)
             else:
-                d, d1 = dc.sync0_deadline(), dc.sync1_deadline()
-            if d is not None and d < nxt:
-                nxt = d
-            if d1 is not None and d1 < nxt:
-                nxt = d1
+                d = dc.sync0_deadline_or(NO_DEADLINE)
+                d1 = dc.sync1_deadline_or(NO_DEADLINE)
+            nxt = min(nxt, d, d1)
         self._set_next_sync(nxt)
 
     def _set_next_sync(self, nxt: int) -> None:

@@ -53,6 +53,9 @@ cdef class DcUnit:
     cpdef bint sync0_pulse(self, object now_ns) except -1
     cpdef void _schedule_sync1(self, object sync0_time, object cycle0) except *
     cpdef object sync1_deadline(self)
+    @cython.locals(n0="unsigned long long")
+    cpdef long long sync0_deadline_or(self, long long none) except? -1
+    cpdef long long sync1_deadline_or(self, long long none) except? -1
     cpdef bint sync1_pulse(self) except -1
     @cython.locals(lim="long long", x="long long", m=bytearray)
     cpdef void _speed_counter_diff(self, long long start) except *

@@ -331,6 +331,20 @@ class DcUnit:
             self.next_sync1 = sync0_time + cycle1
         _U64.pack_into(self.mem, DC_NEXT_SYNC1, self.next_sync1 & MASK64)
 
+    def sync0_deadline_or(self, none: int) -> int:
+        """sync0_deadline(), or ``none`` while no SYNC0 pulse is scheduled (an integer
+        either way: a C integer in the compiled core)."""
+        if self.next_sync0 is None:
+            return none
+        n0 = self.next_sync0
+        return self._host_time(n0)
+
+    def sync1_deadline_or(self, none: int) -> int:
+        """sync1_deadline(), or ``none`` while no SYNC1 pulse is scheduled."""
+        if self.next_sync1 is None:
+            return none
+        return self.host_time_of(self.next_sync1)
+
     def sync1_deadline(self) -> int | None:
         """Host time of the next SYNC1 pulse."""
         return None if self.next_sync1 is None else self.host_time_of(self.next_sync1)
