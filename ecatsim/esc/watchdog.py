@@ -7,7 +7,12 @@ restarted by every ECAT write to an SM with the watchdog trigger bit, and expire
 
 from __future__ import annotations
 
-from ecatsim.esc import regs
+from ecatsim.esc.regs import (  # compiled: C constants (watchdog.pxd)
+    WD_COUNTER_PD,
+    WD_DIVIDER,
+    WD_STATUS_PD,
+    WD_TIME_PD,
+)
 
 TICK_NS = 40  # 25 MHz
 
@@ -30,19 +35,19 @@ class Watchdog:
         Ref: TMC8460 §5.39 Table 53, §5.41 Table 55 (time 0 disables the watchdog).
         """
         m = self.mem
-        div = m[regs.WD_DIVIDER] | (m[regs.WD_DIVIDER + 1] << 8)
+        div = m[WD_DIVIDER] | (m[WD_DIVIDER + 1] << 8)
         self.increment_ns = (div + 2) * TICK_NS
-        t = m[regs.WD_TIME_PD] | (m[regs.WD_TIME_PD + 1] << 8)
+        t = m[WD_TIME_PD] | (m[WD_TIME_PD + 1] << 8)
         self.timeout_ns = t * self.increment_ns
         if self.timeout_ns == 0:
             self.deadline_ns = 0
-            m[regs.WD_STATUS_PD] |= 0x01  # "active or disabled"
+            m[WD_STATUS_PD] |= 0x01  # "active or disabled"
 
     def trigger(self, now_ns: int) -> None:
         """Restart on an SM write. Ref: TMC8460 §5.41 Table 55."""
         if self.timeout_ns:
             self.deadline_ns = now_ns + self.timeout_ns
-        self.mem[regs.WD_STATUS_PD] |= 0x01
+        self.mem[WD_STATUS_PD] |= 0x01
 
     def expired(self, now_ns: int) -> bool:
         """Check for expiry; on expiry update status and counter and return True.
@@ -53,7 +58,7 @@ class Watchdog:
             return False
         self.deadline_ns = 0
         m = self.mem
-        m[regs.WD_STATUS_PD] &= 0xFE
-        if m[regs.WD_COUNTER_PD] < 0xFF:
-            m[regs.WD_COUNTER_PD] += 1
+        m[WD_STATUS_PD] &= 0xFE
+        if m[WD_COUNTER_PD] < 0xFF:
+            m[WD_COUNTER_PD] += 1
         return True
