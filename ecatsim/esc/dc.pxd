@@ -46,7 +46,6 @@ cdef class DcUnit:
     cpdef long long host_time_of(self, object system_ns) except? -1
     @cython.locals(local="long long")
     cpdef long long _host_time(self, unsigned long long system_ns) except? -1
-    @cython.locals(n0="unsigned long long")
     cpdef object sync0_deadline(self)
     @cython.locals(m=bytearray, n0="unsigned long long", cycle="long long",
                    behind="long long")

@@ -273,10 +273,7 @@ class DcUnit:
 
     def sync0_deadline(self) -> int | None:
         """Host time of the next SYNC0 pulse."""
-        if self.next_sync0 is None:
-            return None
-        n0 = self.next_sync0  # kept in [0, 2^64) by sync0_pulse and activation_written
-        return self._host_time(n0)
+        return None if self.next_sync0 is None else self.sync0_deadline_or(0)
 
     def sync0_pulse(self, now_ns: int) -> bool:
         """Generate the due SYNC0 pulse; returns True if SYNC0 is mapped to 0x0220.2.
@@ -336,7 +333,7 @@ class DcUnit:
         either way: a C integer in the compiled core)."""
         if self.next_sync0 is None:
             return none
-        n0 = self.next_sync0
+        n0 = self.next_sync0  # kept in [0, 2^64) by sync0_pulse and activation_written
         return self._host_time(n0)
 
     def sync1_deadline_or(self, none: int) -> int:
@@ -347,7 +344,7 @@ class DcUnit:
 
     def sync1_deadline(self) -> int | None:
         """Host time of the next SYNC1 pulse."""
-        return None if self.next_sync1 is None else self.host_time_of(self.next_sync1)
+        return None if self.next_sync1 is None else self.sync1_deadline_or(0)
 
     def sync1_pulse(self) -> bool:
         """Generate the due SYNC1 pulse; True if SYNC1 is mapped to 0x0220.3.
