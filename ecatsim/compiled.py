@@ -47,6 +47,7 @@ CORE = (
     "ecatsim.slave.pdo",
     "ecatsim.slave.firmware",
     "ecatsim.wire.frame",
+    "ecatsim.recorder",
     "ecatsim.segment",
     "ecatsim.device.cia402",
     "ecatsim.device.servo",

@@ -2,9 +2,12 @@
 
 Blocking wake-up by default (select(2) on the link's fd with the next timer as timeout,
 decision P1); ``busy_poll`` spins on a non-blocking receive instead. On a raw link the
-compiled responder (ecatsim/responder.pyx, decision P9) waits, receives and answers each
-frame through the same segment calls as :meth:`Daemon.handle_frame`, the reference, and
-hands a frame to it where something watches or alters frames (trace, faults).
+compiled responder (ecatsim/responder.pyx, decision P9) runs the steady state: it waits,
+receives and answers each frame through the same segment calls as
+:meth:`Daemon.handle_frame`, the reference, runs the work after each reply and the
+segment's timers, and returns here only for what Python serves (the control socket, the
+front doors, faults, delayed replies); it hands a frame to :meth:`handle_frame` where
+something watches or alters frames (trace, faults).
 A failure while processing a frame is counted and logged once with the last frames; the
 loop carries on.
 Ref: docs/architecture.md "Frame path".
@@ -17,7 +20,7 @@ import os
 import select
 import signal
 from types import FrameType
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import structlog
 
@@ -30,6 +33,9 @@ from ecatsim.link.follow import CpuFollower
 from ecatsim.recorder import FrameRecorder
 from ecatsim.segment import Segment
 from ecatsim.wire.frame import ecat_offset, mark_processed
+
+if TYPE_CHECKING:
+    from ecatsim.responder import Responder as ResponderType
 
 responder = load("ecatsim.responder")  # decision P9; None: the select(2) loop serves
 
@@ -90,10 +96,8 @@ class Daemon:
         #: serve with the compiled responder where it applies (a raw link, the OS clock);
         #: tests compare it with the Python path
         self.compiled = True
-        #: the frame as received, kept by the compiled responder for the recorder
-        self._rx_copy = bytearray(MAX_FRAME)
-        #: the compiled responder's timer fd (armed once per deadline), made on first use
-        self._timer_fd = -1
+        #: the compiled responder serving the link (decision P9), made on first use
+        self._responder: ResponderType | None = None
         #: runs the daemon on the master's CPU (decision K5); None: stays where it is
         self.follower: CpuFollower | None = None
         self.failures = 0
@@ -189,7 +193,7 @@ class Daemon:
             self._failure("process", exc)
         self._service(t_rx)
         if self.follower is not None:
-            self._follow(self.follower, t_rx)
+            self._follow(t_rx)
         faults = self.faults
         if faults.active:
             try:
@@ -197,8 +201,11 @@ class Daemon:
             except Exception as exc:
                 self._failure("faults", exc)
 
-    def _follow(self, follower: CpuFollower, now_ns: int) -> None:
+    def _follow(self, now_ns: int) -> None:
         """Move to the CPU the master's frames come from (decision K5)."""
+        follower = self.follower
+        if follower is None:
+            return
         pauses = follower.pauses
         try:
             cpu = follower.poll(now_ns)
@@ -286,55 +293,57 @@ class Daemon:
             self._service_timers()
 
     def _run_compiled(self, buf: bytearray) -> None:
-        """The loop with the compiled responder (decision P9)."""
+        """The loop with the compiled responder (decision P9): it serves frames and the
+        segment's timers itself and comes back for the deadlines and descriptors that
+        Python serves."""
         clock = self.segment.clock
         while not self._stop:
+            fast = self._fast_ok()
             now = clock.now_ns()
-            deadline = self._deadline()
+            deadline = self._deadline(segment=not fast)
             if deadline is None or deadline - now > IDLE_TIMEOUT_NS:
                 deadline = now + IDLE_TIMEOUT_NS
-            self.serve_once(buf, deadline)
+            self.serve_once(buf, deadline, timers=fast)
 
-    def serve_once(self, buf: bytearray, deadline_ns: int, t_rx_ns: int = 0) -> int:
+    def serve_once(
+        self, buf: bytearray, deadline_ns: int, t_rx_ns: int = 0, timers: bool = False
+    ) -> int:
         """One call of the compiled responder: wait until a frame arrives, ``deadline_ns``
         (host monotonic) passes or another descriptor is readable, and serve what came. A
         frame waiting is always served before the timers, as in :meth:`_run_select`.
         ``t_rx_ns``: the frame's arrival time (0: the kernel's receive time stamp).
-        Returns the responder's code (``responder.REPLIED`` ...)."""
-        srv = responder
-        assert srv is not None
-        if self._timer_fd < 0:
-            self._timer_fd = srv.timer()
-        rx_copy = self._rx_copy
-        seg = self.segment if self._fast_ok() else None
-        try:
-            code, n, t_rx = srv.serve(
-                self._fd,
-                self._watch,
-                buf,
-                rx_copy,
-                deadline_ns,
-                self.busy_poll,
-                seg,
-                t_rx_ns,
-                self._timer_fd,
+        ``timers``: the responder also runs the segment's timers and goes on serving
+        until ``deadline_ns`` (the segment on the OS clock; else one frame at most).
+        Returns the responder's code (``responder.REPLIED`` ...) for the last thing done."""
+        mod = responder
+        assert mod is not None
+        srv = self._responder
+        if srv is None:
+            srv = self._responder = mod.Responder(
+                self._fd, self._watch, self.recorder, self.busy_poll
             )
-        except srv.SegmentError as exc:  # the loop never dies on a frame
-            self.recorder.record(rx_copy, exc.args[0])
+        srv.follow = self._follow if self.follower is not None else None
+        seg = self.segment if self._fast_ok() else None
+        before = srv.replied
+        n = t_rx = 0
+        try:
+            code, n, t_rx = srv.serve(buf, deadline_ns, seg, t_rx_ns, timers and seg is not None)
+        except mod.SegmentError as exc:  # the loop never dies on a frame
             self._failure("process", exc.__cause__ or exc)
-            return int(srv.DROPPED)  # the frame was handled: by a failure, as in handle_frame
-        if code == srv.REPLIED:
-            self.recorder.record(rx_copy, n)
-            self.replies += 1
-            self.compiled_replies += 1
-            self._after(t_rx)
-        elif code == srv.DROPPED:
-            self.recorder.record(rx_copy, n)
-            self._after(t_rx)
-        elif code == srv.FRAME:
+            code = mod.DROPPED  # handled: by a failure, as in handle_frame
+        except mod.ServiceError as exc:  # nor on the work after it
+            where, t, code = exc.args
+            self._failure(where, exc.__cause__ or exc)
+            if where == "process":
+                self._service(t)  # what _after runs after a failed after_reply
+        finally:
+            sent = srv.replied - before
+            self.replies += sent
+            self.compiled_replies += sent
+        if code == mod.FRAME:
             self.handle_frame(buf, n, t_rx)
-        else:  # TIMEOUT, WAKE: no frame is waiting
-            if code == srv.WAKE:
+        elif code in (mod.TIMEOUT, mod.WAKE):
+            if code == mod.WAKE:
                 ready, _, _ = select.select(self._watch, (), (), 0)
                 self._serve_others(ready)
             self._service_timers()
@@ -368,9 +377,15 @@ class Daemon:
             elif self.doors is not None and efd == self.doors.fileno():
                 self.doors.serve()  # a door's failure is counted by the host
 
-    def _deadline(self) -> int | None:
+    def _deadline(self, segment: bool = True) -> int | None:
+        """The earliest deadline of the loop's timers; ``segment``: the segment's too."""
         ds = [
-            d for d in (self.segment.next_deadline(), self.faults.next_deadline()) if d is not None
+            d
+            for d in (
+                self.segment.next_deadline() if segment else None,
+                self.faults.next_deadline(),
+            )
+            if d is not None
         ]
         if self.delayed:
             ds.append(self.delayed[0][0])
@@ -406,9 +421,9 @@ class Daemon:
         self.link.close()
         if self.follower is not None:
             self.follower.close()
-        for f in (self._wake_r, self._wake_w, self._timer_fd):
-            if f < 0:
-                continue
+        if self._responder is not None:
+            self._responder.close()
+        for f in (self._wake_r, self._wake_w):
             try:
                 os.close(f)
             except OSError:

@@ -1,6 +1,8 @@
 """A small in-memory recorder of the last frames, for diagnostics when something fails.
 
-Slots are preallocated; recording is one slice copy (no per-frame objects).
+Slots are preallocated; recording is one copy into the next slot (no per-frame objects).
+Part of the compiled core (``recorder.pxd``): the daemon's compiled responder copies each
+frame as received into the next slot, before processing it, with no Python call.
 A failure is logged once, with the last frames.
 """
 
@@ -21,10 +23,20 @@ class FrameRecorder:
         self._next = 0
 
     def record(self, buf: bytearray | memoryview, n: int) -> None:
-        i = self._next
+        """Keep ``buf[:n]`` (at most ``SLOT`` bytes) as the newest frame."""
         n = min(n, SLOT)
-        self._slots[i][:n] = buf[:n]
-        self._lens[i] = n
+        self.next_slot()[:n] = buf[:n]
+        self.commit(n)
+
+    def next_slot(self) -> bytearray:
+        """The slot the next frame goes into (the compiled responder copies a frame into
+        it, then calls :meth:`commit`)."""
+        return self._slots[self._next]
+
+    def commit(self, n: int) -> None:
+        """The frame in :meth:`next_slot` is ``n`` bytes long: it becomes the newest."""
+        i = self._next
+        self._lens[i] = min(n, SLOT)
         self._next = (i + 1) % self.depth
 
     def last(self) -> list[bytes]:

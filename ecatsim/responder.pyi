@@ -1,5 +1,8 @@
 """Type stub of the daemon's compiled responder (ecatsim/responder.pyx, decision P9)."""
 
+from collections.abc import Callable
+
+from ecatsim.recorder import FrameRecorder
 from ecatsim.segment import Segment
 
 TIMEOUT: int
@@ -12,15 +15,28 @@ class SegmentError(Exception):
     """Segment.pulses_due or Segment.process raised on a frame (its ``__cause__``);
     ``args[0]``: the frame's length."""
 
-def serve(
-    fd: int,
-    others: tuple[int, ...],
-    buf: bytearray,
-    rx_copy: bytearray,
-    deadline_ns: int,
-    busy: bool,
-    seg: Segment | None,
-    t_rx: int,
-    timer_fd: int,
-) -> tuple[int, int, int]: ...
-def timer() -> int: ...
+class ServiceError(Exception):
+    """Segment.after_reply or Segment.service raised (its ``__cause__``); ``args``:
+    ("process" or "service", the time it ran for, serve()'s code before it)."""
+
+class Responder:
+    busy: bool
+    follow: Callable[[int], None] | None
+    replied: int
+    def __init__(
+        self,
+        fd: int,
+        others: tuple[int, ...],
+        recorder: FrameRecorder,
+        busy: bool = False,
+        timer: bool = True,
+    ) -> None: ...
+    def serve(
+        self,
+        buf: bytearray,
+        deadline_ns: int,
+        seg: Segment | None = None,
+        t_rx: int = 0,
+        timers: bool = False,
+    ) -> tuple[int, int, int]: ...
+    def close(self) -> None: ...

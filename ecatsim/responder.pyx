@@ -1,19 +1,24 @@
 # cython: language_level=3
-"""The daemon's compiled responder (decision P9): the wait, the receive of one frame with
-its kernel time stamp, and the send of its reply in one call, with no Python bytecode run
-between the frame's arrival and its reply but the segment's own (compiled) walk.
+"""The daemon's compiled responder (decision P9): the raw link's steady state with no
+Python bytecode run. One :class:`Responder` per link waits, receives each frame with its
+kernel time stamp, records it, walks it, sends the reply, then runs the work after the
+reply and the segment's timers, and goes back to waiting; it returns to the daemon only
+where Python is needed (another descriptor, a signal, the daemon's own deadline, a frame
+it does not serve whole).
 
-What happens to the frame is :meth:`Daemon.handle_frame`'s, through the same calls:
-``Segment.pulses_due`` fires the SYNC pulses due before it and ``Segment.process`` walks it
-(ETG.1000.4 §5.3-5.4); the frame as received is copied for the recorder, which Python
-fills after the reply. Only the I/O is here: ppoll(2) (or a busy spin) on the raw socket,
-the other descriptors and a timerfd_create(2) timer armed once per deadline; recvmsg(2) on
-the packet(7) socket with its SO_TIMESTAMPNS receive time (socket(7)) and the 802.1Q tag
-from PACKET_AUXDATA, as ``RawLink.recv_into`` receives (ecatsim/link/raw.py); send(2) as
-``RawLink.send``. Nothing interpreted runs before the reply is sent.
+What happens to a frame is :meth:`Daemon.handle_frame`'s, through the same calls:
+``Segment.pulses_due`` fires the SYNC pulses due before it, ``Segment.process`` walks it
+(ETG.1000.4 §5.3-5.4), and after the reply ``Segment.after_reply`` and
+``Segment.service`` (:meth:`Daemon._after`); a timer that falls due is
+``Segment.service`` (:meth:`Daemon._service_timers`). Only the I/O is here: ppoll(2) (or
+a busy spin) on the raw socket, the other descriptors and a timerfd_create(2) timer armed
+once per deadline; recvmsg(2) on the packet(7) socket with its SO_TIMESTAMPNS receive time
+(socket(7)) and the 802.1Q tag from PACKET_AUXDATA, as ``RawLink.recv_into`` receives
+(ecatsim/link/raw.py); send(2) as ``RawLink.send``.
 
 Compiled only (no ``.py`` twin): where it is not built the daemon's select(2) loop serves.
 """
+
 
 from cpython.exc cimport PyErr_CheckSignals, PyErr_SetFromErrno
 from cpython.pystate cimport PyInterpreterState, PyThreadState
@@ -25,6 +30,7 @@ from posix.types cimport time_t
 from posix.uio cimport iovec
 from posix.unistd cimport close, read
 
+from ecatsim.recorder cimport FrameRecorder
 from ecatsim.wire.frame cimport ecat_offset, mark_processed
 
 from os import strerror
@@ -50,6 +56,9 @@ cdef extern from "<poll.h>" nogil:
 
 cdef extern from "<sched.h>" nogil:
     int sched_yield()
+    int sched_getscheduler(int pid)
+    enum: SCHED_FIFO
+    enum: SCHED_RR
 
 
 cdef extern from "<sys/timerfd.h>" nogil:
@@ -109,14 +118,12 @@ cpdef enum:
     TIMEOUT = 0  # the deadline came with no frame waiting
     WAKE = 1  # one of ``others`` is readable, or a signal came (its handler has run)
     FRAME = 2  # a frame is in buf[:n], untouched: Python serves it (Daemon.handle_frame)
-    REPLIED = 3  # the frame was processed and its reply sent
+    REPLIED = 3  # the frame was processed and its reply sent (the last one, with timers)
     DROPPED = 4  # the frame was processed and destroyed (Segment.process returned False)
 
 cdef enum:
     #: the fds ``others`` may hold besides the link's
     MAX_WATCH = 8
-    #: timer fds numbered below this (the ``armed`` table)
-    MAX_TIMER_FD = 4096
     #: busy mode: spins between two looks at ``others``
     BUSY_SPINS = 64
     #: recvmsg(2)'s control buffer in 8-byte words (PACKET_AUXDATA and SO_TIMESTAMPNS)
@@ -126,15 +133,22 @@ cdef enum:
     ETH_P_8021Q = 0x8100
     #: an error was raised (the Python error indicator is set)
     ERROR = -1000
-
-#: the deadline each timer fd (from timer()) is armed for; -1: not armed
-cdef long long armed[MAX_TIMER_FD]
+    #: wait_frame: a timer (no frame) ended the wait
+    NO_FRAME = 0
 
 
 class SegmentError(Exception):
     """``Segment.pulses_due`` or ``Segment.process`` raised on a frame (the cause): the
     frame's failure, told apart from a failure of the socket (an OSError of serve()).
-    ``args[0]``: the frame's length (it is in rx_copy as received)."""
+    ``args[0]``: the frame's length (the recorder holds it as received)."""
+
+
+class ServiceError(Exception):
+    """The work after a reply or a timer raised (the cause). ``args``: where (``"process"``:
+    ``Segment.after_reply``, ``"service"``: ``Segment.service``), the time it ran for
+    (host monotonic ns) and serve()'s code for what came before (REPLIED or DROPPED: a
+    frame, TIMEOUT: a timer); the daemon counts it and runs what was left, as
+    :meth:`Daemon._after` does."""
 
 
 cdef long long clock_ns(int clock_id) noexcept nogil:
@@ -215,24 +229,6 @@ cdef long raw_recv(int fd, uint8_t *buf, long cap, long long *stamp) noexcept no
         return n
 
 
-cdef int arm(int tfd, long long deadline) noexcept nogil:
-    """Arm timer fd ``tfd`` for ``deadline`` (absolute, CLOCK_MONOTONIC) unless it already
-    is: the kernel's timer is programmed once per deadline, not once per wait. -1 on
-    error (errno). Ref: timerfd_create(2)."""
-    cdef itimerspec its
-    if armed[tfd] == deadline:
-        return 0
-    memset(&its, 0, sizeof(its))
-    its.it_value.tv_sec = <time_t>(deadline // 1_000_000_000)
-    its.it_value.tv_nsec = deadline % 1_000_000_000
-    if its.it_value.tv_sec == 0 and its.it_value.tv_nsec == 0:
-        its.it_value.tv_nsec = 1  # all zero would disarm it
-    if timerfd_settime(tfd, TFD_TIMER_ABSTIME, &its, NULL) < 0:
-        return -1
-    armed[tfd] = deadline
-    return 0
-
-
 cdef bint other_threads() noexcept:
     """Another Python thread exists: the wait releases the GIL for it. The daemon has
     none, and taking the GIL back after the wake-up costs microseconds per frame (P9). No
@@ -252,131 +248,235 @@ cdef int wait_fds(pollfd *pfd, nfds_t n, const timespec *ts) noexcept:
     return rc
 
 
-cdef long wait_frame(int fd, pollfd *pfd, int nothers, int tfd, uint8_t *buf, long cap,
-                     long long deadline, bint busy, long long *stamp) except? ERROR:
-    """Wait for a frame (or the deadline, or ``others``) and receive it: its length > 0,
-    or -TIMEOUT, -WAKE. ``pfd``: the link, ``others``, then the timer fd if ``tfd`` >= 0.
-    With a timer fd the wait has no timeout of its own: ppoll(2) with a timeout arms and
-    cancels a kernel timer on every call, which is costly in a VM (decision P9)."""
-    cdef long n
-    cdef long long left
-    cdef int rc, i
-    cdef unsigned spin = 0
-    cdef uint64_t expirations
-    cdef timespec ts
-    while True:
-        spin += 1
-        n = raw_recv(fd, buf, cap, stamp)
-        if n > 0:
-            return n
-        if n < 0:
-            raise OSError(-n, strerror(-n))
-        PyErr_CheckSignals()
-        left = deadline - clock_ns(CLOCK_MONOTONIC)
-        if left <= 0:
-            return -TIMEOUT
-        if busy:
-            if spin % BUSY_SPINS or nothers == 0:
-                continue
-            rc = poll(pfd + 1, <nfds_t>nothers, 0)
-        elif tfd >= 0:
-            if arm(tfd, deadline) < 0:
-                PyErr_SetFromErrno(OSError)
-            rc = wait_fds(pfd, <nfds_t>(nothers + 2), NULL)
-            if rc > 0 and pfd[nothers + 1].revents:
-                if read(tfd, &expirations, sizeof(expirations)) < 0 and errno != EAGAIN:
-                    PyErr_SetFromErrno(OSError)
-        else:
-            ts.tv_sec = <time_t>(left // 1_000_000_000)
-            ts.tv_nsec = left % 1_000_000_000
-            rc = wait_fds(pfd, <nfds_t>(nothers + 1), &ts)
-        if rc < 0:
-            if errno != EINTR:
-                PyErr_SetFromErrno(OSError)
-            PyErr_CheckSignals()
-            return -WAKE  # a handler ran: the loop looks at its stop flag
-        for i in range(1, nothers + 1):
-            if pfd[i].revents:
-                return -WAKE
 
 
-def timer() -> int:
-    """A timer fd for serve()'s deadlines (the caller closes it). Ref: timerfd_create(2)."""
-    cdef int tfd = timerfd_create(CLOCK_MONOTONIC, TFD_NONBLOCK | TFD_CLOEXEC)
-    if tfd < 0:
-        PyErr_SetFromErrno(OSError)
-    if tfd >= MAX_TIMER_FD:
-        close(tfd)
-        raise OSError("timer fd number too large")
-    armed[tfd] = -1
-    return tfd
+cdef class Responder:
+    """The raw link's steady state (decision P9). ``fd``: the link's socket; ``others``:
+    descriptors that end a wait (wake-up pipe, control socket, front doors); ``buf``: the
+    frame buffer; ``recorder``: where each frame served here is kept as received;
+    ``busy``: spin instead of sleeping in ppoll(2); ``timer``: wait on a timerfd(2) armed
+    once per deadline, not a ppoll timeout (which arms and cancels a kernel timer on every
+    call, costly in a VM). ``follow``: called with each served frame's arrival time after
+    its work (the daemon's CPU following, decision K5), or None. ``replied``: replies
+    sent so far."""
 
-
-cdef int answer(int fd, bytearray buf, bytearray rx_copy, long n, object seg,
-                long long t_rx) except -1:
-    """Daemon.handle_frame and Daemon._answer for a frame served whole: keep it as
-    received in ``rx_copy``, fire the SYNC pulses due before it, process it, then send the
-    reply (or not: DROPPED). FRAME: not an EtherCAT frame (Python ignores it).
-    Ref: ETG.1000.4 §5.3-5.4."""
-    cdef uint8_t *b = <uint8_t *>(<char *>buf)
-    cdef long long off = ecat_offset(buf, n, True)
-    if off < 0:
-        return FRAME
-    memcpy(<char *>rx_copy, b, <size_t>n)
-    try:
-        seg.pulses_due(t_rx)  # pulses due before this frame arrived come first
-        reply = seg.process(buf, off, n, t_rx)
-    except Exception as exc:
-        raise SegmentError(n) from exc
-    if not reply:
-        return DROPPED
-    mark_processed(buf)
-    b = <uint8_t *>(<char *>buf)
-    if send(fd, b, <size_t>n, 0) < 0:
-        if errno not in (ENOBUFS, EAGAIN, ENETDOWN, ENXIO):  # dropped, as a wire would
-            PyErr_SetFromErrno(OSError)
-    sched_yield()  # a master woken on this CPU takes the reply first (Daemon._answer)
-    return REPLIED
-
-
-def serve(int fd, tuple others not None, bytearray buf not None, bytearray rx_copy not None,
-          long long deadline_ns, bint busy, seg, long long t_rx, int timer_fd):
-    """Wait until a frame arrives, ``deadline_ns`` (host monotonic) passes or one of
-    ``others`` (fds) is readable, and serve the frame with ``seg`` (a Segment; None: hand
-    every frame back as FRAME). ``rx_copy`` (as large as ``buf``): the frame as received,
-    for the recorder, when served here. ``busy``: spin instead of sleeping in ppoll(2).
-    ``t_rx``: the frame's arrival time (host monotonic ns; 0: from the kernel's receive
-    time stamp). ``timer_fd``: from timer(), or -1 (a ppoll timeout instead).
-
-    Returns (code, n, t_rx): TIMEOUT or WAKE with n = 0, else the frame's length in buf
-    and its arrival time. Raises SegmentError (from the segment's exception) where
-    Segment.process would raise in Daemon.handle_frame, OSError where the socket fails."""
+    cdef int fd, tfd, nothers
     cdef pollfd pfd[MAX_WATCH + 2]
-    cdef Py_ssize_t nothers = len(others)
-    cdef Py_ssize_t i
-    cdef long long stamp = 0
-    cdef long n
-    if len(rx_copy) < len(buf):
-        raise TypeError("rx_copy: smaller than buf")
-    if nothers > MAX_WATCH:
-        raise ValueError("too many fds to watch")
-    if timer_fd >= MAX_TIMER_FD:
-        raise ValueError("timer_fd: not from timer()")
-    pfd[0].fd = fd
-    pfd[0].events = POLLIN
-    for i in range(nothers):
-        pfd[i + 1].fd = others[i]
-        pfd[i + 1].events = POLLIN
-        pfd[i + 1].revents = 0
-    pfd[nothers + 1].fd = timer_fd
-    pfd[nothers + 1].events = POLLIN
-    pfd[nothers + 1].revents = 0
-    n = wait_frame(fd, pfd, <int>nothers, timer_fd, <uint8_t *>(<char *>buf), len(buf),
-                   deadline_ns, busy, &stamp)
-    if n <= 0:
-        return (-n, 0, 0)
-    if not t_rx:
-        t_rx = rx_time(stamp)
-    if seg is None:
-        return (FRAME, n, t_rx)
-    return (answer(fd, buf, rx_copy, n, seg, t_rx), n, t_rx)
+    #: the deadline the timer fd is armed for (-1: none)
+    cdef long long armed
+    cdef bytearray buf
+    cdef FrameRecorder recorder
+    cdef readonly bint busy
+    cdef public object follow
+    cdef readonly long long replied
+    #: the process runs SCHED_FIFO/RR: a yield after the reply gives nothing to a master
+    cdef bint rt
+
+    def __cinit__(self) -> None:
+        self.tfd = -1
+
+    def __init__(self, int fd, tuple others not None, FrameRecorder recorder not None,
+                 bint busy=False, bint timer=True) -> None:
+        cdef Py_ssize_t i
+        if len(others) > MAX_WATCH:
+            raise ValueError("too many fds to watch")
+        self.fd = fd
+        self.nothers = <int>len(others)
+        self.recorder = recorder
+        self.busy = busy
+        self.follow = None
+        self.armed = -1
+        self.pfd[0].fd = fd
+        self.pfd[0].events = POLLIN
+        for i in range(self.nothers):
+            self.pfd[i + 1].fd = others[i]
+            self.pfd[i + 1].events = POLLIN
+        if timer:
+            self.tfd = timerfd_create(CLOCK_MONOTONIC, TFD_NONBLOCK | TFD_CLOEXEC)
+            if self.tfd < 0:
+                PyErr_SetFromErrno(OSError)
+        self.pfd[self.nothers + 1].fd = self.tfd
+        self.pfd[self.nothers + 1].events = POLLIN
+
+    def __dealloc__(self) -> None:
+        if self.tfd >= 0:
+            close(self.tfd)
+
+    def close(self) -> None:
+        """Close the timer fd (the link's socket is the caller's)."""
+        if self.tfd >= 0:
+            close(self.tfd)
+            self.tfd = -1
+            self.pfd[self.nothers + 1].fd = -1
+
+    cdef int arm(self, long long deadline) except -1:
+        """Arm the timer fd for ``deadline`` (absolute, CLOCK_MONOTONIC) unless it already
+        is: the kernel's timer is programmed once per deadline, not once per wait.
+        Ref: timerfd_create(2)."""
+        cdef itimerspec its
+        if self.armed == deadline:
+            return 0
+        memset(&its, 0, sizeof(its))
+        its.it_value.tv_sec = <time_t>(deadline // 1_000_000_000)
+        its.it_value.tv_nsec = deadline % 1_000_000_000
+        if its.it_value.tv_sec == 0 and its.it_value.tv_nsec == 0:
+            its.it_value.tv_nsec = 1  # all zero would disarm it
+        if timerfd_settime(self.tfd, TFD_TIMER_ABSTIME, &its, NULL) < 0:
+            PyErr_SetFromErrno(OSError)
+        self.armed = deadline
+        return 0
+
+    cdef long wait_frame(self, long long deadline, long long *stamp) except? ERROR:
+        """Wait for a frame (or the deadline, or ``others``) and receive it: its length
+        > 0, or NO_FRAME (the deadline), -WAKE. Without busy spinning, the link is read
+        only where ppoll(2) says it is readable (a receive that finds nothing is a
+        system call for nothing), or once where the deadline has already passed."""
+        cdef long n
+        cdef long long left
+        cdef int rc, i
+        cdef int nothers = self.nothers
+        cdef unsigned spin = 0
+        cdef uint64_t expirations
+        cdef timespec ts
+        cdef pollfd *pfd = self.pfd
+        # a frame waiting is served before a deadline that has passed
+        cdef bint look = self.busy or deadline <= clock_ns(CLOCK_MONOTONIC)
+        while True:
+            if look:
+                n = raw_recv(self.fd, <uint8_t *>(<char *>self.buf), len(self.buf), stamp)
+                if n > 0:
+                    return n
+                if n < 0:
+                    raise OSError(-n, strerror(-n))
+            PyErr_CheckSignals()
+            left = deadline - clock_ns(CLOCK_MONOTONIC)
+            if left <= 0:
+                return NO_FRAME
+            if self.busy:
+                spin += 1
+                if spin % BUSY_SPINS or nothers == 0:
+                    continue
+                rc = poll(pfd + 1, <nfds_t>nothers, 0)
+            elif self.tfd >= 0:
+                self.arm(deadline)
+                rc = wait_fds(pfd, <nfds_t>(nothers + 2), NULL)
+                if rc > 0 and pfd[nothers + 1].revents:
+                    if read(self.tfd, &expirations, sizeof(expirations)) < 0 and errno != EAGAIN:
+                        PyErr_SetFromErrno(OSError)
+            else:
+                ts.tv_sec = <time_t>(left // 1_000_000_000)
+                ts.tv_nsec = left % 1_000_000_000
+                rc = wait_fds(pfd, <nfds_t>(nothers + 1), &ts)
+            if rc < 0:
+                if errno != EINTR:
+                    PyErr_SetFromErrno(OSError)
+                PyErr_CheckSignals()
+                return -WAKE  # a handler ran: the loop looks at its stop flag
+            for i in range(1, nothers + 1):
+                if pfd[i].revents:
+                    return -WAKE
+            look = self.busy or (rc > 0 and pfd[0].revents != 0)
+
+    cdef int answer(self, long n, object seg, long long t_rx) except -1:
+        """Daemon.handle_frame and Daemon._answer for a frame served whole: record it as
+        received, fire the SYNC pulses due before it, process it, then send the reply (or
+        not: DROPPED). FRAME: not an EtherCAT frame (Python ignores it).
+        Ref: ETG.1000.4 §5.3-5.4."""
+        cdef bytearray buf = self.buf
+        cdef bytearray slot
+        cdef uint8_t *b
+        cdef long long off = ecat_offset(buf, n, True)
+        if off < 0:
+            return FRAME
+        slot = self.recorder.next_slot()  # kept as received, before the walk patches it
+        memcpy(<char *>slot, <char *>buf, <size_t>min(n, len(slot)))
+        self.recorder.commit(n)
+        try:
+            seg.pulses_due(t_rx)  # pulses due before this frame arrived come first
+            reply = seg.process(buf, off, n, t_rx)
+        except Exception as exc:
+            raise SegmentError(n) from exc
+        if not reply:
+            return DROPPED
+        mark_processed(buf)
+        b = <uint8_t *>(<char *>buf)
+        if send(self.fd, b, <size_t>n, 0) < 0:
+            if errno not in (ENOBUFS, EAGAIN, ENETDOWN, ENXIO):  # dropped, as a wire would
+                PyErr_SetFromErrno(OSError)
+        self.replied += 1
+        if not self.rt:
+            sched_yield()  # a master woken on this CPU takes the reply first (Daemon._answer)
+        return REPLIED
+
+    cdef int after(self, object seg, long long t, int code) except -1:
+        """Daemon._after for a frame served here: the work it left for after its reply,
+        the firmware and timers due by its arrival, then the CPU following."""
+        try:
+            seg.after_reply()
+        except Exception as exc:
+            raise ServiceError("process", t, code) from exc
+        service(seg, t, code)
+        if self.follow is not None:
+            self.follow(t)
+        return 0
+
+    def serve(self, bytearray buf not None, long long deadline_ns, seg=None, long long t_rx=0,
+              bint timers=False):
+        """Wait until a frame arrives in ``buf``, ``deadline_ns`` (host monotonic) passes or
+        one of ``others`` is readable, and serve the frame with ``seg`` (a Segment; None:
+        hand every frame back as FRAME) and the work after it. ``t_rx``: the frame's arrival
+        time (host monotonic ns; 0: from the kernel's receive time stamp).
+
+        ``timers`` (the segment runs on the OS monotonic clock): go on serving frames, and
+        run the segment's timers (``Segment.next_deadline``, ``Segment.service``) as they
+        fall due, until ``deadline_ns`` or a wake-up; without, return after one frame.
+
+        Returns (code, n, t_rx): TIMEOUT or WAKE with n = 0, else the last frame's length
+        in buf and its arrival time. Raises SegmentError (from the segment's exception)
+        where Segment.process would raise in Daemon.handle_frame, ServiceError where the
+        work after it would, OSError where the socket fails."""
+        cdef long long stamp = 0
+        cdef long long wait_until, now
+        cdef long n
+        cdef int code, i
+        cdef int policy = sched_getscheduler(0)
+        self.rt = policy == SCHED_FIFO or policy == SCHED_RR
+        if seg is None and timers:
+            raise ValueError("timers: a segment is needed")
+        self.buf = buf
+        for i in range(self.nothers + 2):
+            self.pfd[i].revents = 0
+        while True:
+            wait_until = deadline_ns
+            if timers:
+                d = seg.next_deadline()
+                if d is not None and d < wait_until:
+                    wait_until = d
+            n = self.wait_frame(wait_until, &stamp)
+            if n == -WAKE:
+                return (WAKE, 0, 0)
+            if n == NO_FRAME:
+                now = clock_ns(CLOCK_MONOTONIC)
+                if not timers or now >= deadline_ns:
+                    return (TIMEOUT, 0, 0)
+                service(seg, now, TIMEOUT)  # a timer of the segment's (SYNC pulse, watchdog)
+                continue
+            t = t_rx if t_rx else rx_time(stamp)
+            if seg is None:
+                return (FRAME, n, t)
+            code = self.answer(n, seg, t)
+            if code == FRAME:
+                return (FRAME, n, t)
+            self.after(seg, t, code)
+            if not timers:
+                return (code, n, t)
+
+
+cdef int service(object seg, long long t, int code) except -1:
+    """``Segment.service(t)``, its failure a ServiceError (``code``: what serve() was
+    doing, REPLIED or DROPPED after a frame, TIMEOUT for a timer)."""
+    try:
+        seg.service(t)
+    except Exception as exc:
+        raise ServiceError("service", t, code) from exc
+    return 0

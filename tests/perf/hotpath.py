@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 import struct
 import time
+from typing import Any
 
 from ecatsim.daemon import Daemon
 from ecatsim.link.loopback import LoopbackLink
@@ -114,11 +115,13 @@ class CspCycle:
         compiled: bool = True,
         ecat_irq: bool = False,
         responder: bool = False,
+        clock: Any = None,
     ) -> None:
         self.n = drives
         #: frames go through the compiled responder (decision P9) over a socket pair
         self.responder = responder
-        self.seg, self.clock = segment_of(drives, device=device)
+        #: ``clock``: the segment's clock (default: a manual clock the cycles move)
+        self.seg, self.clock = segment_of(drives, device=device, clock=clock)
         self.seg.compiled = compiled  # the responder may serve the segment (decision P9)
         t = self.master = TinyMaster(self.seg)
         configure_to_op(t, drives, ecat_irq)

@@ -23,21 +23,22 @@ def require_built(module: object, name: str) -> None:
 
 
 def record_results(
-    monkeypatch: pytest.MonkeyPatch, owner: object, attr: str, function: str
+    monkeypatch: pytest.MonkeyPatch, owner: object, attr: str, cls: str, method: str
 ) -> list[Any]:
-    """Replace the extension module ``owner.attr`` for this test by a stand-in whose
-    ``function`` calls the real one and records every result, in order."""
+    """Replace the extension module ``owner.attr`` for this test by a stand-in whose class
+    ``cls`` is a subclass of the real one whose ``method`` records every result, in
+    order."""
     real = getattr(owner, attr)
     require_built(real, f"{getattr(owner, '__name__', owner)}.{attr}")
     results: list[Any] = []
-    fn = getattr(real, function)
+    base = getattr(real, cls)
 
-    def recording(*args: Any) -> Any:
-        r = fn(*args)
+    def recording(self: Any, *args: Any) -> Any:
+        r = getattr(base, method)(self, *args)
         results.append(r)
         return r
 
     stand_in = SimpleNamespace(**{k: getattr(real, k) for k in dir(real) if not k.startswith("__")})
-    setattr(stand_in, function, recording)  # the module's constants stay as they are
+    setattr(stand_in, cls, type(cls, (base,), {method: recording}))  # constants stay as they are
     monkeypatch.setattr(owner, attr, stand_in)
     return results

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass
+from typing import Any
 
 from ecatsim.build import build_segment
 from ecatsim.clock import ManualClock
@@ -46,9 +47,11 @@ def decode(frame: bytes, off: int) -> list[Reply]:
         p += 12 + n
 
 
-def segment_of(n: int = 1, device: str = "echo", **kw: object) -> tuple[Segment, ManualClock]:
-    """A segment of n slaves on a manual clock."""
-    clock = ManualClock(1_000_000_000)
+def segment_of(
+    n: int = 1, device: str = "echo", clock: Any = None, **kw: object
+) -> tuple[Segment, ManualClock]:
+    """A segment of n slaves on a manual clock (or on ``clock``)."""
+    clock = ManualClock(1_000_000_000) if clock is None else clock
     cfg = SegmentConfig(tuple(SlaveConfig(device=device, serial=i + 1, **kw) for i in range(n)))  # type: ignore[arg-type]
     return build_segment(cfg, clock), clock
 

@@ -38,7 +38,7 @@ def _require_compiled() -> None:
 @pytest.fixture
 def answered(monkeypatch: pytest.MonkeyPatch) -> list[tuple[int, int, int]]:
     """Every result of the compiled responder (responder.serve: code, n, t_rx)."""
-    return record_results(monkeypatch, daemon_mod, "responder", "serve")
+    return record_results(monkeypatch, daemon_mod, "responder", "Responder", "serve")
 
 
 def codes(results: list[tuple[int, int, int]]) -> list[int]:

@@ -8,10 +8,12 @@ Ref: ecatsim/responder.pyx; ecatsim/daemon.py Daemon.serve_once, Daemon.handle_f
 from __future__ import annotations
 
 import os
+import struct
 import threading
 import time
 from collections.abc import Iterator
 from types import ModuleType
+from typing import Any
 
 import pytest
 
@@ -20,9 +22,10 @@ from ecatsim.build import build_segment
 from ecatsim.clock import MonotonicClock
 from ecatsim.config import SegmentConfig, SlaveConfig
 from ecatsim.daemon import Daemon
+from ecatsim.recorder import FrameRecorder
 from ecatsim.segment import Segment
 from ecatsim.wire import datagram as dg
-from tests.perf.hotpath import MS, CspCycle
+from tests.perf.hotpath import IN, MS, OUT, CspCycle
 from tests.support.compiled import record_results, require_built
 from tests.support.socketlink import SocketLink
 from tests.support.tinymaster import segment_of
@@ -54,78 +57,80 @@ def test_codes(srv: ModuleType) -> None:
     )
 
 
+def responder_on(srv: ModuleType, link: SocketLink, others: tuple[int, ...] = (),
+                 busy: bool = False, timer: bool = True) -> Any:  # fmt: skip
+    return srv.Responder(link.fileno(), others, FrameRecorder(), busy, timer)
+
+
 @pytest.mark.parametrize(("busy", "timer"), [(False, False), (False, True), (True, False)])
 def test_waits_until_the_deadline(
     srv: ModuleType, link: SocketLink, busy: bool, timer: bool
 ) -> None:
     """The wait ends at the deadline: a ppoll timeout, the timer fd (armed once per
     deadline, so a second wait for the same deadline must still end), or spinning."""
-    tfd = srv.timer() if timer else -1
+    r = responder_on(srv, link, busy=busy, timer=timer)
     try:
-        buf, copy = bytearray(2048), bytearray(2048)
+        buf = bytearray(2048)
         for _ in range(2):
             t0 = time.monotonic_ns()
             deadline = t0 + 20_000_000
-            code, n, _t = srv.serve(link.fileno(), (), buf, copy, deadline, busy, None, 0, tfd)
+            code, n, _t = r.serve(buf, deadline)
             waited = time.monotonic_ns() - t0
             assert (code, n) == (TIMEOUT, 0)
             assert 20_000_000 <= waited < 2_000_000_000  # a wide guard, not a timing test
         # the same deadline again, now passed: no wait at all
-        code, *_ = srv.serve(link.fileno(), (), buf, copy, deadline, busy, None, 0, tfd)
+        code, *_ = r.serve(buf, deadline)
         assert code == TIMEOUT
     finally:
-        if tfd >= 0:
-            os.close(tfd)
+        r.close()
 
 
 def test_timer_armed_once_per_deadline(srv: ModuleType, link: SocketLink) -> None:
     """A wait that another descriptor ended leaves the timer armed: the next wait for the
     same deadline is not re-armed and still ends at it."""
-    tfd = srv.timer()
     r, w = os.pipe()
+    resp = responder_on(srv, link, (r,))
     try:
-        buf, copy = bytearray(2048), bytearray(2048)
+        buf = bytearray(2048)
         deadline = time.monotonic_ns() + 30_000_000
         os.write(w, b"x")
-        code, *_ = srv.serve(link.fileno(), (r,), buf, copy, deadline, False, None, 0, tfd)
+        code, *_ = resp.serve(buf, deadline)
         assert code == WAKE
         os.read(r, 1)
-        code, *_ = srv.serve(link.fileno(), (r,), buf, copy, deadline, False, None, 0, tfd)
+        code, *_ = resp.serve(buf, deadline)
         assert code == TIMEOUT
         assert deadline <= time.monotonic_ns() < deadline + 2_000_000_000
     finally:
-        for f in (r, w, tfd):
+        resp.close()
+        for f in (r, w):
             os.close(f)
 
 
 def test_a_frame_ends_a_timer_wait(srv: ModuleType, link: SocketLink) -> None:
     """Blocked on the timer fd with a far deadline, a frame from another thread ends the
     wait at once."""
-    tfd = srv.timer()
+    resp = responder_on(srv, link)
     frame = dg.ethernet_frame([dg.build(dg.Cmd.BRD, 0, 0x0130, bytes(2))])
     sender = threading.Timer(0.05, link.master_send, (frame,))
     try:
         sender.start()
         t0 = time.monotonic_ns()
-        code, n, _t = srv.serve(
-            link.fileno(), (), bytearray(2048), bytearray(2048), t0 + 10**10, False, None, 0, tfd
-        )
+        code, n, _t = resp.serve(bytearray(2048), t0 + 10**10)
         assert (code, n) == (FRAME, len(frame))
         assert time.monotonic_ns() - t0 < 5 * 10**9
     finally:
         sender.join()
-        os.close(tfd)
+        resp.close()
 
 
 @pytest.mark.parametrize("busy", [False, True])
 def test_another_descriptor_ends_the_wait(srv: ModuleType, link: SocketLink, busy: bool) -> None:
     r, w = os.pipe()
+    resp = responder_on(srv, link, (r,), busy=busy, timer=False)
     try:
         os.write(w, b"x")
         t0 = time.monotonic_ns()
-        code, _n, _t = srv.serve(
-            link.fileno(), (r,), bytearray(64), bytearray(64), t0 + 10**10, busy, None, 0, -1
-        )
+        code, _n, _t = resp.serve(bytearray(64), t0 + 10**10)
         assert code == WAKE
         assert time.monotonic_ns() - t0 < 5 * 10**9
     finally:
@@ -137,25 +142,29 @@ def test_a_frame_waiting_comes_before_the_deadline(srv: ModuleType, link: Socket
     """Without a segment the frame is handed over as received, with its arrival time."""
     frame = dg.ethernet_frame([dg.build(dg.Cmd.BRD, 0, 0x0130, bytes(2))])
     link.master_send(frame)
-    buf, copy = bytearray(2048), bytearray(2048)
+    buf = bytearray(2048)
+    rec = FrameRecorder()
+    resp = srv.Responder(link.fileno(), (), rec, False, False)
     before = time.monotonic_ns()
-    code, n, t_rx = srv.serve(link.fileno(), (), buf, copy, 0, False, None, 0, -1)
+    code, n, t_rx = resp.serve(buf, 0)
     assert (code, n) == (FRAME, len(frame))
     assert bytes(buf[:n]) == frame
     assert before - 10**9 < t_rx <= time.monotonic_ns()
-    assert copy == bytearray(2048)  # nothing served, nothing kept
+    assert rec.last() == []  # nothing served, nothing kept
     assert link.master_recv() is None  # nothing sent
 
 
 def test_bad_arguments_raise(srv: ModuleType, link: SocketLink) -> None:
-    buf = bytearray(64)
-    for bad, copy in ((bytes(64), buf), (None, buf), (buf, bytearray(8)), (buf, None)):
+    resp = responder_on(srv, link, timer=False)
+    for bad in (bytes(64), None):
         with pytest.raises(TypeError):
-            srv.serve(link.fileno(), (), bad, copy, 0, False, None, 0, -1)
+            resp.serve(bad, 0)
+    with pytest.raises(TypeError):
+        srv.Responder(link.fileno(), (), None)
     with pytest.raises(ValueError):
-        srv.serve(link.fileno(), tuple(range(9)), buf, bytearray(64), 0, False, None, 0, -1)
+        srv.Responder(link.fileno(), tuple(range(9)), FrameRecorder())
     with pytest.raises(ValueError):
-        srv.serve(link.fileno(), (), buf, bytearray(64), 0, False, None, 0, 1 << 20)
+        resp.serve(bytearray(64), 0, None, 0, True)  # the segment's timers need a segment
 
 
 def pair_of_cycles() -> tuple[CspCycle, CspCycle]:
@@ -205,8 +214,9 @@ def test_responder_answers_as_handle_frame(
     """The same frames through the responder (serve_once) and the Python path
     (handle_frame): the same replies, recorder, counters and memory, frame by frame,
     including a frame with a SYNC0 pulse due before it and frames the segment destroys."""
+    answered = record_results(monkeypatch, daemon_mod, "responder", "Responder", "serve")
     a, b = pair_of_cycles()
-    answered = record_results(monkeypatch, daemon_mod, "responder", "serve")
+    answered.clear()  # the constructor's cycles
     assert a.daemon._fast_ok()
     assert state(a)[3:] == state(b)[3:]
     for k in range(12):
@@ -262,7 +272,9 @@ def test_a_failing_frame_is_counted_as_in_handle_frame(srv: ModuleType, link: So
     assert link.master_recv() is None
     with pytest.raises(srv.SegmentError) as err:
         link.master_send(frame)
-        srv.serve(link.fileno(), (), bytearray(2048), bytearray(2048), 0, False, failing, 0, -1)
+        srv.Responder(link.fileno(), (), FrameRecorder(), False, False).serve(
+            bytearray(2048), 0, failing
+        )
     assert isinstance(err.value.__cause__, RuntimeError)
     assert err.value.args == (len(frame),)
 
@@ -297,3 +309,60 @@ def test_daemon_run_serves_through_the_responder(srv: ModuleType, link: SocketLi
     assert replies[0] == processed and replies[2] == processed
     assert replies[1] is not None and replies[1][26:30] == b"\x01\x00\x01\x00"
     assert (d.replies, d.compiled_replies, d.failures) == (3, 3, 0)
+
+
+def test_the_responder_runs_the_segments_timers(
+    srv: ModuleType, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """With ``timers`` (the daemon on the OS clock) one call serves the SYNC0 pulses as
+    they fall due and a frame that comes meanwhile, and returns only at the daemon's own
+    deadline: Python's timers run once, after it."""
+    c = CspCycle(1, enable=False, responder=True, clock=MonotonicClock())
+    d = c.daemon
+    python_timers: list[int] = []
+    monkeypatch.setattr(d, "_service_timers", lambda: python_timers.append(1))
+    ticks, replies = c.seg.sync0_ticks, d.replies
+    frame = c.frame(0x00)
+    sender = threading.Timer(0.02, c.link.master_send, (frame,))
+    t0 = time.monotonic_ns()
+    sender.start()
+    try:
+        code = d.serve_once(c.buf, t0 + 50 * MS, timers=True)
+    finally:
+        sender.join()
+    assert code == TIMEOUT
+    assert time.monotonic_ns() - t0 >= 50 * MS
+    # about 48 pulses of 1 ms from 2 ms on; a wide guard, not a timing test
+    assert c.seg.sync0_ticks - ticks >= 20
+    assert (d.replies - replies, d.compiled_replies - replies) == (1, 1)
+    reply = c.link.master_recv()
+    assert reply is not None and reply[6] & 0x02  # processed
+    lrw_wkc = 14 + 2 + 10 + OUT + IN  # the LRW's WKC: outputs written, inputs read
+    assert struct.unpack_from("<H", reply, lrw_wkc)[0] == 3
+    assert d.recorder.last()[-1] == frame
+    assert python_timers == [1]
+
+
+class FailingService(Segment):
+    """A segment whose work after a reply fails."""
+
+    def service(self, now_ns: int | None = None) -> None:
+        raise RuntimeError("broken firmware")
+
+
+def test_a_failing_service_is_counted_and_the_loop_goes_on(
+    srv: ModuleType, link: SocketLink
+) -> None:
+    """The work after a reply raises in the responder: the reply is out, the daemon counts
+    and logs the failure once, and the next frame is served."""
+    seg, _ = segment_of(1)
+    failing = FailingService(seg.escs, seg.ctx, MonotonicClock())
+    d = Daemon(link, failing)
+    frame = dg.ethernet_frame([dg.build(dg.Cmd.BRD, 0, 0x0130, bytes(2))])
+    for k in range(2):
+        link.master_send(frame)
+        assert d.serve_once(bytearray(2048), time.monotonic_ns() + 10**9) == REPLIED
+        reply = link.master_recv()
+        assert reply is not None and reply[26:30] == b"\x01\x00\x01\x00"  # INIT, WKC 1
+        assert (d.replies, d.failures) == (k + 1, k + 1)
+    assert d.recorder.last() == [frame, frame]

@@ -7,7 +7,6 @@ Ref: packet(7), tuntap; ETG.1000.4 (EtherType 0x88A4, UDP port 0x88A4); IEEE 802
 
 from __future__ import annotations
 
-import os
 import select
 import socket
 import struct
@@ -24,6 +23,7 @@ from ecatsim.link.loopback import LoopbackLink, Manipulator
 from ecatsim.link.pcap import MAGIC_NSEC, MAGIC_USEC, PcapWriter
 from ecatsim.link.raw import RawLink, iface_ipv4_addresses
 from ecatsim.link.udp import UDP_PORT, UdpLink
+from ecatsim.recorder import FrameRecorder
 from tests.integration.netns import NetnsPair, in_netns, require_root
 from tests.support.compiled import require_built
 
@@ -75,22 +75,19 @@ def pair() -> Iterator[NetnsPair]:
 
 
 class ResponderLink(RawLink):
-    """A RawLink whose receive is the daemon's compiled responder's (``responder.serve``
+    """A RawLink whose receive is the daemon's compiled responder's (``Responder.serve``
     with no segment: wait until the deadline, receive, hand the frame back), so the tests
     below run the compiled receive and the Python reference alike."""
 
     def __init__(self, iface: str) -> None:
         super().__init__(iface)
         assert daemon.responder is not None
-        self._responder = daemon.responder
-        self._timer = self._responder.timer()
-        self._rx_copy = bytearray(2048)
+        self._srv = daemon.responder
+        self._responder = self._srv.Responder(self.fileno(), (), FrameRecorder())
 
     def recv_into(self, buf: bytearray) -> int:
-        srv = self._responder
-        code, n, t_rx = srv.serve(
-            self.fileno(), (), buf, self._rx_copy, time.monotonic_ns(), False, None, 0, self._timer
-        )
+        srv = self._srv
+        code, n, t_rx = self._responder.serve(buf, time.monotonic_ns())
         if code != srv.FRAME:
             assert code == srv.TIMEOUT, code
             return 0
@@ -98,7 +95,7 @@ class ResponderLink(RawLink):
         return n
 
     def close(self) -> None:
-        os.close(self._timer)
+        self._responder.close()
         super().close()
 
 

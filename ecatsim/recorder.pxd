@@ -1,0 +1,14 @@
+# The compiled core's declarations for recorder.py (Cython, pure-Python mode): the ring's
+# state as typed fields, so the compiled responder records each frame (next_slot, a copy,
+# commit) with C calls. Decisions P2, P9.
+cdef long long SLOT
+
+
+cdef class FrameRecorder:
+    cdef public long long depth
+    cdef public list _slots, _lens
+    cdef public long long _next
+
+    cpdef void record(self, object buf, long long n) except *
+    cpdef bytearray next_slot(self)
+    cpdef void commit(self, long long n) except *
