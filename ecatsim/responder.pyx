@@ -31,6 +31,7 @@ from posix.uio cimport iovec
 from posix.unistd cimport close, read
 
 from ecatsim.recorder cimport FrameRecorder
+from ecatsim.segment cimport Segment
 from ecatsim.wire.frame cimport ecat_offset, mark_processed
 
 from os import strerror
@@ -265,6 +266,8 @@ cdef class Responder:
     #: the deadline the timer fd is armed for (-1: none)
     cdef long long armed
     cdef bytearray buf
+    #: a typed view of ``buf`` while serve() runs (one buffer export per call, not per frame)
+    cdef unsigned char[:] view
     cdef FrameRecorder recorder
     cdef readonly bint busy
     cdef public object follow
@@ -377,7 +380,7 @@ cdef class Responder:
                     return -WAKE
             look = self.busy or (rc > 0 and pfd[0].revents != 0)
 
-    cdef int answer(self, long n, object seg, long long t_rx) except -1:
+    cdef int answer(self, long n, Segment seg, long long t_rx) except -1:
         """Daemon.handle_frame and Daemon._answer for a frame served whole: record it as
         received, fire the SYNC pulses due before it, process it, then send the reply (or
         not: DROPPED). FRAME: not an EtherCAT frame (Python ignores it).
@@ -385,7 +388,7 @@ cdef class Responder:
         cdef bytearray buf = self.buf
         cdef bytearray slot
         cdef uint8_t *b
-        cdef long long off = ecat_offset(buf, n, True)
+        cdef long long off = ecat_offset(self.view, n, True)
         if off < 0:
             return FRAME
         slot = self.recorder.next_slot()  # kept as received, before the walk patches it
@@ -398,7 +401,7 @@ cdef class Responder:
             raise SegmentError(n) from exc
         if not reply:
             return DROPPED
-        mark_processed(buf)
+        mark_processed(self.view)
         b = <uint8_t *>(<char *>buf)
         if send(self.fd, b, <size_t>n, 0) < 0:
             if errno not in (ENOBUFS, EAGAIN, ENETDOWN, ENXIO):  # dropped, as a wire would
@@ -408,7 +411,7 @@ cdef class Responder:
             sched_yield()  # a master woken on this CPU takes the reply first (Daemon._answer)
         return REPLIED
 
-    cdef int after(self, object seg, long long t, int code) except -1:
+    cdef int after(self, Segment seg, long long t, int code) except -1:
         """Daemon._after for a frame served here: the work it left for after its reply,
         the firmware and timers due by its arrival, then the CPU following."""
         try:
@@ -420,8 +423,8 @@ cdef class Responder:
             self.follow(t)
         return 0
 
-    def serve(self, bytearray buf not None, long long deadline_ns, seg=None, long long t_rx=0,
-              bint timers=False):
+    def serve(self, bytearray buf not None, long long deadline_ns, Segment seg=None,
+              long long t_rx=0, bint timers=False):
         """Wait until a frame arrives in ``buf``, ``deadline_ns`` (host monotonic) passes or
         one of ``others`` is readable, and serve the frame with ``seg`` (a Segment; None:
         hand every frame back as FRAME) and the work after it. ``t_rx``: the frame's arrival
@@ -435,15 +438,24 @@ cdef class Responder:
         in buf and its arrival time. Raises SegmentError (from the segment's exception)
         where Segment.process would raise in Daemon.handle_frame, ServiceError where the
         work after it would, OSError where the socket fails."""
-        cdef long long stamp = 0
-        cdef long long wait_until, now
-        cdef long n
-        cdef int code, i
         cdef int policy = sched_getscheduler(0)
         self.rt = policy == SCHED_FIFO or policy == SCHED_RR
         if seg is None and timers:
             raise ValueError("timers: a segment is needed")
         self.buf = buf
+        self.view = buf
+        try:
+            return self.serve_frames(deadline_ns, seg, t_rx, timers)
+        finally:
+            self.view = None  # the caller's buffer is free to change size again
+
+    cdef tuple serve_frames(self, long long deadline_ns, Segment seg, long long t_rx,
+                            bint timers):
+        """serve()'s loop."""
+        cdef long long stamp = 0
+        cdef long long wait_until, now, t
+        cdef long n
+        cdef int code, i
         for i in range(self.nothers + 2):
             self.pfd[i].revents = 0
         while True:
@@ -472,7 +484,7 @@ cdef class Responder:
                 return (code, n, t)
 
 
-cdef int service(object seg, long long t, int code) except -1:
+cdef int service(Segment seg, long long t, int code) except -1:
     """``Segment.service(t)``, its failure a ServiceError (``code``: what serve() was
     doing, REPLIED or DROPPED after a frame, TIMEOUT for a timer)."""
     try:

@@ -14,7 +14,7 @@ cdef long long CIRCULATING, LEN_MASK, MORE_FOLLOWS, _DC_SYSTEM_TIME, NO_DEADLINE
 cdef class Segment:
     cdef public bytearray _dc_after, _dc_before
     cdef public long long _dc_pending, _dc_reach, _dc_reader
-    cdef public object _next_sync, _pulse_hint
+    cdef public long long _next_sync, _pulse_hint
     cdef public list _sync_escs
     cdef public dict addr_map
     cdef public object awake
@@ -31,9 +31,19 @@ cdef class Segment:
     cdef public bint reply_first
     cdef public long long sync0_late_ns, sync0_ticks
 
+    @cython.locals(ctx=FrameContext, hdr="long long", end="long long", p="long long",
+                   lf="long long", q="long long")
+    cpdef bint process(self, bytearray buf, long long off, long long n,
+                       long long t_ns=*) except -1
+    @cython.locals(reader="long long", n="long long", inc="long long", esc=Esc,
+                   before="unsigned char[:]", after="unsigned char[:]")
+    cpdef long long _frmw_system_time(self, unsigned char[:] data, tuple readers,
+                                      long long reach) except -1
+
     @cython.locals(ctx=FrameContext, escs=list, reach="long long", cmd="long long",
                    lf="long long", dlen="long long", d0="long long", w="long long",
-                   data="unsigned char[:]", inc="long long", adp="long long",
+                   mv="unsigned char[:]", data="unsigned char[:]", inc="long long",
+                   adp="long long",
                    ado="long long", lad="long long", esc=Esc,
                    k="long long", i="long long", irq="long long", wkc="long long")
     cpdef void _walk(self, bytearray buf, long long p) except *
@@ -41,6 +51,11 @@ cdef class Segment:
     @cython.locals(n="long long", reader="long long", reach="long long", i="long long",
                    escs=list, esc=Esc, before=bytes, after=bytes)
     cpdef void after_reply(self) except *
+    cpdef void pulses_due(self, long long t) except *
+    @cython.locals(t="long long", ctx=FrameContext, esc=Esc, d="long long")
+    cpdef void service(self, object now_ns=*) except *
+    @cython.locals(best="long long", d="long long", e=Esc)
+    cpdef object next_deadline(self)
     @cython.locals(ctx=FrameContext, esc=Esc, dc=DcUnit, k="long long", nxt="long long",
                    d="long long", d1="long long")
     cpdef void sync_until(self, long long t) except *

@@ -223,7 +223,7 @@ class Segment:
         self._walk(buf, off + 2)
         return True
 
-    def _frmw_system_time(self, data: memoryview, readers: Sequence[int], reach: int) -> int:
+    def _frmw_system_time(self, data: memoryview, readers: tuple[int, ...], reach: int) -> int:
         """The DC time distribution (FRMW of 0x0910, the frame's last datagram) with the
         writers' time loops after the reply (decision P7): the reference's read is all the
         reply needs, and a register write always counts (+1 per writer). The writes run
@@ -234,12 +234,15 @@ class Segment:
         reader = readers[0] if readers else reach
         n = len(data)
         if reader > 0:
-            self._dc_before[:n] = data
+            before = self._dc_before
+            before[:n] = data
         inc = 0
         if reader < reach:
-            inc += self.escs[reader].ecat_read(_DC_SYSTEM_TIME, data)
+            esc = self.escs[reader]
+            inc += esc.ecat_read(_DC_SYSTEM_TIME, data)
         if reader + 1 < reach:
-            self._dc_after[:n] = data
+            after = self._dc_after
+            after[:n] = data
         self._dc_pending = n
         self._dc_reader = reader
         self._dc_reach = reach

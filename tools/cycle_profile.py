@@ -6,6 +6,7 @@ loopback link with a manual clock.
     .venv/bin/python tools/cycle_profile.py --drives 1 --cycles 2000          # us per cycle
     .venv/bin/python tools/cycle_profile.py --drives 16 --profile | head -40  # cProfile
     tools/icount.sh 1 --idle       # instructions per cycle (callgrind, two run lengths)
+    tools/icount.sh 1 --responder  # the frame through the compiled responder
 
 Ref: docs/performance.md.
 """
@@ -32,8 +33,13 @@ def main() -> int:
     ap.add_argument("--device", default="tmc8670", help="tmc8670 | echo")
     ap.add_argument("--idle", action="store_true", help="drives in OP but not enabled")
     ap.add_argument("--profile", action="store_true", help="cProfile, sorted by own time")
+    ap.add_argument(
+        "--responder",
+        action="store_true",
+        help="the frame through the compiled responder over a socket pair (decision P9)",
+    )
     args = ap.parse_args()
-    c = CspCycle(args.drives, args.device, enable=not args.idle)
+    c = CspCycle(args.drives, args.device, enable=not args.idle, responder=args.responder)
     for _ in range(100):  # warm up
         c.step()
     if args.profile:

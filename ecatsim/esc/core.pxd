@@ -48,6 +48,7 @@ cdef class Esc(SmHost):
     cdef public bint pdi_emulation
     cdef public FrameContext ctx
     cdef public bytearray mem
+    cdef unsigned char[:] memv
     cdef public object t
     cdef public bytes ecat_wmask, pdi_wmask, ecat_w_hooked, pdi_w_hooked, ecat_r_hooked
     cdef public bytes pdi_r_hooked
@@ -96,13 +97,13 @@ cdef class Esc(SmHost):
     cpdef void sync0_tick(self, object now_ns) except *
     cpdef void sync1_tick(self) except *
     @cython.locals(end="long long", ws="long long", we="long long")
-    cpdef long long ecat_read(self, long long ado, object out) except -1
+    cpdef long long ecat_read(self, long long ado, unsigned char[:] out) except -1
     @cython.locals(end="long long", ws="long long", we="long long")
     cpdef long long ecat_write(self, long long ado, object data) except -1
     @cython.locals(end="long long", e="long long")
     cpdef bint _plain_write(self, long long ado, object data) except -1
-    @cython.locals(end="long long", e="long long")
-    cpdef bint _plain_read(self, long long ado, object out) except -1
+    @cython.locals(end="long long", e="long long", k="long long", mv="unsigned char[:]")
+    cpdef bint _plain_read(self, long long ado, unsigned char[:] out) except -1
     @cython.locals(e="long long", i="long long", k="long long", m="long long",
                    wmask=bytes, hooked=bytes, mem=bytearray, hooks=tuple, entry=tuple)
     cpdef void reg_write(self, long long s, bytes data, bint pdi) except *

@@ -271,6 +271,7 @@ class Esc(SmHost):
         "fmmus",
         "link_down",
         "mem",
+        "memv",
         "mii",
         "on_reset",
         "pdi_emulation",
@@ -308,6 +309,8 @@ class Esc(SmHost):
         self.pdi_emulation = pdi_emulation
         self.ctx = ctx
         self.mem = bytearray(0x10000)
+        #: a view of mem for the read paths (mem is never resized or replaced)
+        self.memv = memoryview(self.mem)
         t = self.t = tables()
         #: the tables' masks and side-effect bitmaps, bound here (typed in the compiled core)
         self.ecat_wmask = t.ecat_wmask
@@ -748,22 +751,23 @@ class Esc(SmHost):
 
     def _plain_read(self, ado: int, out: memoryview) -> bool:
         end = ado + len(out)
+        mv = self.memv
         if end <= REGISTER_END:
             self.reg_read_hooks(ado, end, False)
-            out[:] = self.mem[ado:end]
+            out[:] = mv[ado:end]
             return True
         if ado < REGISTER_END:
             self.reg_read_hooks(ado, REGISTER_END, False)
-            out[: REGISTER_END - ado] = self.mem[ado:REGISTER_END]
+            out[: REGISTER_END - ado] = mv[ado:REGISTER_END]
             out = out[REGISTER_END - ado :]
             ado = REGISTER_END
         if not self.pdram_ok:
             return False
         e = min(end, PDRAM_END)
         if e > ado:
-            out[: e - ado] = self.mem[ado:e]
-        if end > e:
-            out[max(e, ado) - ado :] = bytes(end - max(e, ado))
+            out[: e - ado] = mv[ado:e]
+        for k in range(max(e, ado) - ado, end - ado):
+            out[k] = 0  # past the process RAM
         return True
 
     def reg_write(self, s: int, data: bytes, pdi: bool) -> None:
