@@ -256,13 +256,17 @@ class Segment:
         self._dc_pending = 0
         reader = self._dc_reader
         reach = self._dc_reach
-        before = bytes(self._dc_before[:n])
-        after = bytes(self._dc_after[:n])
         escs = self.escs
-        for i in range(reach):
-            if i != reader:
+        if reader > 0:  # the writers before the reference (all of them, if none reads)
+            before = bytes(self._dc_before[:n])
+            for i in range(min(reader, reach)):
                 esc = escs[i]
-                esc.ecat_write(_DC_SYSTEM_TIME, before if i < reader else after)
+                esc.ecat_write(_DC_SYSTEM_TIME, before)
+        if reader + 1 < reach:  # the writers behind it
+            after = bytes(self._dc_after[:n])
+            for i in range(reader + 1, reach):
+                esc = escs[i]
+                esc.ecat_write(_DC_SYSTEM_TIME, after)
 
     def _circulate(self, buf: bytearray, p: int) -> bool:
         """A frame passing an ESC whose port 0 is closed gets the circulating bit; one that
