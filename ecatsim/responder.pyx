@@ -253,13 +253,13 @@ cdef int wait_fds(pollfd *pfd, nfds_t n, const timespec *ts) noexcept:
 
 cdef class Responder:
     """The raw link's steady state (decision P9). ``fd``: the link's socket; ``others``:
-    descriptors that end a wait (wake-up pipe, control socket, front doors); ``buf``: the
-    frame buffer; ``recorder``: where each frame served here is kept as received;
-    ``busy``: spin instead of sleeping in ppoll(2); ``timer``: wait on a timerfd(2) armed
-    once per deadline, not a ppoll timeout (which arms and cancels a kernel timer on every
-    call, costly in a VM). ``follow``: called with each served frame's arrival time after
-    its work (the daemon's CPU following, decision K5), or None. ``replied``: replies
-    sent so far."""
+    descriptors that end a wait (wake-up pipe, control socket, front doors);
+    ``recorder``: where each frame served here is kept as received; ``busy``: spin
+    instead of sleeping in ppoll(2); ``timer``: wait on a timerfd(2) armed once per
+    deadline, not a ppoll timeout (which arms and cancels a kernel timer on every call,
+    costly in a VM). ``follow``: called with each served frame's arrival time after its
+    work (the daemon's CPU following, decision K5), or None. ``replied``: replies sent
+    so far."""
 
     cdef int fd, tfd, nothers
     cdef pollfd pfd[MAX_WATCH + 2]
