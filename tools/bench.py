@@ -280,7 +280,11 @@ def with_master(
                                  pair.slave_if, echo_mode])  # fmt: skip
         try:
             time.sleep(0.3)
-            floor = cycles(m, seconds, period_us, proc.pid, lock=False)
+            # the same reply-time taps as for the daemon: their thread wakes with every
+            # frame in the master's process, so both runs carry it alike
+            with ReplyTimer((pair.master_ns, pair.master_if), (pair.slave_ns, pair.slave_if)) as ft:
+                floor = cycles(m, seconds, period_us, proc.pid, lock=False)
+            run["floor_reply_us"] = ft.stats()
         finally:
             proc.kill()
             proc.wait()
@@ -395,7 +399,8 @@ def run(args: BenchOptions) -> int:
                       f"{run['cpu_percent']} %  enabled {run['drives_enabled']}/{n}  raw frame "
                       f"x{row['raw_ratio_median']}  daemon reply median "
                       f"{run['reply_us']['median']} p99.99 {run['reply_us']['p99.99']} max "
-                      f"{run['reply_us']['max']} us"
+                      f"{run['reply_us']['max']} us (floor "
+                      f"{run.get('floor_reply_us', {}).get('median')})"
                       + held)  # fmt: skip
     out = ROOT / "bench" / "results"
     out.mkdir(parents=True, exist_ok=True)
