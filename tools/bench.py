@@ -267,11 +267,16 @@ def with_master(
     daemon_pid: int,
 ) -> dict[str, Any]:
     """Cyclic exchange against the daemon, then, with the same pysoem master and frames,
-    against the C echo swapped in for the daemon (docs/performance.md "How to measure")."""
+    against the C echo swapped in for the daemon (docs/performance.md "How to measure").
+    The round trips of both are taken with nothing else listening on the link; the reply
+    times (``reply_us``, ``floor_reply_us``) in a second exchange of each, under the taps
+    of tools/reply_time.py, whose thread wakes with every frame in the master's process."""
+    taps = ((pair.master_ns, pair.master_if), (pair.slave_ns, pair.slave_if))
     m = pysoem_master(pair, n, period_us)
     try:
-        with ReplyTimer((pair.master_ns, pair.master_if), (pair.slave_ns, pair.slave_if)) as rt:
-            run = cycles(m, seconds, period_us, daemon_pid)
+        run = cycles(m, seconds, period_us, daemon_pid)
+        with ReplyTimer(*taps) as rt:
+            cycles(m, seconds, period_us, daemon_pid)
         run["reply_us"] = rt.stats()
         if echo is None:
             return run
@@ -280,10 +285,9 @@ def with_master(
                                  pair.slave_if, echo_mode])  # fmt: skip
         try:
             time.sleep(0.3)
-            # the same reply-time taps as for the daemon: their thread wakes with every
-            # frame in the master's process, so both runs carry it alike
-            with ReplyTimer((pair.master_ns, pair.master_if), (pair.slave_ns, pair.slave_if)) as ft:
-                floor = cycles(m, seconds, period_us, proc.pid, lock=False)
+            floor = cycles(m, seconds, period_us, proc.pid, lock=False)
+            with ReplyTimer(*taps) as ft:
+                cycles(m, seconds, period_us, proc.pid, lock=False)
             run["floor_reply_us"] = ft.stats()
         finally:
             proc.kill()
