@@ -720,7 +720,8 @@ class Esc(SmHost):
     def _plain_write(self, ado: int, data: memoryview | bytes) -> bool:
         end = ado + len(data)
         if end <= REGISTER_END:
-            self.reg_write(ado, bytes(data), False)
+            # bytes already (the DC time loops after the reply): no copy
+            self.reg_write(ado, data if type(data) is bytes else bytes(data), False)
             return True
         if ado < REGISTER_END:
             self.reg_write(ado, bytes(data[: REGISTER_END - ado]), False)
