@@ -23,6 +23,8 @@ cdef class Segment:
     cdef public bint compiled
     cdef public FrameContext ctx
     cdef public list escs, firmware, logical
+    cdef bytearray _frame
+    cdef unsigned char[:] _frame_view
     cdef public long long frames
     cdef public long long irq
     cdef public object persist

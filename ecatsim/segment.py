@@ -49,6 +49,8 @@ class Segment:
         "_dc_pending",
         "_dc_reach",
         "_dc_reader",
+        "_frame",
+        "_frame_view",
         "_next_sync",
         "_pulse_hint",
         "_sync_escs",
@@ -105,6 +107,11 @@ class Segment:
         self._dc_reach = 0
         self._dc_before = bytearray(8)
         self._dc_after = bytearray(8)
+        #: the buffer of the last frame walked and a view of it, made once per buffer (the
+        #: daemon receives every frame into one buffer; the buffer cannot be resized while
+        #: the segment holds the view)
+        self._frame: bytearray | None = None
+        self._frame_view = memoryview(bytearray())
         self.irq = 0
         #: a reachable ESC has its port-0 loop forced closed (circulating-frame handling)
         self.port0_closed = False
@@ -283,7 +290,10 @@ class Segment:
             p += 12 + (lf & LEN_MASK)
 
     def _walk(self, buf: bytearray, p: int) -> None:
-        mv = memoryview(buf)
+        if buf is not self._frame:
+            self._frame_view = memoryview(buf)
+            self._frame = buf
+        mv = self._frame_view
         ctx = self.ctx
         escs = self.escs
         while True:

@@ -15,7 +15,7 @@ cdef long long AL_EVENT_MASK, AL_EVENT_REQUEST, AL_STATUS, CUC_LATCH0_PDI
 cdef long long CUC_SYNC_PDI, DC_ACTIVATION, DC_ACTIVATION_STATUS, DC_CYCLIC_UNIT_CONTROL
 cdef long long DC_ECAT_EVENT_TIME, DC_LATCH0_CONTROL, DC_LATCH0_POS, DC_LATCH0_STATUS
 cdef long long DC_PDI_CHANGE_EVENT_TIME, DC_PDI_START_EVENT_TIME, DC_PULSE_LENGTH, DC_RECV_TIME_P0
-cdef long long DC_SYNC0_STATUS, DC_TIME_DIFF_FILTER, DL_CONTROL, DL_STATUS
+cdef long long DC_SYNC0_STATUS, DC_SYSTEM_TIME, DC_TIME_DIFF_FILTER, DL_CONTROL, DL_STATUS
 cdef long long ECAT_EVENT_MASK, ECAT_EVENT_REQUEST, ECAT_EV_AL_STATUS, ECAT_EV_DC_LATCH
 cdef long long ECAT_EV_DL_STATUS, ECAT_EV_SM0, ECAT_PU_ERROR_COUNTER, EEPROM_CONFIG
 cdef long long ESC_CFG_LATCH_IN, ESC_CFG_SYNC_OUT, ESC_CONFIG, EV_AL_CONTROL
@@ -111,6 +111,7 @@ cdef class Esc(SmHost):
     cpdef bytes old_reg(self, long long ra, long long rs, bytes old, long long s)
     @cython.locals(i="long long", hooked=bytes, ra="long long", rs="long long")
     cpdef void reg_read_hooks(self, long long s, long long e, bint pdi) except *
+    cpdef void _er_dc_system_time(self, long long ra, long long rs) except *
     @cython.locals(value="unsigned long long", lo="unsigned long long", hi="unsigned long long",
                    nbytes="long long")
     cpdef void _ew_dc_system_time(self, long long ra, long long rs, object old) except *

@@ -41,6 +41,7 @@ from ecatsim.esc.regs import (
     DC_PULSE_LENGTH,
     DC_RECV_TIME_P0,
     DC_SYNC0_STATUS,
+    DC_SYSTEM_TIME,
     DC_TIME_DIFF_FILTER,
     DL_CONTROL,
     DL_STATUS,
@@ -817,7 +818,11 @@ class Esc(SmHost):
             if entry is None:  # pragma: no cover
                 break
             fn, ra, rs = entry
-            fn(self, ra, rs)
+            if ra == DC_SYSTEM_TIME and not pdi:
+                # the FRMW of every cycle reads it: a C call in the compiled core (P14)
+                self._er_dc_system_time(ra, rs)
+            else:
+                fn(self, ra, rs)
             i = _first(hooked, ra + rs, e) if ra + rs < e else -1
 
     def old_reg(self, ra: int, rs: int, old: bytes, s: int) -> bytes:

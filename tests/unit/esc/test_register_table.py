@@ -9,7 +9,8 @@ import itertools
 
 import pytest
 
-from ecatsim.esc.core import PASSIVE_SIDE_EFFECTS, hook_names, tables
+from ecatsim.esc.core import PASSIVE_SIDE_EFFECTS, Esc, hook_names, tables
+from ecatsim.esc.regs import DC_SYSTEM_TIME
 from ecatsim.spec.tables import SIDE_EFFECTS, SpecError, load_registers, parse_registers
 
 
@@ -21,6 +22,17 @@ def test_every_side_effect_in_the_table_has_a_hook_and_back() -> None:
     assert PASSIVE_SIDE_EFFECTS - used == set()
     assert hooks & PASSIVE_SIDE_EFFECTS == set()
     assert used <= SIDE_EFFECTS
+
+
+def test_the_system_time_read_hook_called_directly_is_the_tables() -> None:
+    """Esc.reg_read_hooks calls the ECAT read hook of 0x0910 by name (a C call in the
+    compiled core); the table must name the same hook for every byte of the register."""
+    t = tables()
+    for a in range(DC_SYSTEM_TIME, DC_SYSTEM_TIME + 8):
+        entry = t.ecat_r[a]
+        assert entry is not None
+        assert entry[0] is Esc._er_dc_system_time
+        assert entry[1:] == (DC_SYSTEM_TIME, 8)
 
 
 def test_every_row_cites_the_datasheet_and_rows_do_not_overlap() -> None:
