@@ -34,6 +34,10 @@ def core_modules() -> list[str]:
     raise SystemExit("setup.py: no CORE tuple in ecatsim/compiled.py")
 
 
+#: Cython's own run-time code (memoryviews, function objects, ...), one copy in one
+#: module for every compiled module instead of a copy in each (decision P14)
+SHARED = "ecatsim._cyutility"
+
 #: compiled-only Cython modules (a .pyx, no .py twin): the daemon's responder (decision P9)
 PYX = ["ecatsim.responder"]
 
@@ -54,12 +58,16 @@ def core() -> list[Extension]:
         Extension(name, [name.replace(".", "/") + ".pyx"], optional=True, extra_compile_args=CFLAGS)
         for name in PYX
     ]
+    exts.append(
+        Extension(SHARED, [SHARED.replace(".", "/") + ".c"], optional=True, extra_compile_args=CFLAGS)
+    )
     built = list(
         cythonize(
             exts,
             build_dir="build/cython",
             language_level=3,
             quiet=True,
+            shared_utility_qualified_name=SHARED,
             compiler_directives={
                 # the .py files' annotations are for mypy; Cython's types come from the
                 # .pxd file beside each module

@@ -138,7 +138,7 @@ def test_every_extension_is_optional(monkeypatch: pytest.MonkeyPatch) -> None:
     every extension setup.py declares is optional, including those cythonize makes anew.
     They are all Cython modules: no hand-written C is left."""
     exts, _ = _cythonize_calls(monkeypatch)
-    assert {e.name for e in exts} == {*compiled.CORE, "ecatsim.responder"}
+    assert {e.name for e in exts} == {*compiled.CORE, "ecatsim.responder", "ecatsim._cyutility"}
     assert [e.name for e in exts if not e.optional] == []
     root = Path(compiled.__file__).parent
     assert sorted(p.name for p in root.rglob("*.[ch]")) == []
@@ -151,3 +151,5 @@ def test_every_extension_declares_that_it_needs_the_gil(monkeypatch: pytest.Monk
     silently."""
     _, seen = _cythonize_calls(monkeypatch)
     assert seen["compiler_directives"]["freethreading_compatible"] is False
+    # Cython's run-time code is one shared module, built with the same directives
+    assert seen["shared_utility_qualified_name"] == "ecatsim._cyutility"
