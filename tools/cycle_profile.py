@@ -7,6 +7,7 @@ loopback link with a manual clock.
     .venv/bin/python tools/cycle_profile.py --drives 16 --profile | head -40  # cProfile
     tools/icount.sh 1 --idle       # instructions per cycle (callgrind, two run lengths)
     tools/icount.sh 1 --responder  # the frame through the compiled responder
+    tools/coldmiss.sh 1            # code and data lines a frame misses in a cold L2
 
 Ref: docs/performance.md.
 """
@@ -38,8 +39,25 @@ def main() -> int:
         action="store_true",
         help="the frame through the compiled responder over a socket pair (decision P9)",
     )
+    ap.add_argument(
+        "--evict",
+        type=int,
+        default=0,
+        metavar="MB",
+        help="before each frame, read MB megabytes a byte per cache line, so the frame finds "
+        "the caches cold, as after the master's own work on a shared CPU",
+    )
     args = ap.parse_args()
     c = CspCycle(args.drives, args.device, enable=not args.idle, responder=args.responder)
+    if args.evict:
+        evict = memoryview(bytearray(b"\1" * (args.evict << 20)))[::64]
+        deliver = c.deliver
+
+        def cold_deliver(raw: bytes) -> bytes | None:
+            sum(evict)
+            return deliver(raw)
+
+        c.deliver = cold_deliver  # type: ignore[method-assign]
     for _ in range(100):  # warm up
         c.step()
     if args.profile:

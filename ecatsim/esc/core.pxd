@@ -38,7 +38,7 @@ cdef void _put32(bytearray m, long long a, long long v) except *
 
 cdef class FrameContext:
     cdef public long long frame_no
-    cdef public object t_ns, pdi_ns
+    cdef public long long t_ns, pdi_ns
     cdef public bint irq_dirty, addr_dirty, logical_dirty, topology_dirty, timers_dirty
     cdef public set pending, flush
 
