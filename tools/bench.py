@@ -24,6 +24,7 @@ import json
 import math
 import os
 import platform
+import shutil
 import signal
 import socket
 import struct
@@ -411,6 +412,7 @@ def run(args: BenchOptions) -> int:
     path = out / f"bench-{time.strftime('%Y%m%d-%H%M%S')}.json"
     path.write_text(json.dumps(results, indent=2) + "\n")
     print(f"written {path.relative_to(ROOT)}")
+    shutil.rmtree(tmp, ignore_errors=True)  # a run that fails keeps its daemon logs there
     return 0
 
 
