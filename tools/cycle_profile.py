@@ -7,7 +7,7 @@ loopback link with a manual clock.
     .venv/bin/python tools/cycle_profile.py --drives 16 --profile | head -40  # cProfile
     tools/icount.sh 1 --idle       # instructions per cycle (callgrind, two run lengths)
     tools/icount.sh 1 --responder  # the frame through the compiled responder
-    tools/coldmiss.sh 1            # code and data lines a frame misses in a cold L2
+    tools/icount.sh 1 --cold       # code and data lines a frame misses in a cold L2
 
 Ref: docs/performance.md.
 """
