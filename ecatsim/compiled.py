@@ -44,6 +44,7 @@ CORE = (
     "ecatsim.esc.dc",
     "ecatsim.esc.core",
     "ecatsim.esc.pdi",
+    "ecatsim.slave.od",
     "ecatsim.slave.pdo",
     "ecatsim.slave.firmware",
     "ecatsim.wire.frame",

@@ -6,6 +6,7 @@ cimport cython
 
 from ecatsim.device.servo cimport Servo
 cimport ecatsim.device.cia402 as cia402
+from ecatsim.slave.od cimport Entry
 
 
 # the statusword bits as C constants (drive.py uses them only within itself)
@@ -17,6 +18,7 @@ cdef long long SW_OMS12, SW_OMS13, SW_MOTOR_ACTIVE, SW_DIRECTION
 cdef object _round(double x)
 
 
+@cython.locals(e=Entry)
 cdef long long _int_of(tuple hit) except? -1
 
 
@@ -56,6 +58,7 @@ cdef class Drive:
     cdef public object tracer
 
     cpdef object _entry(self, int index, int sub)
+    @cython.locals(e=Entry)
     cpdef object _v(self, int index, int sub=*)
     @cython.locals(hits=tuple)
     cpdef tuple _controls(self)
@@ -82,5 +85,5 @@ cdef class Drive:
     cpdef _controlword(self)
 
     @cython.locals(s=Servo, sw="long long", rpm=double, mode="long long", hits=tuple,
-                   values=tuple, k=Py_ssize_t, hit=tuple)
+                   values=tuple, k=Py_ssize_t, hit=tuple, e=Entry)
     cpdef _publish(self)

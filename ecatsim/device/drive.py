@@ -105,7 +105,8 @@ def _int_of(hit: tuple[Entry, int, int] | None) -> int:
     """An entry's value if it is an int, else 0 (no entry: 0); see Drive._entry."""
     if hit is None:
         return 0
-    v = hit[0].value
+    e = hit[0]
+    v = e.value
     return v if isinstance(v, int) else 0
 
 
@@ -183,7 +184,8 @@ class Drive:
         hit = self._entry(index, sub)
         if hit is None:
             return 0
-        v = hit[0].value
+        e = hit[0]
+        v = e.value
         return v if isinstance(v, int) else 0
 
     def _controls(self) -> tuple[tuple[Entry, int, int] | None, ...]:
@@ -644,7 +646,8 @@ class Drive:
                 v = values[k]
                 lo = hit[1]
                 hi = hit[2]
-                hit[0].value = lo if v < lo else hi if v > hi else v
+                e = hit[0]
+                e.value = lo if v < lo else hi if v > hi else v
 
     def _publish_sdo_only(self) -> None:
         """Values no PDO can carry, refreshed when the OD is read (SDO upload, control

@@ -67,6 +67,7 @@ cdef class Esc(SmHost):
     cdef public bint al_control_locked
     cdef public long long reset_progress_frame
     cdef public long long ecat_irq
+    cdef public bint irq_line
     cdef public long long wr_s, wr_e
     cdef public bytearray _scratch
     cdef public object on_reset

@@ -270,6 +270,7 @@ class Esc(SmHost):
         "ecat_wmask",
         "eeprom",
         "fmmus",
+        "irq_line",
         "link_down",
         "mem",
         "memv",
@@ -340,6 +341,9 @@ class Esc(SmHost):
         self.al_control_locked = False
         self.reset_progress_frame = -1
         self.ecat_irq = 0
+        #: the PDI interrupt line (IRQ pin), as last set by _pdi_irq: this ESC's position
+        #: is in ctx.pending while it is high
+        self.irq_line = False
         #: byte range [wr_s, wr_e) of the register write being processed (for hooks)
         self.wr_s = 0
         self.wr_e = 0
@@ -379,6 +383,7 @@ class Esc(SmHost):
         self.ctx.addr_dirty = self.ctx.logical_dirty = self.ctx.irq_dirty = True
         self.ctx.topology_dirty = True
         self.ctx.pending.discard(self.position)
+        self.irq_line = False
         self.ecat_irq = 0
 
     def _eeprom_written(self) -> None:
@@ -510,8 +515,13 @@ class Esc(SmHost):
         self._pdi_irq(_get32(self.mem, AL_EVENT_REQUEST))
 
     def _pdi_irq(self, request: int) -> None:
-        """The PDI interrupt: AL event request AND AL event mask. Ref: §5.32, §5.33."""
-        if request & _get32(self.mem, AL_EVENT_MASK):
+        """The PDI interrupt: AL event request AND AL event mask. Ref: §5.32, §5.33. The
+        pending set changes only where the line does (most event changes leave it high)."""
+        line = (request & _get32(self.mem, AL_EVENT_MASK)) != 0
+        if line == self.irq_line:
+            return
+        self.irq_line = line
+        if line:
             self.ctx.pending.add(self.position)
         else:
             self.ctx.pending.discard(self.position)

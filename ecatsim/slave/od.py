@@ -96,34 +96,83 @@ def _signed(dtype: str) -> bool:
     return dtype.startswith("INTEGER")
 
 
-@dataclass(slots=True)
 class Entry:
-    """One subindex: type, access, limits and the current value."""
+    """One subindex: type, access, limits and the current value.
+
+    A plain class, not a dataclass: compiled, it is an extension type whose fields the
+    drive and the process image read and write directly every cycle (od.pxd, decision
+    P15); its constructor, ``repr`` and equality are a slots dataclass's."""
+
+    __slots__ = FIELDS = (
+        "sub", "name", "dtype", "access", "pdo", "minimum", "maximum", "default", "unit",
+        "values", "write_states", "value", "bits", "pdo_bits",
+    )  # fmt: skip
 
     sub: int
     name: str
     dtype: str
-    access: str = "ro"  # ro, rw, wo
-    pdo: bool = False
-    minimum: int | None = None
-    maximum: int | None = None
-    default: int | str = 0
-    unit: str = ""
-    values: tuple[int, ...] = ()
+    access: str  # ro, rw, wo
+    pdo: bool
+    minimum: int | None
+    maximum: int | None
+    default: int | str
+    unit: str
+    values: tuple[int, ...]
     #: states (AL codes) in which a write is allowed; empty = any state
-    write_states: tuple[int, ...] = ()
-    value: int | str | bytes = 0
-    bits: int = 0
+    write_states: tuple[int, ...]
+    value: int | str | bytes
+    bits: int
     #: shorter lengths a PDO may map the entry with besides ``bits`` (the low bits, sign-
     #: extended on the way in), where a datasheet's default mapping uses one
-    pdo_bits: tuple[int, ...] = ()
+    pdo_bits: tuple[int, ...]
 
-    def __post_init__(self) -> None:
-        if self.dtype not in DATA_TYPES:
-            raise ValueError(f"unknown data type {self.dtype}")
-        if not self.bits:
-            self.bits = DATA_TYPES[self.dtype][1]
-        self.value = self.default
+    def __init__(
+        self,
+        sub: int,
+        name: str,
+        dtype: str,
+        access: str = "ro",
+        pdo: bool = False,
+        minimum: int | None = None,
+        maximum: int | None = None,
+        default: int | str = 0,
+        unit: str = "",
+        values: tuple[int, ...] = (),
+        write_states: tuple[int, ...] = (),
+        value: int | str | bytes = 0,
+        bits: int = 0,
+        pdo_bits: tuple[int, ...] = (),
+    ) -> None:
+        if dtype not in DATA_TYPES:
+            raise ValueError(f"unknown data type {dtype}")
+        self.sub = sub
+        self.name = name
+        self.dtype = dtype
+        self.access = access
+        self.pdo = pdo
+        self.minimum = minimum
+        self.maximum = maximum
+        self.default = default
+        self.unit = unit
+        self.values = values
+        self.write_states = write_states
+        self.bits = bits or DATA_TYPES[dtype][1]
+        self.pdo_bits = pdo_bits
+        self.value = default  # ``value`` is accepted and, as ever, starts at the default
+
+    def _fields(self) -> tuple[object, ...]:
+        return tuple(getattr(self, f) for f in Entry.FIELDS)
+
+    def __repr__(self) -> str:
+        return "Entry(" + ", ".join(f"{f}={getattr(self, f)!r}" for f in Entry.FIELDS) + ")"
+
+    def __eq__(self, other: object) -> bool:
+        if other.__class__ is not self.__class__:
+            return NotImplemented
+        assert isinstance(other, Entry)
+        return self._fields() == other._fields()
+
+    __hash__ = None  # type: ignore[assignment]  # mutable, compared by value
 
     @property
     def type_code(self) -> int:
@@ -156,10 +205,7 @@ class Entry:
     def decode(self, data: bytes) -> int | str | bytes:
         if self.is_string:
             return data.decode("latin-1") if self.dtype == "VISIBLE_STRING" else bytes(data)
-        v = int.from_bytes(data, "little")
-        if _signed(self.dtype) and v >= 1 << (8 * len(data) - 1):
-            v -= 1 << (8 * len(data))
-        return v
+        return int.from_bytes(data, "little", signed=_signed(self.dtype))
 
     def check_write(self, data: bytes) -> int | str | bytes:
         """Validate a download of ``data``; return the decoded value or raise SdoAbort.

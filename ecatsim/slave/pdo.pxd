@@ -3,6 +3,8 @@
 # compiled code. pdo.py stays the one source of the behaviour. Decisions P2, P3, P13.
 cimport cython
 
+from ecatsim.slave.od cimport Entry
+
 
 cdef class PdoImage:
     cdef public object od, device
@@ -10,7 +12,8 @@ cdef class PdoImage:
     cdef object _rx_st, _tx_st
     cdef tuple _rx_entries, _tx_entries
 
-    @cython.locals(entries=tuple, values=tuple, i="Py_ssize_t")
+    @cython.locals(entries=tuple, values=tuple, i="Py_ssize_t", e=Entry)
     cpdef void set_outputs(self, object data, object now_ns) except *
     cpdef bytes get_inputs(self, object now_ns)
+    @cython.locals(entries=tuple, values=list, i="Py_ssize_t", e=Entry)
     cpdef bytes pack_inputs(self)

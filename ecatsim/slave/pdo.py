@@ -235,7 +235,8 @@ class PdoImage:
             entries: tuple[Entry, ...] = self._rx_entries
             values: tuple[int, ...] = st.unpack_from(data)
             for i in range(len(entries)):
-                entries[i].value = values[i]
+                e = entries[i]
+                e.value = values[i]
         else:
             for f in self._plan.rx:
                 if f.entry is not None:
@@ -250,8 +251,13 @@ class PdoImage:
         """The input image from the OD values, as they are now."""
         st = self._tx_st
         if st is not None:
+            entries: tuple[Entry, ...] = self._tx_entries
+            values = []
+            for i in range(len(entries)):
+                e = entries[i]
+                values.append(e.value)
             try:
-                return st.pack(*[e.value for e in self._tx_entries])
+                return st.pack(*values)
             except struct.error:
                 pass  # a value out of its type's range: encoded (masked) entry by entry
         out = bytearray(self.plan.tx_size)
