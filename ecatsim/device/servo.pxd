@@ -4,9 +4,13 @@
 cimport cython
 
 
+cdef class Gains:
+    cdef public double cur_kp, cur_ki, flux_kp, flux_ki, vel_kp, vel_ki, pos_kp
+
+
 cdef class Servo:
     cdef public object p
-    cdef public object gains
+    cdef public Gains gains
     cdef public double angle
     cdef public double omega
     cdef public double iq_ma
@@ -32,6 +36,7 @@ cdef class Servo:
         iq_ref=double, flux=bint, done=long, why=int, out=double, err_p=double, v_ref=double,
         err=double, emf=double, err_a=double, v=double, torque=double, drive=double,
         new=double, rev=double, two_pi=double, rpm=double, torque_kind=int, position_kind=int,
+        g=Gains,
     )
     cpdef tuple run(self, long n, int kind, double ref, double v_ff_rpm=*, double window=*,
                     double i_trip_ma=*, bint index=*)

@@ -41,17 +41,50 @@ class MotorParams:
     substep: float = 1.0e-4  # s
 
 
-@dataclass(slots=True)
 class Gains:
-    """Loop gains in engineering units (mapped from 2041h-2043h by the drive)."""
+    """Loop gains in engineering units (mapped from 2041h-2043h by the drive).
 
-    cur_kp: float = 4.0  # V per A (2041h:05 / 256; L / 250 us)
-    cur_ki: float = 4000.0  # V per A*s (2041h:06; R / 250 us)
-    flux_kp: float = 4.0  # V per A (2041h:07 / 256)
-    flux_ki: float = 4000.0  # V per A*s (2041h:08)
-    vel_kp: float = 12.5  # mA per rpm
-    vel_ki: float = 960.0  # mA per rpm*s
-    pos_kp: float = 0.7  # rpm per count
+    A plain class with the constructor, ``repr`` and equality of a slots dataclass:
+    compiled, an extension type with C doubles, which the substep loop reads as fields
+    (servo.pxd, decision P15)."""
+
+    __slots__ = FIELDS = ("cur_kp", "cur_ki", "flux_kp", "flux_ki", "vel_kp", "vel_ki", "pos_kp")
+
+    cur_kp: float  # V per A (2041h:05 / 256; L / 250 us)
+    cur_ki: float  # V per A*s (2041h:06; R / 250 us)
+    flux_kp: float  # V per A (2041h:07 / 256)
+    flux_ki: float  # V per A*s (2041h:08)
+    vel_kp: float  # mA per rpm
+    vel_ki: float  # mA per rpm*s
+    pos_kp: float  # rpm per count
+
+    def __init__(
+        self,
+        cur_kp: float = 4.0,
+        cur_ki: float = 4000.0,
+        flux_kp: float = 4.0,
+        flux_ki: float = 4000.0,
+        vel_kp: float = 12.5,
+        vel_ki: float = 960.0,
+        pos_kp: float = 0.7,
+    ) -> None:
+        self.cur_kp = cur_kp
+        self.cur_ki = cur_ki
+        self.flux_kp = flux_kp
+        self.flux_ki = flux_ki
+        self.vel_kp = vel_kp
+        self.vel_ki = vel_ki
+        self.pos_kp = pos_kp
+
+    def __repr__(self) -> str:
+        return "Gains(" + ", ".join(f"{f}={getattr(self, f)!r}" for f in Gains.FIELDS) + ")"
+
+    def __eq__(self, other: object) -> bool:
+        if other.__class__ is not self.__class__:
+            return NotImplemented
+        return all(getattr(self, f) == getattr(other, f) for f in Gains.FIELDS)
+
+    __hash__ = None  # type: ignore[assignment]  # mutable, compared by value
 
 
 class Servo:
@@ -249,7 +282,7 @@ class Servo:
             elif abs(drive) <= coulomb:
                 drive = 0.0  # static friction holds
             else:
-                drive -= math.copysign(coulomb, drive)
+                drive -= coulomb if drive > 0.0 else -coulomb  # |drive| > coulomb >= 0
             new = omega + drive / inertia * dt
             if omega != 0.0 and (new > 0) != (omega > 0) and abs(torque - load) <= coulomb:
                 new = 0.0  # friction stops the motor, it does not reverse it
@@ -279,7 +312,9 @@ def _floor(x: float) -> float:
     if not -4.0e18 < x < 4.0e18:
         return float(math.floor(x))
     k = int(x)
-    return float(k - 1 if x < k else k)
+    if x < k:
+        k -= 1
+    return float(k)
 
 
 class Profile:
