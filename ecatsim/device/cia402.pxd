@@ -2,5 +2,10 @@
 # step() callable in C from the compiled drive (drive.pxd cimports this module). cia402.py
 # stays the one source of the behaviour; this file only gives types. Decision P2.
 
+cimport cython
+
+
 cpdef object decode(long long controlword, long long previous)
+
+@cython.locals(transitions=dict)
 cpdef object step(object state, object cmd)

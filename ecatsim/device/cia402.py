@@ -111,4 +111,5 @@ _FAULT_RESET = Command.FAULT_RESET
 
 def step(state: PdsState, cmd: Command) -> tuple[int, PdsState] | None:
     """The transition for (state, command), or None if the command does nothing there."""
-    return TRANSITIONS.get((state, cmd))
+    transitions = TRANSITIONS
+    return transitions.get((state, cmd))

@@ -90,6 +90,7 @@ cdef class Esc(SmHost):
     cpdef void set_al_event(self, long long bits) except *
     @cython.locals(m=bytearray, v="long long")
     cpdef void clr_al_event(self, long long bits) except *
+    @cython.locals(line=bint)
     cpdef void _pdi_irq(self, long long request) except *
     @cython.locals(mirror="long long", ebit="long long", abit="long long")
     cpdef void sm_status_changed(self, SyncManager sm) except *
