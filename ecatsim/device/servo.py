@@ -82,7 +82,8 @@ class Gains:
     def __eq__(self, other: object) -> bool:
         if other.__class__ is not self.__class__:
             return NotImplemented
-        return all(getattr(self, f) == getattr(other, f) for f in Gains.FIELDS)
+        fields = Gains.FIELDS  # compared as field tuples, as a dataclass does
+        return tuple(getattr(self, f) for f in fields) == tuple(getattr(other, f) for f in fields)
 
     __hash__ = None  # type: ignore[assignment]  # mutable, compared by value
 

@@ -160,17 +160,14 @@ class Entry:
         self.pdo_bits = pdo_bits
         self.value = default  # ``value`` is accepted and, as ever, starts at the default
 
-    def _fields(self) -> tuple[object, ...]:
-        return tuple(getattr(self, f) for f in Entry.FIELDS)
-
     def __repr__(self) -> str:
         return "Entry(" + ", ".join(f"{f}={getattr(self, f)!r}" for f in Entry.FIELDS) + ")"
 
     def __eq__(self, other: object) -> bool:
         if other.__class__ is not self.__class__:
             return NotImplemented
-        assert isinstance(other, Entry)
-        return self._fields() == other._fields()
+        fields = Entry.FIELDS  # compared as field tuples, as a dataclass does
+        return tuple(getattr(self, f) for f in fields) == tuple(getattr(other, f) for f in fields)
 
     __hash__ = None  # type: ignore[assignment]  # mutable, compared by value
 
