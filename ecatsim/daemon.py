@@ -100,6 +100,8 @@ class Daemon:
         self._responder: ResponderType | None = None
         #: runs the daemon on the master's CPU (decision K5); None: stays where it is
         self.follower: CpuFollower | None = None
+        #: the follower's descriptor was readable: frames came in on another CPU
+        self._follow_due = False
         self.failures = 0
         self.replies = 0
         #: replies the compiled responder sent
@@ -192,7 +194,8 @@ class Daemon:
         except Exception as exc:
             self._failure("process", exc)
         self._service(t_rx)
-        if self.follower is not None:
+        follower = self.follower
+        if follower is not None and (self._follow_due or 0 < follower.look_ns <= t_rx):
             self._follow(t_rx)
         faults = self.faults
         if faults.active:
@@ -201,21 +204,25 @@ class Daemon:
             except Exception as exc:
                 self._failure("faults", exc)
 
-    def _follow(self, now_ns: int) -> None:
-        """Move to the CPU the master's frames come from (decision K5)."""
+    def _follow(self, now_ns: int) -> int:
+        """Move to the CPU the master's frames come from (decision K5), after frames came
+        in on another CPU (the follower's descriptor was readable) or at the time the
+        follower asked to look again. Returns that time (0: none)."""
         follower = self.follower
+        self._follow_due = False
         if follower is None:
-            return
+            return 0
         pauses = follower.pauses
         try:
             cpu = follower.poll(now_ns)
         except OSError as exc:
             log.warning("follow_master_cpu_failed", reason=exc.strerror)
-            return
+            return follower.look_ns
         if cpu is not None:
             (log.info if follower.moves == 1 else log.debug)("following_master_cpu", cpu=cpu)
         elif follower.pauses != pauses:
             log.info("follow_master_cpu_paused", reason="the master keeps moving away")
+        return follower.look_ns
 
     def _hold(self, frame: bytes, copies: int, delay_ns: int) -> None:
         """A delay fault: send ``frame`` later (``copies`` times)."""
@@ -271,7 +278,8 @@ class Daemon:
         )
 
     def _run_select(self, buf: bytearray) -> None:
-        watch = [f for f in (self._fd, *self._watch) if f >= 0]
+        follow_fd = self.follower.fileno() if self.follower is not None else -1
+        watch = [f for f in (self._fd, *self._watch, follow_fd) if f >= 0]
         clock = self.segment.clock
         while not self._stop:
             if self.busy_poll:
@@ -286,10 +294,14 @@ class Daemon:
             # wake the loop up to 1 ms after a SYNC0 deadline (decision P1)
             ready, _, _ = select.select(watch, (), (), timeout)
             self._serve_others(ready)
+            if follow_fd in ready:
+                self._follow_due = True  # after the frame that came with it (_after)
             # frames first (one that came in since poll returned is older than "now"), then
             # the timers: every frame is served before the pulses that come after it
             while self.handle_one(buf):
                 pass
+            if self._follow_due:  # no frame came with it
+                self._follow(clock.now_ns())
             self._service_timers()
 
     def _run_compiled(self, buf: bytearray) -> None:
@@ -322,7 +334,11 @@ class Daemon:
             srv = self._responder = mod.Responder(
                 self._fd, self._watch, self.recorder, self.busy_poll
             )
-        srv.follow = self._follow if self.follower is not None else None
+        follower = self.follower
+        if follower is not None:
+            srv.set_follow(self._follow, follower.fileno(), follower.look_ns)
+        else:
+            srv.set_follow(None, -1, 0)
         seg = self.segment if self._fast_ok() else None
         before = srv.replied
         n = t_rx = 0

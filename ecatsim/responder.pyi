@@ -21,7 +21,6 @@ class ServiceError(Exception):
 
 class Responder:
     busy: bool
-    follow: Callable[[int], None] | None
     replied: int
     def __init__(
         self,
@@ -31,6 +30,7 @@ class Responder:
         busy: bool = False,
         timer: bool = True,
     ) -> None: ...
+    def set_follow(self, follow: Callable[[int], int] | None, fd: int, look_ns: int) -> None: ...
     def serve(
         self,
         buf: bytearray,

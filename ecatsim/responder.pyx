@@ -257,12 +257,12 @@ cdef class Responder:
     ``recorder``: where each frame served here is kept as received; ``busy``: spin
     instead of sleeping in ppoll(2); ``timer``: wait on a timerfd(2) armed once per
     deadline, not a ppoll timeout (which arms and cancels a kernel timer on every call,
-    costly in a VM). ``follow``: called with each served frame's arrival time after its
-    work (the daemon's CPU following, decision K5), or None. ``replied``: replies sent
-    so far."""
+    costly in a VM). :meth:`set_follow`: the daemon's CPU following (decision K5), or
+    none. ``replied``: replies sent so far."""
 
     cdef int fd, tfd, nothers
-    cdef pollfd pfd[MAX_WATCH + 2]
+    #: the link, ``others``, the timer fd, the CPU follower's fd
+    cdef pollfd pfd[MAX_WATCH + 3]
     #: the deadline the timer fd is armed for (-1: none)
     cdef long long armed
     cdef bytearray buf
@@ -270,7 +270,11 @@ cdef class Responder:
     cdef unsigned char[:] view
     cdef FrameRecorder recorder
     cdef readonly bint busy
-    cdef public object follow
+    #: the CPU following: called with a time after a frame from another CPU, returns the
+    #: next time to call it without one (0: none)
+    cdef object follow
+    cdef long long follow_at
+    cdef bint follow_due
     cdef readonly long long replied
     #: the process runs SCHED_FIFO/RR: a yield after the reply gives nothing to a master
     cdef bint rt
@@ -288,6 +292,7 @@ cdef class Responder:
         self.recorder = recorder
         self.busy = busy
         self.follow = None
+        self.follow_at = 0
         self.armed = -1
         self.pfd[0].fd = fd
         self.pfd[0].events = POLLIN
@@ -300,10 +305,29 @@ cdef class Responder:
                 PyErr_SetFromErrno(OSError)
         self.pfd[self.nothers + 1].fd = self.tfd
         self.pfd[self.nothers + 1].events = POLLIN
+        self.pfd[self.nothers + 2].fd = -1
+        self.pfd[self.nothers + 2].events = POLLIN
 
     def __dealloc__(self) -> None:
         if self.tfd >= 0:
             close(self.tfd)
+
+    def set_follow(self, follow, int fd, long long look_ns) -> None:
+        """The CPU following (decision K5): ``fd`` is readable when frames have come in on
+        another CPU; after the frame that came with it (or at once, if none did) the
+        responder calls ``follow(t)``, which returns when to call it again with nothing
+        readable (0: never), as it does also after a frame arriving at ``look_ns`` or
+        later. ``follow`` None: no following."""
+        self.follow = follow
+        self.pfd[self.nothers + 2].fd = fd if follow is not None else -1
+        self.follow_at = look_ns
+        if follow is None:
+            self.follow_due = False
+
+    cdef int run_follow(self, long long t) except -1:
+        self.follow_due = False
+        self.follow_at = self.follow(t)
+        return 0
 
     def close(self) -> None:
         """Close the timer fd (the link's socket is the caller's)."""
@@ -359,17 +383,17 @@ cdef class Responder:
                 spin += 1
                 if spin % BUSY_SPINS or nothers == 0:
                     continue
-                rc = poll(pfd + 1, <nfds_t>nothers, 0)
+                rc = poll(pfd + 1, <nfds_t>(nothers + 2), 0)
             elif self.tfd >= 0:
                 self.arm(deadline)
-                rc = wait_fds(pfd, <nfds_t>(nothers + 2), NULL)
+                rc = wait_fds(pfd, <nfds_t>(nothers + 3), NULL)
                 if rc > 0 and pfd[nothers + 1].revents:
                     if read(self.tfd, &expirations, sizeof(expirations)) < 0 and errno != EAGAIN:
                         PyErr_SetFromErrno(OSError)
             else:
                 ts.tv_sec = <time_t>(left // 1_000_000_000)
                 ts.tv_nsec = left % 1_000_000_000
-                rc = wait_fds(pfd, <nfds_t>(nothers + 1), &ts)
+                rc = wait_fds(pfd, <nfds_t>(nothers + 3), &ts)  # no timer fd: -1, ignored
             if rc < 0:
                 if errno != EINTR:
                     PyErr_SetFromErrno(OSError)
@@ -379,6 +403,10 @@ cdef class Responder:
                 if pfd[i].revents:
                     return -WAKE
             look = self.busy or (rc > 0 and pfd[0].revents != 0)
+            if rc > 0 and pfd[nothers + 2].revents:
+                self.follow_due = True  # after this frame, or now if none came with it
+                if not look:
+                    self.run_follow(clock_ns(CLOCK_MONOTONIC))
 
     cdef int answer(self, long n, Segment seg, long long t_rx) except -1:
         """Daemon.handle_frame and Daemon._answer for a frame served whole: record it as
@@ -419,8 +447,8 @@ cdef class Responder:
         except Exception as exc:
             raise ServiceError("process", t, code) from exc
         service(seg, t, code)
-        if self.follow is not None:
-            self.follow(t)
+        if self.follow is not None and (self.follow_due or 0 < self.follow_at <= t):
+            self.run_follow(t)
         return 0
 
     def serve(self, bytearray buf not None, long long deadline_ns, Segment seg=None,
@@ -456,7 +484,7 @@ cdef class Responder:
         cdef long long wait_until, now, t
         cdef long n
         cdef int code, i
-        for i in range(self.nothers + 2):
+        for i in range(self.nothers + 3):
             self.pfd[i].revents = 0
         while True:
             wait_until = deadline_ns

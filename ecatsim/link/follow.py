@@ -9,14 +9,18 @@ once and the reply is queued before the master's first poll, whatever else runs.
 
 The CPU a frame arrived on comes from a packet fanout group (``PACKET_FANOUT_CPU``: each
 frame goes to the member whose index is the receiving CPU, packet(7)): one probe socket per
-CPU, each keeping one byte of each EtherCAT frame it gets. After each frame the daemon
-drains the probes that hold frames and, when most came from another CPU than the one it
-runs on, pins itself there (``sched_setaffinity``): a master that moves is followed from
-its next frame on. A daemon with much work per cycle on the master's CPU drives the
-scheduler to move the master away, again and again: more than ``CHASE_MOVES`` moves within
-a second stop the following for ``CHASE_PAUSE_NS`` and give the daemon all its CPUs back.
-Only while the daemon runs SCHED_FIFO: an ordinary task woken on the master's CPU would
-wait behind it.
+CPU, each keeping one byte of each EtherCAT frame it gets. The probes of the CPUs the daemon
+is not pinned to are members of an epoll(7) set (:meth:`CpuFollower.fileno`), which the
+daemon's wait watches: as long as the frames arrive on its own CPU nothing more happens per
+frame. When one arrives elsewhere the set becomes readable and the daemon calls
+:meth:`CpuFollower.poll`, which drains every probe and pins the daemon
+(``sched_setaffinity``) to the other CPU most frames came from: a master that moves is
+followed from its next frame on. A daemon with much work per cycle on the master's CPU
+drives the scheduler to move the master away, again and again: more than ``CHASE_MOVES``
+moves within a second stop the following for ``CHASE_PAUSE_NS`` and give the daemon all its
+CPUs back; while stopped (and for ``BACKOFF_NS`` after a failed move) no probe is watched,
+and the daemon looks again at :attr:`CpuFollower.look_ns`. Only while the daemon runs
+SCHED_FIFO: an ordinary task woken on the master's CPU would wait behind it.
 """
 
 from __future__ import annotations
@@ -42,8 +46,10 @@ BACKOFF_NS = 10_000_000_000
 #: more moves than this within one second are a chase: the following pauses
 CHASE_MOVES = 20
 CHASE_PAUSE_NS = 10_000_000_000
-#: each probe's receive buffer: room for a few hundred one-byte frames
-PROBE_BUF = 1 << 18
+#: each probe's receive buffer (the kernel doubles it): a few dozen one-byte frames. The
+#: probe of the daemon's own CPU is read only when a frame comes from elsewhere; until then
+#: it fills and drops, and what it holds is drained at that look.
+PROBE_BUF = 1 << 14
 
 #: EtherCAT frames (plain or 802.1Q-tagged) that arrive, not our own replies; one byte kept.
 #: Ref: filter(7), ETG.1000.4 §5.2 (EtherType 0x88A4).
@@ -76,6 +82,11 @@ class CpuFollower:
         self._window_moves = 0
         self._buf = bytearray(1)
         self.probes: list[socket.socket] = []
+        #: the probes whose frames call for a look (:meth:`fileno`), by CPU
+        self._epoll = select.epoll()
+        self._watched: set[int] = set()
+        #: while the following is stopped: when the daemon should look again (0: not stopped)
+        self.look_ns = 0
         group = (os.getpid() & 0xFFFF) | (PACKET_FANOUT_CPU << 16)
         try:
             for _ in range(self.ncpu):
@@ -93,6 +104,28 @@ class CpuFollower:
         self._poller = select.poll()
         for s in self.probes:
             self._poller.register(s, select.POLLIN)
+        self._watch()
+
+    def fileno(self) -> int:
+        """An epoll(7) descriptor, readable when a frame has arrived on a CPU the daemon may
+        run on other than the one it is pinned to (any before the first move) and the
+        following is not stopped: the daemon calls :meth:`poll` then."""
+        return self._epoll.fileno()
+
+    def _watch(self) -> None:
+        """Watch the probes of the CPUs the daemon may move to, or none while the following
+        is stopped (``look_ns`` set)."""
+        want = set() if self.look_ns else {c for c in self.allowed if c != self.cpu}
+        for cpu in self._watched - want:
+            self._epoll.unregister(self.probes[cpu])
+        for cpu in want - self._watched:
+            self._epoll.register(self.probes[cpu], select.EPOLLIN)
+        self._watched = want
+
+    def _stop_until(self, due_ns: int) -> None:
+        """No look before ``due_ns``: nothing is watched until then."""
+        self.due_ns = self.look_ns = due_ns
+        self._watch()
 
     def counts(self) -> list[int]:
         """Frames that arrived on each CPU since the probes were last read (drained)."""
@@ -111,21 +144,27 @@ class CpuFollower:
         return out
 
     def poll(self, now_ns: int) -> int | None:
-        """Pin the daemon to the CPU most frames came from since the last call, if it may
-        run there and is not there yet (a tie keeps it where it is). Returns the CPU it
-        moved to, else None. OSError: the move failed; no other is tried for BACKOFF_NS."""
-        counts = self.counts()  # read while paused too: a later move looks at new frames
+        """Drain the probes and, if frames came from CPUs other than the daemon's own since
+        the last look, pin it to the one most came from (the lowest of a tie) if it may run
+        there. Returns the CPU it moved to, else None. OSError: the move failed; no other is
+        tried for BACKOFF_NS."""
+        counts = self.counts()  # read while stopped too: a later move looks at new frames
         if now_ns < self.due_ns:
             return None
-        best = max(range(self.ncpu), key=counts.__getitem__)
-        if not counts[best] or best == self.cpu or best not in self.allowed:
-            return None
-        if self.cpu is not None and counts[best] <= counts[self.cpu]:
+        if self.look_ns:
+            self.look_ns = 0
+            self._watch()
+        best = max(
+            (c for c in range(self.ncpu) if c != self.cpu and c in self.allowed),
+            key=counts.__getitem__,
+            default=None,
+        )
+        if best is None or not counts[best]:
             return None
         try:
             os.sched_setaffinity(0, {best})
         except OSError:
-            self.due_ns = now_ns + BACKOFF_NS
+            self._stop_until(now_ns + BACKOFF_NS)
             raise
         self.cpu = best
         self.moves += 1
@@ -135,17 +174,19 @@ class CpuFollower:
         if self._window_moves > CHASE_MOVES:
             self._pause(now_ns)
             return None
+        self._watch()
         return best
 
     def _pause(self, now_ns: int) -> None:
         """Stop following for CHASE_PAUSE_NS; the daemon may run on all its CPUs again."""
         self.pauses += 1
         self.cpu = None
-        self.due_ns = now_ns + CHASE_PAUSE_NS
         self._window_moves = 0
+        self._stop_until(now_ns + CHASE_PAUSE_NS)
         os.sched_setaffinity(0, self.allowed)
 
     def close(self) -> None:
+        self._epoll.close()
         for s in self.probes:
             s.close()
         self.probes = []

@@ -366,3 +366,100 @@ def test_a_failing_service_is_counted_and_the_loop_goes_on(
         assert reply is not None and reply[26:30] == b"\x01\x00\x01\x00"  # INIT, WKC 1
         assert (d.replies, d.failures) == (k + 1, k + 1)
     assert d.recorder.last() == [frame, frame]
+
+
+class PipeFollower:
+    """A CPU follower (decision K5) whose descriptor is a pipe the test writes to, as the
+    probes' epoll set becomes readable when a frame comes in on another CPU; ``poll``
+    records its calls and drains the pipe, as the real one drains its probes, and stops
+    the following for ``stop_ns`` if set (as a pause does: nothing watched, a look at
+    ``look_ns``)."""
+
+    pauses = moves = 0
+
+    def __init__(self) -> None:
+        self.r, self.w = os.pipe()
+        os.set_blocking(self.r, False)
+        self.look_ns = 0
+        self.stop_ns = 0
+        self.calls: list[int] = []
+
+    def fileno(self) -> int:
+        return self.r
+
+    def poll(self, now_ns: int) -> int | None:
+        self.calls.append(now_ns)
+        self.look_ns = now_ns + self.stop_ns if self.stop_ns else 0
+        self.stop_ns = 0
+        try:
+            os.read(self.r, 64)
+        except BlockingIOError:
+            pass
+        return None
+
+    def close(self) -> None:
+        os.close(self.r)
+        os.close(self.w)
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_the_cpu_following_runs_only_when_its_descriptor_or_time_says_so(
+    compiled: bool, link: SocketLink
+) -> None:
+    """Frames on the daemon's own CPU cost nothing for the following: its poll runs after a
+    frame only once the follower's descriptor is readable (a frame came in elsewhere), at
+    once if no frame comes with it, and after a frame arriving at its ``look_ns`` or later
+    (the following stopped until then). Through Daemon.run: the compiled responder and the
+    select(2) loop."""
+    if compiled:
+        require_built(daemon_mod.responder, "ecatsim.responder")
+    seg = build_segment(SegmentConfig((SlaveConfig(device="echo", serial=1),)), MonotonicClock())
+    d = Daemon(link, seg)
+    d.compiled = compiled
+    assert d.responder_applies() == compiled
+    f = PipeFollower()
+    d.follower = f  # type: ignore[assignment]
+    brd = dg.ethernet_frame([dg.build(dg.Cmd.BRD, 0, 0x0130, bytes(2))])
+
+    def exchange() -> None:
+        link.master_send(brd)
+        deadline = time.monotonic() + 5
+        while link.master_recv() is None:
+            assert time.monotonic() < deadline, "no reply"
+            time.sleep(0.001)
+
+    def calls_become(n: int) -> None:
+        deadline = time.monotonic() + 5
+        while len(f.calls) < n and time.monotonic() < deadline:
+            time.sleep(0.001)
+        time.sleep(0.05)  # and no more come
+        assert len(f.calls) == n
+
+    t = threading.Thread(target=d.run)
+    t.start()
+    try:
+        for _ in range(3):
+            exchange()
+        calls_become(0)
+        os.write(f.w, b"x")  # with the next frame
+        exchange()
+        calls_become(1)
+        exchange()
+        calls_become(1)
+        f.stop_ns = 200 * MS
+        os.write(f.w, b"x")  # no frame comes with it
+        calls_become(2)
+        exchange()  # stopped: no look before look_ns
+        calls_become(2)
+        time.sleep(0.25)
+        exchange()
+        calls_become(3)
+        assert f.calls[2] >= f.calls[1] + 200 * MS
+        exchange()
+        calls_become(3)
+    finally:
+        d.stop()
+        t.join(5)
+        f.close()
+    assert not t.is_alive()
+    assert d.failures == 0

@@ -6,6 +6,7 @@ CPU set is checked right after a move only). Root."""
 from __future__ import annotations
 
 import os
+import select
 import socket
 import time
 from collections.abc import Iterator
@@ -84,14 +85,42 @@ def test_poll_pins_to_the_cpu_most_frames_came_from(
     assert f.poll(t) == b and f.cpu == b and f.moves == 1
     assert os.sched_getaffinity(0) == {b}
     assert f.poll(t) is None  # nothing new
-    send_from(a, master, ECAT, ECAT)
     send_from(b, master, ECAT, ECAT)
-    assert f.poll(t) is None and f.cpu == b  # a tie stays
+    assert f.poll(t) is None and f.cpu == b  # frames on its own CPU: it stays
+    send_from(b, master, ECAT, ECAT, ECAT)
     send_from(a, master, ECAT)
+    # its own CPU's frames do not hold it back: they were read late (the look comes with
+    # the first frame from elsewhere), so the other CPU's are the newer
     assert f.poll(t) == a and f.moves == 2 and os.sched_getaffinity(0) == {a}
     f.due_ns = t + follow.BACKOFF_NS  # as after a failed move
     send_from(b, master, ECAT)
     assert f.poll(t) is None and f.cpu == a and f.moves == 2
+
+
+def readable(f: CpuFollower) -> bool:
+    return bool(select.select([f], [], [], 0)[0])
+
+
+def test_its_descriptor_is_readable_when_frames_come_in_on_another_cpu(
+    rig: tuple[CpuFollower, socket.socket, socket.socket],
+) -> None:
+    """The daemon's wait watches fileno(): frames on the CPU it is pinned to leave it quiet
+    (nothing runs per frame), a frame on another CPU makes it readable until poll()."""
+    f, master, _ = rig
+    a, b = two_cpus()
+    t = 1_000_000_000
+    assert not readable(f)
+    send_from(b, master, ECAT)
+    assert readable(f)  # not pinned yet: any CPU
+    assert f.poll(t) == b and not readable(f)
+    send_from(b, master, ECAT, ECAT, ECAT)
+    assert not readable(f)
+    send_from(a, master, ECAT)
+    assert readable(f)
+    assert f.poll(t) == a and not readable(f)
+    send_from(a, master, ECAT)
+    assert not readable(f)
+    assert f.counts()[a] == 1  # its own CPU's probe still counts, for the next look
 
 
 def test_a_cpu_the_daemon_may_not_use_is_not_followed(
@@ -119,9 +148,13 @@ def test_a_master_that_keeps_moving_away_pauses_the_following(
         assert f.poll(t + k) == cpu
     send_from(a if f.cpu == b else b, master, ECAT)
     assert f.poll(t + follow.CHASE_MOVES) is None
-    assert (f.pauses, f.cpu, f.due_ns) == (1, None, t + follow.CHASE_MOVES + follow.CHASE_PAUSE_NS)
+    due = t + follow.CHASE_MOVES + follow.CHASE_PAUSE_NS
+    assert (f.pauses, f.cpu, f.due_ns, f.look_ns) == (1, None, due, due)
     assert os.sched_getaffinity(0) == allowed
     send_from(a, master, ECAT)
+    assert not readable(f)  # paused: nothing is watched, the daemon looks at look_ns
     assert f.poll(t + follow.CHASE_PAUSE_NS) is None  # still paused
     send_from(b, master, ECAT)
-    assert f.poll(t + follow.CHASE_MOVES + follow.CHASE_PAUSE_NS) == b  # following again
+    assert f.poll(due) == b and f.look_ns == 0  # following again
+    send_from(a, master, ECAT)
+    assert readable(f)
