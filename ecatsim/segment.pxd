@@ -24,6 +24,8 @@ cdef class Segment:
     cdef public FrameContext ctx
     cdef public list escs, firmware, logical
     cdef bytearray _frame
+    cdef public long long _frmw_adp
+    cdef public tuple _frmw_readers
     cdef unsigned char[:] _frame_view
     cdef public long long frames
     cdef public long long irq
@@ -47,7 +49,8 @@ cdef class Segment:
                    mv="unsigned char[:]", data="unsigned char[:]", inc="long long",
                    adp="long long",
                    ado="long long", lad="long long", esc=Esc,
-                   k="long long", i="long long", irq="long long", wkc="long long")
+                   k="long long", i="long long", irq="long long", wkc="long long",
+                   readers=tuple)
     cpdef void _walk(self, bytearray buf, long long p) except *
 
     @cython.locals(n="long long", reader="long long", reach="long long", i="long long",

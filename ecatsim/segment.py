@@ -51,6 +51,8 @@ class Segment:
         "_dc_reader",
         "_frame",
         "_frame_view",
+        "_frmw_adp",
+        "_frmw_readers",
         "_next_sync",
         "_pulse_hint",
         "_sync_escs",
@@ -92,6 +94,10 @@ class Segment:
         self._sync_escs: list[Esc] = []
         self.reach = len(self.escs)
         self.addr_map: dict[int, tuple[int, ...]] = {}
+        #: the last FRMW's address and the ESCs it names (the reference clock's, the same
+        #: every cycle), until the addresses change
+        self._frmw_adp = -1
+        self._frmw_readers: tuple[int, ...] = ()
         self.logical: list[Esc] = []
         #: the daemon's compiled responder may serve this segment's frames (decision P9);
         #: tests compare it with the Python path
@@ -160,6 +166,7 @@ class Segment:
                     if i not in lst:
                         lst.append(i)
             self.addr_map = {k: tuple(v) for k, v in amap.items()}
+            self._frmw_adp = -1
         if ctx.logical_dirty:
             ctx.logical_dirty = False
             self.logical = [e for e in self.escs[: self.reach] if e.fmmus]
@@ -354,7 +361,10 @@ class Segment:
                 buf[p + 2] = adp & 0xFF
                 buf[p + 3] = adp >> 8
             elif cmd == FRMW:
-                readers = self.addr_map.get(adp, ())
+                if adp != self._frmw_adp:
+                    self._frmw_readers = self.addr_map.get(adp, ())
+                    self._frmw_adp = adp
+                readers = self._frmw_readers
                 if (
                     self.reply_first
                     and ado == _DC_SYSTEM_TIME

@@ -52,7 +52,7 @@ cdef class Esc(SmHost):
     cdef public object t
     cdef public bytes ecat_wmask, pdi_wmask, ecat_w_hooked, pdi_w_hooked, ecat_r_hooked
     cdef public bytes pdi_r_hooked
-    cdef public tuple ecat_w_hooks, pdi_w_hooks
+    cdef public tuple ecat_w_hooks, pdi_w_hooks, ecat_r_hooks, pdi_r_hooks
     cdef public list sm
     cdef public object eeprom
     cdef public DcUnit dc
@@ -111,7 +111,8 @@ cdef class Esc(SmHost):
     cpdef void reg_write(self, long long s, bytes data, bint pdi) except *
     @cython.locals(lo="long long", hi="long long")
     cpdef bytes old_reg(self, long long ra, long long rs, bytes old, long long s)
-    @cython.locals(i="long long", hooked=bytes, ra="long long", rs="long long")
+    @cython.locals(i="long long", hooked=bytes, hooks=tuple, entry=tuple, ra="long long",
+                   rs="long long")
     cpdef void reg_read_hooks(self, long long s, long long e, bint pdi) except *
     cpdef void _er_dc_system_time(self, long long ra, long long rs) except *
     @cython.locals(value="unsigned long long", lo="unsigned long long", hi="unsigned long long",

@@ -265,6 +265,7 @@ class Esc(SmHost):
         "dc",
         "ecat_irq",
         "ecat_r_hooked",
+        "ecat_r_hooks",
         "ecat_w_hooked",
         "ecat_w_hooks",
         "ecat_wmask",
@@ -278,6 +279,7 @@ class Esc(SmHost):
         "on_reset",
         "pdi_emulation",
         "pdi_r_hooked",
+        "pdi_r_hooks",
         "pdi_w_hooked",
         "pdi_w_hooks",
         "pdi_wmask",
@@ -323,6 +325,8 @@ class Esc(SmHost):
         self.pdi_r_hooked = t.pdi_r_hooked
         self.ecat_w_hooks = t.ecat_w
         self.pdi_w_hooks = t.pdi_w
+        self.ecat_r_hooks = t.ecat_r
+        self.pdi_r_hooks = t.pdi_r
         self.sm = [SyncManager(self, n) for n in range(N_SM)]
         self.eeprom = EepromUnit(self.mem, sii, self._eeprom_written)
         self.dc = DcUnit(
@@ -766,7 +770,8 @@ class Esc(SmHost):
         mv = self.memv
         if end <= REGISTER_END:
             self.reg_read_hooks(ado, end, False)
-            out[:] = mv[ado:end]
+            for k in range(end - ado):  # compiled: a C loop (a slice copy is a generic call)
+                out[k] = mv[ado + k]
             return True
         if ado < REGISTER_END:
             self.reg_read_hooks(ado, REGISTER_END, False)
@@ -821,8 +826,7 @@ class Esc(SmHost):
         i = _first(hooked, s, e)
         if i < 0:
             return
-        t = self.t
-        hooks = t.pdi_r if pdi else t.ecat_r
+        hooks = self.pdi_r_hooks if pdi else self.ecat_r_hooks
         while i >= 0:
             entry = hooks[i]
             if entry is None:  # pragma: no cover

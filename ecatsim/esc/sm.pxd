@@ -41,9 +41,9 @@ cdef class SyncManager:
     cpdef bint ecat_may_read(self) except -1
     cpdef bint pdi_may_write(self) except -1
     cpdef bint pdi_may_read(self) except -1
-    @cython.locals(first=bint, last=bint, base="long long")
+    @cython.locals(first=bint, last=bint, base="long long", mv="unsigned char[:]", k="long long")
     cpdef void writer_write(self, long long off, const unsigned char[:] data) except *
-    @cython.locals(first=bint, last=bint, base="long long")
+    @cython.locals(first=bint, last=bint, base="long long", mv="unsigned char[:]", k="long long")
     cpdef void reader_read(self, long long off, unsigned char[:] out) except *
     @cython.locals(base="long long")
     cpdef bytes read_whole(self)

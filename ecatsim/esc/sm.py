@@ -247,8 +247,10 @@ class SyncManager:
         """
         first = off == 0
         last = off + len(data) >= self.length
-        base = self._base_for_write()
-        self.mv[base + off : base + off + len(data)] = data
+        base = self._base_for_write() + off
+        mv = self.mv
+        for k in range(len(data)):  # compiled: a C loop (a slice copy is a generic call)
+            mv[base + k] = data[k]
         self._writer_access(first, last)
 
     def reader_read(self, off: int, out: memoryview) -> None:
@@ -257,8 +259,10 @@ class SyncManager:
         last = off + len(out) >= self.length
         if first:
             self._reader_open()
-        base = self._base_for_read()
-        out[:] = self.mv[base + off : base + off + len(out)]
+        base = self._base_for_read() + off
+        mv = self.mv
+        for k in range(len(out)):  # compiled: a C loop, as in writer_write
+            out[k] = mv[base + k]
         self._reader_access(first, last)
 
     def read_whole(self) -> bytes:
