@@ -208,9 +208,11 @@ def cycles(m: Any, seconds: float, period_us: int, pid: int, lock: bool = True) 
     its timeout is also counted in ``lost_master_stalled``: the master itself was off its
     CPU while it waited, and may have missed a reply that had arrived. It stops
     early, ``fell_behind``, once the cycle runs a whole second late (the rate is not
-    kept: replies come slower than the period). With
+    kept: replies come slower than the period). Every cycle the master computes the csp
+    motion's outputs from the inputs, against the daemon and against the echo alike, so
+    that what its own work leaves in the caches before each frame is the same for both. With
     ``lock`` the cycle is kept mid-way between SYNC0 pulses by the DC time of the replies,
-    as SOEM's examples do (ec_sync)."""
+    as SOEM's examples do (ec_sync); the echo has no DC clock."""
     rtts, lost, wkc_err = [], 0, 0
     lost_waits: list[int] = []  # how long the master's send + receive took for each lost frame
     cycle_ns = period_us * 1000
@@ -218,15 +220,14 @@ def cycles(m: Any, seconds: float, period_us: int, pid: int, lock: bool = True) 
     cpu0, wall0, steal0 = cpu_seconds(pid), time.perf_counter(), steal_seconds()
     t_next = wall0
     n = max(1, int(seconds * 1e6 / period_us))
-    motion = CspMotion(m, period_us) if lock else None
+    motion = CspMotion(m, period_us)
     done, behind = 0, False
     for _ in range(n):
         if time.perf_counter() - t_next > 1.0:
             behind = True  # a whole second behind the schedule: this rate is not kept
             break
         done += 1
-        if motion is not None:
-            motion.outputs()
+        motion.outputs()
         t = time.perf_counter()
         m.send_processdata()
         w = m.receive_processdata(2 * period_us)
