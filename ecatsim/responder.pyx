@@ -516,7 +516,7 @@ cdef int service(Segment seg, long long t, int code) except -1:
     """``Segment.service(t)``, its failure a ServiceError (``code``: what serve() was
     doing, REPLIED or DROPPED after a frame, TIMEOUT for a timer)."""
     try:
-        seg.service(t)
+        seg.service_at(t)
     except Exception as exc:
         raise ServiceError("service", t, code) from exc
     return 0

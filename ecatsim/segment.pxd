@@ -57,8 +57,9 @@ cdef class Segment:
                    escs=list, esc=Esc, before=bytes, after=bytes)
     cpdef void after_reply(self) except *
     cpdef void pulses_due(self, long long t) except *
-    @cython.locals(t="long long", ctx=FrameContext, esc=Esc, d="long long")
     cpdef void service(self, object now_ns=*) except *
+    @cython.locals(ctx=FrameContext, esc=Esc, d="long long")
+    cpdef void service_at(self, long long t) except *
     @cython.locals(best="long long", d="long long", e=Esc)
     cpdef object next_deadline(self)
     @cython.locals(ctx=FrameContext, esc=Esc, dc=DcUnit, k="long long", nxt="long long",

@@ -397,11 +397,14 @@ class Segment:
 
     def service(self, now_ns: int | None = None) -> None:
         """Run timers and the firmware of every slave with a raised PDI interrupt, fire the
-        SYNC0 pulses due by ``now_ns``, then persist EEPROM images that changed. Never
-        called between receive and reply."""
+        SYNC0 pulses due by ``now_ns`` (None: now), then persist EEPROM images that
+        changed. Never called between receive and reply."""
+        self.service_at(self.clock.now_ns() if now_ns is None else now_ns)
+
+    def service_at(self, t: int) -> None:
+        """:meth:`service` at host time ``t`` (the compiled responder's call: a C integer)."""
         if self._dc_pending:
             self.after_reply()
-        t = self.clock.now_ns() if now_ns is None else now_ns
         self.pulses_due(t)  # first: each pulse is handled at its own, earlier, time
         for esc in self.escs:
             d = esc.wd.deadline_ns

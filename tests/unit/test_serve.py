@@ -346,7 +346,7 @@ def test_the_responder_runs_the_segments_timers(
 class FailingService(Segment):
     """A segment whose work after a reply fails."""
 
-    def service(self, now_ns: int | None = None) -> None:
+    def service_at(self, t: int) -> None:  # Segment.service and the responder's call
         raise RuntimeError("broken firmware")
 
 
