@@ -137,6 +137,14 @@ cdef enum:
     #: wait_frame: a timer (no frame) ended the wait
     NO_FRAME = 0
 
+cdef enum:
+    #: what serve() was running when an exception came, so that it names it (a try block
+    #: per call would cost every frame its set-up)
+    IN_NOTHING = 0
+    IN_FRAME = 1  # Segment.pulses_due, Segment.process: SegmentError
+    IN_AFTER = 2  # Segment.after_reply: ServiceError("process", ...)
+    IN_SERVICE = 3  # Segment.service_at: ServiceError("service", ...)
+
 
 class SegmentError(Exception):
     """``Segment.pulses_due`` or ``Segment.process`` raised on a frame (the cause): the
@@ -278,6 +286,10 @@ cdef class Responder:
     cdef readonly long long replied
     #: the process runs SCHED_FIFO/RR: a yield after the reply gives nothing to a master
     cdef bint rt
+    #: the segment call running (IN_*), and the frame's length, time and serve() code
+    cdef int stage, stage_code
+    cdef long stage_n
+    cdef long long stage_t
 
     def __cinit__(self) -> None:
         self.tfd = -1
@@ -416,17 +428,18 @@ cdef class Responder:
         cdef bytearray buf = self.buf
         cdef bytearray slot
         cdef uint8_t *b
+        cdef bint reply
         cdef long long off = ecat_offset(self.view, n, True)
         if off < 0:
             return FRAME
         slot = self.recorder.next_slot()  # kept as received, before the walk patches it
         memcpy(<char *>slot, <char *>buf, <size_t>min(n, len(slot)))
         self.recorder.commit(n)
-        try:
-            seg.pulses_due(t_rx)  # pulses due before this frame arrived come first
-            reply = seg.process(buf, off, n, t_rx)
-        except Exception as exc:
-            raise SegmentError(n) from exc
+        self.stage = IN_FRAME
+        self.stage_n = n
+        seg.pulses_due(t_rx)  # pulses due before this frame arrived come first
+        reply = seg.process(buf, off, n, t_rx)
+        self.stage = IN_NOTHING
         if not reply:
             return DROPPED
         mark_processed(self.view)
@@ -442,11 +455,11 @@ cdef class Responder:
     cdef int after(self, Segment seg, long long t, int code) except -1:
         """Daemon._after for a frame served here: the work it left for after its reply,
         the firmware and timers due by its arrival, then the CPU following."""
-        try:
-            seg.after_reply()
-        except Exception as exc:
-            raise ServiceError("process", t, code) from exc
-        service(seg, t, code)
+        self.stage = IN_AFTER
+        self.stage_t = t
+        self.stage_code = code
+        seg.after_reply()
+        self.service(seg, t, code)
         if self.follow is not None and (self.follow_due or 0 < self.follow_at <= t):
             self.run_follow(t)
         return 0
@@ -472,10 +485,30 @@ cdef class Responder:
             raise ValueError("timers: a segment is needed")
         self.buf = buf
         self.view = buf
+        self.stage = IN_NOTHING
         try:
             return self.serve_frames(deadline_ns, seg, t_rx, timers)
+        except Exception as exc:
+            if self.stage == IN_FRAME:
+                raise SegmentError(self.stage_n) from exc
+            if self.stage == IN_AFTER:
+                raise ServiceError("process", self.stage_t, self.stage_code) from exc
+            if self.stage == IN_SERVICE:
+                raise ServiceError("service", self.stage_t, self.stage_code) from exc
+            raise
         finally:
             self.view = None  # the caller's buffer is free to change size again
+            self.stage = IN_NOTHING
+
+    cdef int service(self, Segment seg, long long t, int code) except -1:
+        """``Segment.service_at(t)``, its failure a ServiceError (``code``: what serve()
+        was doing, REPLIED or DROPPED after a frame, TIMEOUT for a timer)."""
+        self.stage = IN_SERVICE
+        self.stage_t = t
+        self.stage_code = code
+        seg.service_at(t)
+        self.stage = IN_NOTHING
+        return 0
 
     cdef tuple serve_frames(self, long long deadline_ns, Segment seg, long long t_rx,
                             bint timers):
@@ -489,9 +522,7 @@ cdef class Responder:
         while True:
             wait_until = deadline_ns
             if timers:
-                d = seg.next_deadline()
-                if d is not None and d < wait_until:
-                    wait_until = d
+                wait_until = min(wait_until, seg.next_deadline_ns())  # NO_DEADLINE: none
             n = self.wait_frame(wait_until, &stamp)
             if n == -WAKE:
                 return (WAKE, 0, 0)
@@ -499,7 +530,7 @@ cdef class Responder:
                 now = clock_ns(CLOCK_MONOTONIC)
                 if not timers or now >= deadline_ns:
                     return (TIMEOUT, 0, 0)
-                service(seg, now, TIMEOUT)  # a timer of the segment's (SYNC pulse, watchdog)
+                self.service(seg, now, TIMEOUT)  # a SYNC pulse or a watchdog of the segment
                 continue
             t = t_rx if t_rx else rx_time(stamp)
             if seg is None:
@@ -511,12 +542,3 @@ cdef class Responder:
             if not timers:
                 return (code, n, t)
 
-
-cdef int service(Segment seg, long long t, int code) except -1:
-    """``Segment.service(t)``, its failure a ServiceError (``code``: what serve() was
-    doing, REPLIED or DROPPED after a frame, TIMEOUT for a timer)."""
-    try:
-        seg.service_at(t)
-    except Exception as exc:
-        raise ServiceError("service", t, code) from exc
-    return 0

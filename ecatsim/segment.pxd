@@ -60,8 +60,10 @@ cdef class Segment:
     cpdef void service(self, object now_ns=*) except *
     @cython.locals(ctx=FrameContext, esc=Esc, d="long long")
     cpdef void service_at(self, long long t) except *
-    @cython.locals(best="long long", d="long long", e=Esc)
+    @cython.locals(best="long long")
     cpdef object next_deadline(self)
+    @cython.locals(best="long long", d="long long", e=Esc)
+    cpdef long long next_deadline_ns(self) except? -1
     @cython.locals(ctx=FrameContext, esc=Esc, dc=DcUnit, k="long long", nxt="long long",
                    d="long long", d1="long long")
     cpdef void sync_until(self, long long t) except *

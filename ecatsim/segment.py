@@ -483,9 +483,16 @@ class Segment:
         return self._sync_escs
 
     def next_deadline(self) -> int | None:
-        """The earliest timer deadline (ns), for the daemon's poll timeout. SYNC deadlines
-        are those computed when the pulses last ran or a DC register last changed; the time
-        loop moves them by less than the ESC's MOVE_NS until it marks them stale."""
+        """The earliest timer deadline (ns), for the daemon's poll timeout, None if there
+        is none. SYNC deadlines are those computed when the pulses last ran or a DC
+        register last changed; the time loop moves them by less than the ESC's MOVE_NS
+        until it marks them stale."""
+        best = self.next_deadline_ns()
+        return None if best == NO_DEADLINE else best
+
+    def next_deadline_ns(self) -> int:
+        """:meth:`next_deadline` as an integer, ``NO_DEADLINE`` if there is none (the
+        compiled responder's call after each frame: a C integer)."""
         if self.ctx.timers_dirty:
             self._refresh_next_sync()
         best = self._next_sync
@@ -493,7 +500,7 @@ class Segment:
             d = e.wd.deadline_ns
             if d and d < best:
                 best = d
-        return None if best == NO_DEADLINE else best
+        return best
 
 
 def _physical(esc: Esc, op: int, ado: int, data: memoryview) -> int:
