@@ -6,6 +6,7 @@ cimport cython
 cdef long long SLOT
 
 
+@cython.final
 cdef class FrameRecorder:
     cdef public long long depth
     cdef public list _slots, _lens

@@ -253,7 +253,7 @@ class Segment:
         inc = 0
         if reader < reach:
             esc = self.escs[reader]
-            inc += esc.ecat_read(_DC_SYSTEM_TIME, data)
+            inc += esc.ecat_read_system_time(data)
         if reader + 1 < reach:
             after = self._dc_after
             after[:n] = data

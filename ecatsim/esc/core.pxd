@@ -100,6 +100,8 @@ cdef class Esc(SmHost):
     cpdef void sync1_tick(self) except *
     @cython.locals(end="long long", ws="long long", we="long long")
     cpdef long long ecat_read(self, long long ado, unsigned char[:] out) except -1
+    @cython.locals(mv="unsigned char[:]", k="long long")
+    cpdef long long ecat_read_system_time(self, unsigned char[:] out) except -1
     @cython.locals(end="long long", ws="long long", we="long long")
     cpdef long long ecat_write(self, long long ado, object data) except -1
     @cython.locals(end="long long", e="long long")

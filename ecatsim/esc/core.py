@@ -569,6 +569,17 @@ class Esc(SmHost):
                 return self._ecat_read_sm(ado, out)
         return 1 if self._plain_read(ado, out) else 0
 
+    def ecat_read_system_time(self, out: memoryview) -> int:
+        """``ecat_read(DC_SYSTEM_TIME, out)`` for the 4 or 8 bytes of 0x0910 that the FRMW
+        of every DC cycle reads (decision P16): the register's one read hook, then its
+        bytes, without the search through the hook table. Returns the WKC increment (1).
+        Ref: TMC8460 §5.50.2 Table 95."""
+        self._er_dc_system_time(DC_SYSTEM_TIME, 8)
+        mv = self.memv
+        for k in range(len(out)):
+            out[k] = mv[DC_SYSTEM_TIME + k]
+        return 1
+
     def ecat_read_or(self, ado: int, data: memoryview) -> int:
         """Broadcast read: the read data is ORed into the datagram. Ref: ETG.1000.4 §5.4.3."""
         n = len(data)

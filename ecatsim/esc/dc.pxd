@@ -24,6 +24,7 @@ cdef void _put64(bytearray m, long long a, unsigned long long v) except *
 cdef void _put32(bytearray m, long long a, unsigned long long v) except *
 
 
+@cython.final
 cdef class DcUnit:
     cdef public bytearray mem
     cdef public long long position, hop_ns, turnaround_ns, sync1_countdown

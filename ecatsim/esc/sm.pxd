@@ -16,6 +16,7 @@ cdef class SmHost:
     cpdef void sm_event_time(self, long long reg) except *
 
 
+@cython.final
 cdef class SyncManager:
     cdef public SmHost host
     cdef unsigned char[:] mv

@@ -9,7 +9,7 @@ import itertools
 
 import pytest
 
-from ecatsim.esc.core import PASSIVE_SIDE_EFFECTS, Esc, hook_names, tables
+from ecatsim.esc.core import PASSIVE_SIDE_EFFECTS, Esc, FrameContext, hook_names, tables
 from ecatsim.esc.regs import DC_SYSTEM_TIME
 from ecatsim.spec.tables import SIDE_EFFECTS, SpecError, load_registers, parse_registers
 
@@ -33,6 +33,31 @@ def test_the_system_time_read_hook_called_directly_is_the_tables() -> None:
         assert entry is not None
         assert entry[0] is Esc._er_dc_system_time
         assert entry[1:] == (DC_SYSTEM_TIME, 8)
+
+
+@pytest.mark.parametrize("size", [4, 8])
+def test_the_frmw_system_time_read_is_the_register_read(size: int) -> None:
+    """Esc.ecat_read_system_time (the FRMW of every DC cycle) returns the bytes and the
+    WKC increment that ecat_read of 0x0910 does, at several frame times, with an offset
+    and a drifting clock: the same hook, the same memory."""
+    escs = [
+        Esc(0, FrameContext(), bytearray(b"\xff" * 256), dc_start_ns=123_456_789, dc_drift_ppm=d)
+        for d in (37.5, 37.5)
+    ]
+    for e in escs:
+        e.mem[0x0920:0x0928] = (0xFFFF_FFFF_0000_1234).to_bytes(8, "little")
+    fast, slow = escs
+    for t in (0, 1, 999_999, 10**9 + 7, 2**40 + 3):
+        fast.ctx.t_ns = slow.ctx.t_ns = t
+        a, b = bytearray(size), bytearray(size)
+        assert (
+            fast.ecat_read_system_time(memoryview(a))
+            == slow.ecat_read(DC_SYSTEM_TIME, memoryview(b))
+            == 1
+        )
+        assert a == b
+        assert a != bytes(size) or t == 0
+        assert fast.mem == slow.mem
 
 
 def test_every_row_cites_the_datasheet_and_rows_do_not_overlap() -> None:
