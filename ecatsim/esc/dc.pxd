@@ -4,6 +4,9 @@
 # doubles computed in the same order as Python (built -ffp-contract=off). The SYNC
 # deadlines stay Python integers (None while off). Decisions P2, P13.
 cimport cython
+# int64_t, not long long, for the methods of a final class with an exception value:
+# Cython 3.3 writes long long's value there as -1LLLL in pure-Python mode
+from libc.stdint cimport int64_t
 
 cdef unsigned long long MASK64, HALF64
 cdef long long HALF32
@@ -33,7 +36,7 @@ cdef class DcUnit:
     cdef public unsigned long long local_ref
     cdef public object next_sync0, next_sync1
 
-    cpdef long long arrival_ns(self, long long frame_t_ns) except? -1
+    cpdef int64_t arrival_ns(self, long long frame_t_ns) except? -1
     cpdef unsigned long long local_time(self, long long t_ns) except? 0
     cpdef void _set_rate(self, double rate_ppb) except *
     cpdef unsigned long long offset(self) except? 0
@@ -44,9 +47,9 @@ cdef class DcUnit:
                    local="unsigned long long", diff="long long", start="long long",
                    gain=double, step="long long", mag="long long")
     cpdef bint system_time_written(self, long long frame_t_ns, unsigned long long value, long long nbytes) except -1
-    cpdef long long host_time_of(self, object system_ns) except? -1
+    cpdef int64_t host_time_of(self, object system_ns) except? -1
     @cython.locals(local="long long")
-    cpdef long long _host_time(self, unsigned long long system_ns) except? -1
+    cpdef int64_t _host_time(self, unsigned long long system_ns) except? -1
     cpdef object sync0_deadline(self)
     @cython.locals(m=bytearray, n0="unsigned long long", cycle="long long",
                    behind="long long")
@@ -54,8 +57,8 @@ cdef class DcUnit:
     cpdef void _schedule_sync1(self, object sync0_time, object cycle0) except *
     cpdef object sync1_deadline(self)
     @cython.locals(n0="unsigned long long")
-    cpdef long long sync0_deadline_or(self, long long none) except? -1
-    cpdef long long sync1_deadline_or(self, long long none) except? -1
+    cpdef int64_t sync0_deadline_or(self, long long none) except? -1
+    cpdef int64_t sync1_deadline_or(self, long long none) except? -1
     cpdef bint sync1_pulse(self) except -1
     @cython.locals(lim="long long", x="long long", m=bytearray)
     cpdef void _speed_counter_diff(self, long long start) except *

@@ -2,6 +2,9 @@
 # state as typed fields. sm.py stays the one source of the behaviour; this file only
 # gives types. Decisions P2, P13.
 cimport cython
+# int64_t, not long long, for the methods of a final class with an exception value:
+# Cython 3.3 writes long long's value there as -1LLLL in pure-Python mode
+from libc.stdint cimport int64_t
 
 # the register bits, imported from regs.py: C constants here
 cdef long long DC_ECAT_EVENT_TIME, SM_ACT_LATCH_ECAT, SM_CTRL_ECAT_IRQ, SM_CTRL_PDI_IRQ, SM_CTRL_WATCHDOG, SM_DIR_MASK, SM_DIR_WRITE, SM_MODE_MAILBOX, SM_MODE_MASK, SM_ST_BUF_SHIFT, SM_ST_IRQ_READ, SM_ST_IRQ_WRITE, SM_ST_MBX_FULL, SM_ST_READ_OPEN, SM_ST_WRITE_OPEN
@@ -33,9 +36,9 @@ cdef class SyncManager:
     cpdef void _writer_access(self, bint first, bint last) except *
     cpdef void _reader_open(self) except *
     cpdef void _reader_access(self, bint first, bint last) except *
-    cpdef long long _base_for_write(self) except? -1
+    cpdef int64_t _base_for_write(self) except? -1
     @cython.locals(b="long long")
-    cpdef long long _base_for_read(self) except? -1
+    cpdef int64_t _base_for_read(self) except? -1
     cpdef bint writer_may(self) except -1
     cpdef bint reader_may(self) except -1
     cpdef bint ecat_may_write(self) except -1
