@@ -63,7 +63,9 @@ def core() -> list[Extension]:
         for name in PYX
     ]
     exts.append(
-        Extension(SHARED, [SHARED.replace(".", "/") + ".c"], optional=True, extra_compile_args=CFLAGS)
+        Extension(
+            SHARED, [SHARED.replace(".", "/") + ".c"], optional=True, extra_compile_args=CFLAGS
+        )
     )
     built = list(
         cythonize(
