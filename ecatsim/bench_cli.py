@@ -36,6 +36,7 @@ class BenchOptions:
     hold: float
     rates: tuple[int, ...]
     hold_floor: bool
+    repeat: int
 
 
 @click.command("bench")
@@ -114,6 +115,15 @@ class BenchOptions:
     "--hold-floor",
     is_flag=True,
     help="Hold each rate against the C floor too (is 0 lost possible here?).",
+)
+@click.option(
+    "--repeat",
+    type=click.IntRange(min=1),
+    default=1,
+    show_default=True,
+    help="Measure each segment size this many times, each with its own daemon and floor, "
+    "and print the median of the ratios (the machine's drift between runs moves a single "
+    "run's ratio by up to 2x).",
 )
 def bench(**kw: object) -> None:
     """Measure the daemon against a real master and a C echo floor. Root.

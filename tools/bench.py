@@ -27,6 +27,7 @@ import platform
 import shutil
 import signal
 import socket
+import statistics
 import struct
 import subprocess
 import sys
@@ -332,6 +333,29 @@ def max_rate(n: int, extra: tuple[str, ...], hold_s: float, rates: list[int],
     return {"rate_hz": None, "hold_s": hold_s, "tried": tried}
 
 
+def repeated(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per mode, placement and N measured more than once (``--repeat``): the median of the
+    runs' ratios and round trips, with the range of the ratios; printed as it is returned."""
+    groups: dict[tuple[str, str, int], list[dict[str, Any]]] = {}
+    for r in runs:
+        groups.setdefault((r["mode"], r["placement"], r["slaves"]), []).append(r)
+    out = []
+    for (mode, placement, n), rs in groups.items():
+        ratios = sorted(r["ratio_median"] for r in rs)
+        row = {"mode": mode, "placement": placement, "slaves": n, "runs": len(rs),
+               "ratio_median": statistics.median(ratios), "ratio_min": ratios[0],
+               "ratio_max": ratios[-1],
+               "rtt_median_us": statistics.median(r["rtt_us"]["median"] for r in rs),
+               "floor_median_us": statistics.median(r["floor_rtt_us"]["median"] for r in rs),
+               "cpu_percent_median": statistics.median(r["cpu_percent"] for r in rs)}  # fmt: skip
+        out.append(row)
+        print(f"{mode:9s} {placement:8s} N={n:3d} {len(rs)} runs: median ratio "
+              f"x{row['ratio_median']} (x{ratios[0]}-{ratios[-1]}), round trip "
+              f"{row['rtt_median_us']} us, floor {row['floor_median_us']} us, daemon "
+              f"{row['cpu_percent_median']} %")  # fmt: skip
+    return out
+
+
 def run(args: BenchOptions) -> int:
     """The whole benchmark with the options of ``ecatsim bench`` (ecatsim/bench_cli.py)."""
     global MASTER_SPIN
@@ -366,7 +390,7 @@ def run(args: BenchOptions) -> int:
             extra = (*(("--busy-poll",) if busy else ()),
                      *(("--cpu", str(cpu)) if cpu is not None else ()), *rt)  # fmt: skip
             os.sched_setaffinity(0, {cpu} if placement == "same-cpu" else all_cpus)
-            for n in args.slaves:
+            for n in [n for n in args.slaves for _ in range(args.repeat)]:
                 with NetnsPair() as pair:
                     proc = subprocess.Popen(["ip", "netns", "exec", pair.slave_ns, *pin,
                                              str(echo), pair.slave_if, echo_mode])  # fmt: skip
@@ -408,6 +432,8 @@ def run(args: BenchOptions) -> int:
                       f"{run['reply_us']['max']} us (floor "
                       f"{run.get('floor_reply_us', {}).get('median')})"
                       + held)  # fmt: skip
+    if args.repeat > 1:
+        results["repeated"] = repeated(results["runs"])
     out = ROOT / "bench" / "results"
     out.mkdir(parents=True, exist_ok=True)
     path = out / f"bench-{time.strftime('%Y%m%d-%H%M%S')}.json"

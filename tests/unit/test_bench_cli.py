@@ -46,3 +46,19 @@ def test_percentile_is_nearest_rank() -> None:
         9999.0,
         10000.0,
     )
+
+
+def test_repeated_runs_report_the_median_ratio_per_size() -> None:
+    from bench import repeated
+
+    def run(n: int, ratio: float, rtt: float) -> dict[str, object]:
+        return {"mode": "blocking", "placement": "same-cpu", "slaves": n,
+                "ratio_median": ratio, "rtt_us": {"median": rtt},
+                "floor_rtt_us": {"median": 10.0}, "cpu_percent": 5.0}  # fmt: skip
+
+    runs = [run(1, 1.9, 19.0), run(1, 1.1, 11.0), run(1, 1.4, 14.0), run(16, 3.0, 30.0)]
+    rows = repeated(runs)
+    assert [(r["slaves"], r["runs"]) for r in rows] == [(1, 3), (16, 1)]
+    one = rows[0]
+    assert (one["ratio_median"], one["ratio_min"], one["ratio_max"]) == (1.4, 1.1, 1.9)
+    assert (one["rtt_median_us"], one["floor_median_us"]) == (14.0, 10.0)
