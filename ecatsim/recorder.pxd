@@ -9,7 +9,8 @@ cdef long long SLOT
 @cython.final
 cdef class FrameRecorder:
     cdef public long long depth
-    cdef public list _slots, _lens
+    cdef public list _slots
+    cdef public bytearray _lens
     cdef public long long _next
 
     cpdef void record(self, object buf, long long n) except *

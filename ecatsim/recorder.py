@@ -19,7 +19,8 @@ class FrameRecorder:
     def __init__(self, depth: int = 16) -> None:
         self.depth = depth
         self._slots = [bytearray(SLOT) for _ in range(depth)]
-        self._lens = [0] * depth
+        #: each slot's length, two bytes little-endian (no Python integer per frame)
+        self._lens = bytearray(2 * depth)
         self._next = 0
 
     def record(self, buf: bytearray | memoryview, n: int) -> None:
@@ -36,16 +37,19 @@ class FrameRecorder:
     def commit(self, n: int) -> None:
         """The frame in :meth:`next_slot` is ``n`` bytes long: it becomes the newest."""
         i = self._next
-        self._lens[i] = min(n, SLOT)
-        self._next = (i + 1) % self.depth
+        n = min(n, SLOT)
+        self._lens[2 * i] = n & 0xFF
+        self._lens[2 * i + 1] = n >> 8
+        self._next = i + 1 if i + 1 < self.depth else 0
 
     def last(self) -> list[bytes]:
         """Recorded frames, oldest first."""
         out = []
         for k in range(self.depth):
             i = (self._next + k) % self.depth
-            if self._lens[i]:
-                out.append(bytes(self._slots[i][: self._lens[i]]))
+            n = self._lens[2 * i] | (self._lens[2 * i + 1] << 8)
+            if n:
+                out.append(bytes(self._slots[i][:n]))
         return out
 
     def hexdump(self, limit: int = 4) -> list[str]:

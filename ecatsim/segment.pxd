@@ -24,7 +24,7 @@ cdef class Segment:
     cdef public FrameContext ctx
     cdef public list escs, firmware, logical
     cdef bytearray _frame
-    cdef public long long _frmw_adp
+    cdef public long long _frmw_adp, _frmw_reader
     cdef public tuple _frmw_readers
     cdef unsigned char[:] _frame_view
     cdef public long long frames
@@ -41,7 +41,7 @@ cdef class Segment:
                        long long t_ns=*) except -1
     @cython.locals(reader="long long", n="long long", inc="long long", esc=Esc,
                    before="unsigned char[:]", after="unsigned char[:]")
-    cpdef long long _frmw_system_time(self, unsigned char[:] data, tuple readers,
+    cpdef long long _frmw_system_time(self, unsigned char[:] data, long long first,
                                       long long reach) except -1
 
     @cython.locals(ctx=FrameContext, escs=list, reach="long long", cmd="long long",

@@ -52,6 +52,7 @@ class Segment:
         "_frame",
         "_frame_view",
         "_frmw_adp",
+        "_frmw_reader",
         "_frmw_readers",
         "_next_sync",
         "_pulse_hint",
@@ -98,6 +99,8 @@ class Segment:
         #: every cycle), until the addresses change
         self._frmw_adp = -1
         self._frmw_readers: tuple[int, ...] = ()
+        #: the first of them (the reference clock), -1 if none
+        self._frmw_reader = -1
         self.logical: list[Esc] = []
         #: the daemon's compiled responder may serve this segment's frames (decision P9);
         #: tests compare it with the Python path
@@ -237,15 +240,16 @@ class Segment:
         self._walk(buf, off + 2)
         return True
 
-    def _frmw_system_time(self, data: memoryview, readers: tuple[int, ...], reach: int) -> int:
+    def _frmw_system_time(self, data: memoryview, first: int, reach: int) -> int:
         """The DC time distribution (FRMW of 0x0910, the frame's last datagram) with the
         writers' time loops after the reply (decision P7): the reference's read is all the
         reply needs, and a register write always counts (+1 per writer). The writes run
         in :meth:`after_reply` with this frame's time stamp, so their results are the
         same as inline; no later datagram of this frame can see the difference. The data
         the writers before and behind the reference see is kept in two preallocated
-        buffers. Ref: ETG.1000.4 Table 12 (FRMW); TMC8460 §5.50.2 Table 95."""
-        reader = readers[0] if readers else reach
+        buffers. ``first``: the ESC the address names (the reference clock), -1 if none.
+        Ref: ETG.1000.4 Table 12 (FRMW); TMC8460 §5.50.2 Table 95."""
+        reader = first if first >= 0 else reach  # no reader: every slave writes
         n = len(data)
         if reader > 0:
             before = self._dc_before
@@ -363,6 +367,7 @@ class Segment:
             elif cmd == FRMW:
                 if adp != self._frmw_adp:
                     self._frmw_readers = self.addr_map.get(adp, ())
+                    self._frmw_reader = self._frmw_readers[0] if self._frmw_readers else -1
                     self._frmw_adp = adp
                 readers = self._frmw_readers
                 if (
@@ -372,7 +377,7 @@ class Segment:
                     and len(readers) <= 1
                     and dlen in (4, 8)
                 ):
-                    inc += self._frmw_system_time(data, readers, reach)
+                    inc += self._frmw_system_time(data, self._frmw_reader, reach)
                 else:
                     for i in range(reach):
                         if i in readers:
