@@ -8,6 +8,9 @@ from ecatsim.esc.watchdog cimport Watchdog
 
 
 cimport cython
+# int64_t, not long long, for the methods of a final type with an exception value:
+# Cython 3.3 writes long long's value there as -1LLLL in pure-Python mode
+from libc.stdint cimport int64_t
 
 cdef long long _LRD, _LWR, _LRW
 # the registers, imported from regs.py: C constants here
@@ -43,6 +46,7 @@ cdef class FrameContext:
     cdef public set pending, flush
 
 
+@cython.final
 cdef class Esc(SmHost):
     cdef public long long position
     cdef public bint pdi_emulation
@@ -73,7 +77,7 @@ cdef class Esc(SmHost):
     cdef public object on_reset
 
     @cython.locals(n="long long", lo="long long", hi="long long", wr=bint, rd=bint, f=FmmuMap)
-    cpdef long long ecat_logical(self, long long cmd, long long lad, unsigned char[:] data) except -1
+    cpdef int64_t ecat_logical(self, long long cmd, long long lad, unsigned char[:] data) except -1
     @cython.locals(n="long long", lo="long long", hi="long long", phys="long long",
                    sm=SyncManager, view="unsigned char[:]", b0="long long", b1="long long", nb="long long",
                    pb="long long", ps="long long", pe="long long", fb="long long")
@@ -84,7 +88,7 @@ cdef class Esc(SmHost):
     cpdef void _clr_ecat_event(self, long long bits) except *
     @cython.locals(m=bytearray, req="long long", mask="long long", irq="long long")
     cpdef void _irq_update(self) except *
-    cpdef long long al_event(self) except -1
+    cpdef int64_t al_event(self) except -1
     cpdef void pdi_buffer_event(self, SyncManager sm, bint first, bint last) except *
     @cython.locals(m=bytearray, v="long long")
     cpdef void set_al_event(self, long long bits) except *
@@ -92,18 +96,18 @@ cdef class Esc(SmHost):
     cpdef void clr_al_event(self, long long bits) except *
     @cython.locals(line=bint)
     cpdef void _pdi_irq(self, long long request) except *
-    @cython.locals(mirror="long long", ebit="long long", abit="long long")
-    cpdef void sm_status_changed(self, SyncManager sm) except *
-    cpdef void wd_pd_trigger(self) except *
-    cpdef void sm_event_time(self, long long reg) except *
+    # sm_status_changed, wd_pd_trigger, sm_event_time: SmHost's, overridden in core.py (a
+    # final type may not declare its overrides again here)
+    @cython.locals(ebit="long long", abit="long long")
+    cpdef void _sm_events(self, long long mirror, long long n) except *
     cpdef void sync0_tick(self, object now_ns) except *
     cpdef void sync1_tick(self) except *
     @cython.locals(end="long long", ws="long long", we="long long")
-    cpdef long long ecat_read(self, long long ado, unsigned char[:] out) except -1
+    cpdef int64_t ecat_read(self, long long ado, unsigned char[:] out) except -1
     @cython.locals(mv="unsigned char[:]", k="long long")
-    cpdef long long ecat_read_system_time(self, unsigned char[:] out) except -1
+    cpdef int64_t ecat_read_system_time(self, unsigned char[:] out) except -1
     @cython.locals(end="long long", ws="long long", we="long long")
-    cpdef long long ecat_write(self, long long ado, object data) except -1
+    cpdef int64_t ecat_write(self, long long ado, object data) except -1
     @cython.locals(end="long long", e="long long")
     cpdef bint _plain_write(self, long long ado, object data) except -1
     @cython.locals(end="long long", e="long long", k="long long", mv="unsigned char[:]")

@@ -538,9 +538,13 @@ class Esc(SmHost):
         bit 4+n and 0x0220 bit 8+n. The SM calls this only when they change (only SM
         accesses change these bits). Ref: §5.49 Tables 88, 89.
         """
-        mirror = sm.mirror
-        ebit = ECAT_EV_SM0 << sm.n
-        abit = EV_SM0 << sm.n
+        self._sm_events(sm.mirror, sm.n)
+
+    def _sm_events(self, mirror: int, n: int) -> None:
+        """sm_status_changed for SM ``n`` (a method of its own: the override of SmHost's
+        callback cannot carry typed locals in a final type, decision P17)."""
+        ebit = ECAT_EV_SM0 << n
+        abit = EV_SM0 << n
         if mirror & 1:
             self._set_ecat_event(ebit)
         else:
