@@ -10,6 +10,7 @@ Every extension is optional: where Cython, a C compiler or the Python headers ar
 from __future__ import annotations
 
 import ast
+import hashlib
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -70,7 +71,10 @@ def core() -> list[Extension]:
     built = list(
         cythonize(
             exts,
-            build_dir="build/cython",
+            # a build directory per version of this file: the generated C of an earlier
+            # setting (Cython's shared run-time code too) is never mixed with a new one
+            build_dir="build/cython-"
+            + hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:12],
             language_level=3,
             quiet=True,
             shared_utility_qualified_name=SHARED,

@@ -37,7 +37,18 @@ from ecatsim.wire.frame cimport ecat_offset, mark_processed
 from os import strerror
 
 
+cdef extern from *:
+    """
+    static inline void ecatsim_prefetch(const void *p) { __builtin_prefetch(p, 0, 3); }
+    """
+    void ecatsim_prefetch(const void *p) noexcept nogil
+
 cdef extern from "Python.h":
+    ctypedef struct PyTypeObject:
+        Py_ssize_t tp_basicsize
+    PyTypeObject *Py_TYPE(object o)
+    char *PyByteArray_AS_STRING(object o)
+    Py_ssize_t PyByteArray_GET_SIZE(object o)
     PyThreadState *PyThreadState_Get()
     PyInterpreterState *PyThreadState_GetInterpreter(PyThreadState *)
     PyThreadState *PyInterpreterState_ThreadHead(PyInterpreterState *)
@@ -127,6 +138,10 @@ cdef enum:
     MAX_WATCH = 8
     #: busy mode: spins between two looks at ``others``
     BUSY_SPINS = 64
+    #: cache lines prefetched at each wake-up (decision P18), and the frames between two
+    #: looks at what they are
+    MAX_HOT = 512
+    HOT_REFRESH = 1000
     #: recvmsg(2)'s control buffer in 8-byte words (PACKET_AUXDATA and SO_TIMESTAMPNS)
     CONTROL_WORDS = 32
     #: a receive time stamp older than this: the wall clock was stepped (raw.py)
@@ -290,6 +305,12 @@ cdef class Responder:
     cdef int stage, stage_code
     cdef long stage_n
     cdef long long stage_t
+    #: the cache lines a cyclic frame reads (Segment.hot_lines), prefetched as the wait
+    #: ends, before the receive (decision P18); the objects are held here
+    cdef const char *hot[MAX_HOT]
+    cdef int nhot
+    cdef list hot_refs
+    cdef long long hot_next
 
     def __cinit__(self) -> None:
         self.tfd = -1
@@ -335,6 +356,39 @@ cdef class Responder:
         self.follow_at = look_ns
         if follow is None:
             self.follow_due = False
+
+    cdef int look_hot(self, Segment seg) except -1:
+        """Take the lines to prefetch from ``seg.hot_lines()``: an object's whole struct,
+        or a (bytearray, start, stop) range of it."""
+        cdef list items = seg.hot_lines()
+        cdef object it
+        cdef const char *p
+        cdef Py_ssize_t a, b, size
+        cdef int n = 0
+        for it in items:
+            if type(it) is tuple and len(it) == 3 and type(it[0]) is bytearray:
+                ba, a, b = it
+                size = PyByteArray_GET_SIZE(ba)
+                a = max(0, a)
+                b = min(size, b)
+                p = PyByteArray_AS_STRING(ba)
+            else:
+                a = 0
+                b = Py_TYPE(it).tp_basicsize
+                p = <const char *><void *>it
+            while a < b and n < MAX_HOT:
+                self.hot[n] = p + a
+                n += 1
+                a += 64
+        self.nhot = n
+        self.hot_refs = items
+        self.hot_next = self.replied + HOT_REFRESH
+        return 0
+
+    cdef void prefetch(self) noexcept:
+        cdef int i
+        for i in range(self.nhot):
+            ecatsim_prefetch(self.hot[i])
 
     cdef int run_follow(self, long long t) except -1:
         self.follow_due = False
@@ -415,6 +469,8 @@ cdef class Responder:
                 if pfd[i].revents:
                     return -WAKE
             look = self.busy or (rc > 0 and pfd[0].revents != 0)
+            if look and not self.busy:
+                self.prefetch()  # while the receive runs, the walk's lines come in
             if rc > 0 and pfd[nothers + 2].revents:
                 self.follow_due = True  # after this frame, or now if none came with it
                 if not look:
@@ -520,6 +576,8 @@ cdef class Responder:
         for i in range(self.nothers + 3):
             self.pfd[i].revents = 0
         while True:
+            if seg is not None and self.replied >= self.hot_next:
+                self.look_hot(seg)
             wait_until = deadline_ns
             if timers:
                 wait_until = min(wait_until, seg.next_deadline_ns())  # NO_DEADLINE: none

@@ -398,6 +398,24 @@ class Segment:
                 return
             p = w + 2
 
+    def hot_lines(self) -> list[object]:
+        """What a cyclic frame reads, for the compiled responder to prefetch as its wait
+        ends (decision P18): objects (their structs), and (memory, start, stop) ranges of
+        each ESC's memory: the event, AL event, SM and DC registers and the buffers of the
+        SMs its FMMUs map."""
+        out: list[object] = [self, self.ctx, self.escs, self.logical, self._frame]
+        for esc in self.escs:
+            mem = esc.mem
+            out += [esc, esc.dc, esc.wd, esc.fmmus, mem]
+            out += [(mem, 0x0100, 0x0140), (mem, 0x0200, 0x0240)]
+            out += [(mem, 0x0800, 0x0880), (mem, 0x0900, 0x0940)]
+            for f in esc.fmmus:
+                out.append(f)
+                sm = f.sm
+                if sm is not None:
+                    out += [sm, (mem, sm.start, sm.start + 3 * sm.length)]
+        return out
+
     # ----------------------------------------------------------------- after the reply
 
     def service(self, now_ns: int | None = None) -> None:

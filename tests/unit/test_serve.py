@@ -463,3 +463,24 @@ def test_the_cpu_following_runs_only_when_its_descriptor_or_time_says_so(
         f.close()
     assert not t.is_alive()
     assert d.failures == 0
+
+
+def test_hot_lines_name_what_a_cyclic_frame_reads() -> None:
+    """Segment.hot_lines (the responder's prefetch at each wake-up, decision P18): each
+    ESC with its DC unit, watchdog and FMMU maps, the SMs they map with their three buffers,
+    and the event, AL event, SM and DC register lines, every range inside the memory."""
+    c = CspCycle(2)
+    c.step()
+    items = c.seg.hot_lines()
+    objs = [it for it in items if not (isinstance(it, tuple) and len(it) == 3)]
+    ranges = [it for it in items if isinstance(it, tuple) and len(it) == 3]
+    for esc in c.seg.escs:
+        assert all(any(o is x for o in objs) for x in (esc, esc.dc, esc.wd, esc.mem))
+        mapped = [f.sm for f in esc.fmmus if f.sm is not None]
+        assert {sm.n for sm in mapped} == {2, 3}  # outputs and inputs
+        for sm in mapped:
+            assert any(o is sm for o in objs)
+            assert (esc.mem, sm.start, sm.start + 3 * sm.length) in ranges
+        mine = [(a, b) for m, a, b in ranges if m is esc.mem]
+        assert (0x0200, 0x0240) in mine and (0x0900, 0x0940) in mine
+        assert all(0 <= a < b <= len(esc.mem) for a, b in mine)
