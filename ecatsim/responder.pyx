@@ -309,7 +309,7 @@ cdef class Responder:
     #: ends, before the receive (decision P18); the objects are held here
     cdef const char *hot[MAX_HOT]
     cdef int nhot
-    cdef list hot_refs
+    cdef tuple hot_refs
     cdef long long hot_next
 
     def __cinit__(self) -> None:
@@ -358,32 +358,25 @@ cdef class Responder:
             self.follow_due = False
 
     cdef int look_hot(self, Segment seg) except -1:
-        """Take the lines to prefetch from ``seg.hot_lines()``: an object's whole struct,
-        or a (bytearray, start, stop) range of it."""
-        cdef list items = seg.hot_lines()
-        cdef object it
-        cdef const char *p
-        cdef Py_ssize_t a, b, size
-        cdef int n = 0
-        for it in items:
-            if type(it) is tuple and len(it) == 3 and type(it[0]) is bytearray:
-                ba, a, b = it
-                size = PyByteArray_GET_SIZE(ba)
-                a = max(0, a)
-                b = min(size, b)
-                p = PyByteArray_AS_STRING(ba)
-            else:
-                a = 0
-                b = Py_TYPE(it).tp_basicsize
-                p = <const char *><void *>it
-            while a < b and n < MAX_HOT:
-                self.hot[n] = p + a
-                n += 1
-                a += 64
-        self.nhot = n
-        self.hot_refs = items
+        """Take the lines to prefetch from ``seg.hot_lines()``: each object's whole struct
+        and each (bytearray, start, stop) range."""
+        cdef tuple hot = seg.hot_lines()
+        cdef Py_ssize_t a, b
+        self.nhot = 0
+        for it in hot[0]:
+            self.add_hot(<const char *><void *>it, 0, Py_TYPE(it).tp_basicsize)
+        for ba, a, b in hot[1]:
+            self.add_hot(PyByteArray_AS_STRING(ba), max(0, a), min(PyByteArray_GET_SIZE(ba), b))
+        self.hot_refs = hot
         self.hot_next = self.replied + HOT_REFRESH
         return 0
+
+    cdef void add_hot(self, const char *p, Py_ssize_t a, Py_ssize_t b) noexcept:
+        """The cache lines of [p + a, p + b), while there is room."""
+        while a < b and self.nhot < MAX_HOT:
+            self.hot[self.nhot] = p + a
+            self.nhot += 1
+            a += 64
 
     cdef void prefetch(self) noexcept:
         cdef int i

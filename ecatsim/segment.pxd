@@ -56,8 +56,8 @@ cdef class Segment:
     @cython.locals(n="long long", reader="long long", reach="long long", i="long long",
                    escs=list, esc=Esc, before=bytes, after=bytes)
     cpdef void after_reply(self) except *
-    @cython.locals(esc=Esc, out=list, mem=bytearray)
-    cpdef list hot_lines(self)
+    @cython.locals(esc=Esc, objs=list, ranges=list, mem=bytearray)
+    cpdef tuple hot_lines(self)
     cpdef void pulses_due(self, long long t) except *
     cpdef void service(self, object now_ns=*) except *
     @cython.locals(ctx=FrameContext, esc=Esc, d="long long")

@@ -398,23 +398,25 @@ class Segment:
                 return
             p = w + 2
 
-    def hot_lines(self) -> list[object]:
+    def hot_lines(self) -> tuple[list[object], list[tuple[bytearray, int, int]]]:
         """What a cyclic frame reads, for the compiled responder to prefetch as its wait
-        ends (decision P18): objects (their structs), and (memory, start, stop) ranges of
-        each ESC's memory: the event, AL event, SM and DC registers and the buffers of the
-        SMs its FMMUs map."""
-        out: list[object] = [self, self.ctx, self.escs, self.logical, self._frame]
+        ends (decision P18): the objects (their structs), and the (memory, start, stop)
+        ranges of each ESC's memory: the event, AL event, SM and DC registers and the
+        buffers of the SMs its FMMUs map."""
+        objs: list[object] = [self, self.ctx, self.escs, self.logical]
+        ranges: list[tuple[bytearray, int, int]] = []
         for esc in self.escs:
             mem = esc.mem
-            out += [esc, esc.dc, esc.wd, esc.fmmus, mem]
-            out += [(mem, 0x0100, 0x0140), (mem, 0x0200, 0x0240)]
-            out += [(mem, 0x0800, 0x0880), (mem, 0x0900, 0x0940)]
+            objs += [esc, esc.dc, esc.wd, esc.fmmus, mem]
+            ranges += [(mem, 0x0100, 0x0140), (mem, 0x0200, 0x0240)]
+            ranges += [(mem, 0x0800, 0x0880), (mem, 0x0900, 0x0940)]
             for f in esc.fmmus:
-                out.append(f)
+                objs.append(f)
                 sm = f.sm
                 if sm is not None:
-                    out += [sm, (mem, sm.start, sm.start + 3 * sm.length)]
-        return out
+                    objs.append(sm)
+                    ranges.append((mem, sm.start, sm.start + 3 * sm.length))
+        return objs, ranges
 
     # ----------------------------------------------------------------- after the reply
 

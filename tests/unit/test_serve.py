@@ -471,9 +471,7 @@ def test_hot_lines_name_what_a_cyclic_frame_reads() -> None:
     and the event, AL event, SM and DC register lines, every range inside the memory."""
     c = CspCycle(2)
     c.step()
-    items = c.seg.hot_lines()
-    objs = [it for it in items if not (isinstance(it, tuple) and len(it) == 3)]
-    ranges = [it for it in items if isinstance(it, tuple) and len(it) == 3]
+    objs, ranges = c.seg.hot_lines()
     for esc in c.seg.escs:
         assert all(any(o is x for o in objs) for x in (esc, esc.dc, esc.wd, esc.mem))
         mapped = [f.sm for f in esc.fmmus if f.sm is not None]
