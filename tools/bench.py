@@ -33,6 +33,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -216,6 +217,10 @@ def cycles(m: Any, seconds: float, period_us: int, pid: int, lock: bool = True) 
     as SOEM's examples do (ec_sync); the echo has no DC clock."""
     rtts, lost, wkc_err = [], 0, 0
     lost_waits: list[int] = []  # how long the master's send + receive took for each lost frame
+    #: (WKC, send + receive in us) of each mismatch: SOEM splits a process image larger than
+    #: one frame into several LRWs and sums the WKCs of those that came back in time, so a
+    #: late frame of two reads as a WKC below the expected one, not as a lost cycle
+    wkc_seen: list[tuple[int, int]] = []
     cycle_ns = period_us * 1000
     sync0 = struct.unpack("<Q", m.slaves[0]._fprd(0x0990, 8))[0] if lock else None
     cpu0, wall0, steal0 = cpu_seconds(pid), time.perf_counter(), steal_seconds()
@@ -238,6 +243,7 @@ def cycles(m: Any, seconds: float, period_us: int, pid: int, lock: bool = True) 
             lost_waits.append(round(rtts[-1] * 1e6))
         elif w != m.expected_wkc:
             wkc_err += 1
+            wkc_seen.append((w, round(rtts[-1] * 1e6)))
         t_next += period_us / 1e6
         if sync0 is not None and w > 0:
             t_next += 0.1 * (cycle_ns / 2 - (m.dc_time - sync0) % cycle_ns) / 1e9
@@ -255,8 +261,15 @@ def cycles(m: Any, seconds: float, period_us: int, pid: int, lock: bool = True) 
             "rtt_us": stats(rtts), "lost": lost, "drives_enabled": enabled,
             "wkc_errors": wkc_err, "cpu_per_cycle_us": round(cpu / done * 1e6, 1),
             "cpu_percent": round(cpu / wall * 100, 1), "steal_s": steal,
-            "lost_wait_us": lost_waits[:200],
+            "lost_wait_us": lost_waits[:200], "expected_wkc": m.expected_wkc,
+            "wkc_error_seen": wkc_seen[:200],
             "lost_master_stalled": sum(w > 2 * period_us + 1000 for w in lost_waits)}  # fmt: skip
+
+
+def wkc_seen_text(run: dict[str, Any]) -> str:
+    """The WKC mismatches of a run as `` wkc seen 96/192 after 6387 us``, or nothing."""
+    seen = run.get("wkc_error_seen") or []
+    return "".join(f" wkc seen {w}/{run['expected_wkc']} after {us} us" for w, us in seen[:5])
 
 
 def with_master(
@@ -304,7 +317,7 @@ def with_master(
         m.close()
 
 
-def max_rate(n: int, extra: tuple[str, ...], hold_s: float, rates: list[int],
+def max_rate(n: int, extra: tuple[str, ...], hold_s: float, rates: Sequence[int],
              tmp: Path, echo: Path | None = None,
              echo_mode: str = "block") -> dict[str, Any]:  # fmt: skip
     """The highest of ``rates`` (Hz) that holds 0 lost frames and 0 WKC errors for
@@ -383,13 +396,16 @@ def run(args: BenchOptions) -> int:
         for placement in args.placements:
             cpu = args.cpu if placement == "unpinned" else (args.cpu or 0)
             pin = ["taskset", "-c", str(cpu)] if cpu is not None else []
-            rt = ("--rt-priority", str(args.rt_priority)) if args.rt_priority else ()
-            rt = ("--no-rt",) if args.no_rt else rt
+            rt: tuple[str, ...] = ()
+            if args.no_rt:
+                rt = ("--no-rt",)
+            elif args.rt_priority:
+                rt = ("--rt-priority", str(args.rt_priority))
             if args.no_follow_master_cpu:
                 rt = (*rt, "--no-follow-master-cpu")
             extra = (*(("--busy-poll",) if busy else ()),
                      *(("--cpu", str(cpu)) if cpu is not None else ()), *rt)  # fmt: skip
-            os.sched_setaffinity(0, {cpu} if placement == "same-cpu" else all_cpus)
+            os.sched_setaffinity(0, all_cpus if cpu is None or placement == "unpinned" else {cpu})
             for n in [n for n in args.slaves for _ in range(args.repeat)]:
                 with NetnsPair() as pair:
                     proc = subprocess.Popen(["ip", "netns", "exec", pair.slave_ns, *pin,
@@ -431,7 +447,7 @@ def run(args: BenchOptions) -> int:
                       f"{run['reply_us']['median']} p99.99 {run['reply_us']['p99.99']} max "
                       f"{run['reply_us']['max']} us (floor "
                       f"{run.get('floor_reply_us', {}).get('median')})"
-                      + held)  # fmt: skip
+                      + held + wkc_seen_text(run))  # fmt: skip
     if args.repeat > 1:
         results["repeated"] = repeated(results["runs"])
     out = ROOT / "bench" / "results"

@@ -62,3 +62,11 @@ def test_repeated_runs_report_the_median_ratio_per_size() -> None:
     one = rows[0]
     assert (one["ratio_median"], one["ratio_min"], one["ratio_max"]) == (1.4, 1.1, 1.9)
     assert (one["rtt_median_us"], one["floor_median_us"]) == (14.0, 10.0)
+
+
+def test_wkc_mismatches_are_named_with_their_wkc_and_time() -> None:
+    from bench import wkc_seen_text
+
+    run = {"expected_wkc": 192, "wkc_error_seen": [(96, 6387), (0, 2100)]}
+    assert wkc_seen_text(run) == " wkc seen 96/192 after 6387 us wkc seen 0/192 after 2100 us"
+    assert wkc_seen_text({"expected_wkc": 3, "wkc_error_seen": []}) == ""
