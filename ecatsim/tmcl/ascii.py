@@ -12,6 +12,7 @@ Ref: TMCM-1311 TMCL firmware manual §4.4 (4.4.1-4.4.4), §5.6.6, §5.7.38, §10
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from ecatsim.tmcl import protocol as P
@@ -113,35 +114,66 @@ MAX_LINE = 256
 
 class LineEditor:
     """Characters in, complete command lines out, with the echo global parameter 67 asks
-    for (§4.4.4): bits 4/5 00 every character, 01 the whole line after CR, 10 none."""
+    for (§4.4.4): bits 4/5 00 every character, 01 the whole line after CR, 10 none.
+
+    A line is echoed only when it addresses a module ("when the module is addressed",
+    §4.4.4; decision T30): the first character that is not a space decides, and with it
+    whose parameter 67 chooses the echo. Until then nothing is echoed; the spaces before
+    it are echoed with it."""
 
     def __init__(self) -> None:
         self.buf = bytearray()
+        #: the echo mode (67) of the module the line addresses; None: nobody addressed
+        #: (no echo); -1: the address character has not come yet
+        self.mode = -1
 
-    def feed(self, data: bytes, echo_mode: int) -> tuple[bytes, list[str]]:
-        """(echo bytes, complete lines)."""
+    def _decide(self, echo_mode: Callable[[int], int | None]) -> None:
+        text = bytes(self.buf).lstrip(b" \t")
+        if not text:
+            self.mode = -1
+            return
+        c = text[0] & 0xDF  # upper case
+        self.mode = echo_mode(c - 0x40) if 0x41 <= c <= 0x5A else None
+
+    def feed(
+        self, data: bytes, echo_mode: Callable[[int], int | None]
+    ) -> tuple[bytes, list[str]]:
+        """(echo bytes, complete lines). ``echo_mode(address)`` is global parameter 67 of
+        the module with that address, None when the line has none."""
         echo = bytearray()
         lines: list[str] = []
-        per_char = echo_mode & 0x30 == 0
-        whole = echo_mode & 0x30 == 0x10
         for b in data:
             if b == 0x0D:
+                if self.mode == -1:
+                    self._decide(echo_mode)
+                mode = self.mode
                 text = self.buf.decode("ascii", "replace")
-                if per_char:
-                    echo += b"\r"
-                elif whole:
-                    echo += self.buf + b"\r"
+                if mode is not None and mode >= 0:
+                    if mode & 0x30 == 0:
+                        echo += b"\r"
+                    elif mode & 0x30 == 0x10:
+                        echo += self.buf + b"\r"
                 lines.append(text)
                 self.buf.clear()
+                self.mode = -1
             elif b == 0x0A:
                 continue
             elif b in (0x08, 0x7F):
                 if self.buf:
                     self.buf.pop()
-                    if per_char:
+                    if self._per_char():
                         echo += b"\b \b"
+                    if not bytes(self.buf).strip(b" \t"):
+                        self.mode = -1  # the address character is gone: undecided
             elif len(self.buf) < MAX_LINE:
                 self.buf.append(b)
-                if per_char:
+                if self.mode == -1:
+                    self._decide(echo_mode)
+                    if self._per_char():
+                        echo += self.buf  # the address character and the spaces before
+                elif self._per_char():
                     echo.append(b)
         return bytes(echo), lines
+
+    def _per_char(self) -> bool:
+        return self.mode is not None and self.mode >= 0 and self.mode & 0x30 == 0

@@ -123,7 +123,7 @@ def read_axis(m: Module, n: int) -> int:
         150: lambda: round(ax.current_ma * 1.41421356),
         151: lambda: ax.phase_currents()[0],
         152: lambda: ax.phase_currents()[1],
-        153: lambda: 100 if ax.faults.undervoltage else 240,
+        153: lambda: 100 if ax.faults.undervoltage else round(ax.mech.supply_v * 10),
         154: lambda: round(50 + ax.current_ma * abs(ax.measured_v) / 2_000_000),
         155: lambda: 125 if ax.faults.overtemperature else 35,
         180: lambda: ax.cs_actual,

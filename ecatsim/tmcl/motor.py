@@ -43,7 +43,8 @@ CL_DAMPING = 0.0025
 
 @dataclass(slots=True)
 class Mechanics:
-    """The motor and what it drives (not in the manual: the user's machine)."""
+    """The motor and what it drives (not in the manual: the user's machine, decision T21;
+    the electrical data are those of a typical 1.2 Nm NEMA 23 hybrid stepper, T31)."""
 
     #: torque per RMS ampere of phase current (1.2 Nm holding torque at 3 A)
     torque_per_amp: float = 0.4
@@ -51,10 +52,17 @@ class Mechanics:
     load_inertia: float = 0.0
     #: Coulomb friction, Nm
     friction: float = 0.01
-    #: viscous friction and back-EMF damping, Nm per rad/s
+    #: viscous friction, Nm per rad/s
     viscous: float = 0.002
-    #: external load torque, Nm (positive opposes positive rotation)
+    #: the machine's load torque, Nm: it resists motion in either direction and holds the
+    #: rotor at rest up to its size, like friction; it never turns the rotor (T32)
     load: float = 0.0
+    #: phase resistance (ohm) and inductance (H): with the supply they limit the current
+    #: the chopper can drive at speed, so the pull-out torque falls with speed (T31)
+    resistance: float = 0.75
+    inductance: float = 0.0025
+    #: the driver's supply voltage, V (axis parameter 153)
+    supply_v: float = 24.0
 
 
 @dataclass(slots=True)
@@ -181,6 +189,14 @@ class Axis:
             return 256 * self.fullsteps / self.enc_res
         return 256 / self.usteps
 
+    def pos_per_pulse(self) -> float:
+        """Host position units per pulse (the microstep of axis parameter 140): speeds and
+        accelerations count pulses in both loops (§5.7.1, §6.1, decision T7), positions
+        count encoder steps in closed loop (§8.4)."""
+        if self.closed:
+            return self.enc_res / (self.usteps * self.fullsteps)
+        return 1.0
+
     def encoder(self) -> int:
         """The encoder counter (axis parameter 209)."""
         if self.enc_frozen is not None:
@@ -282,7 +298,8 @@ class Axis:
             self.cl_ready = False
             self.cl_init_ns = self.t_ns
         else:
-            self.pos = self.rotor / scale_new
+            # the host's coordinates go on: the encoder's position in microsteps (§8.4)
+            self.pos = float(round(self.encoder() * scale_old / scale_new))
             self.cmd = self.rotor
             self.target = round(self.target * scale_old / scale_new)
             if self.mode == POSITION and self.reached:
@@ -291,8 +308,7 @@ class Axis:
             if self.mode == TORQUE:
                 self.mode = VELOCITY
                 self.vtarget = 0
-        self.vel = self.vel * scale_old / scale_new
-        self.settled = False
+        self.settled = False  # speeds stay in pulses per second (T7)
 
     def start_encoder_init(self) -> None:
         """SAP 132, 1 (§6): the encoder initialisation runs for one second."""
@@ -483,10 +499,12 @@ class Axis:
                 self.vel = max(want, self.vel - acc)
             self._advance_pos((v0 + self.vel) / 2 * DT)
             return
-        remaining = self.target - self.pos
-        if remaining == 0.0 and self.vel == 0.0:
+        if self.target == self.pos and self.vel == 0.0:
             self.decelerating = False
             return
+        # the way to go in pulses: speeds and acceleration are pulses per second (T7)
+        per_pulse = self.pos_per_pulse()
+        remaining = (self.target - self.pos) / per_pulse
         vmax = float(ap[4])
         vstop = float(min(ap[130], ap[4]))
         direction = 1.0 if remaining > 0 else -1.0
@@ -514,40 +532,65 @@ class Axis:
         self.vel = new * direction
         self._advance_pos(step * direction)
 
-    def _advance_pos(self, delta: float) -> None:
-        self.pos += delta
-        if not self.closed:
-            self.cmd += delta * 256 / self.usteps
+    def _advance_pos(self, pulses: float) -> None:
+        """The ramp moves on by ``pulses`` (microsteps of axis parameter 140)."""
+        if self.closed:
+            self.pos += pulses * self.pos_per_pulse()
+        else:
+            self.pos += pulses
+            self.cmd += pulses * 256 / self.usteps
 
     def _mechanics(self) -> None:
-        """The rotor: J dω/dt = T_motor - T_load - friction (semi-implicit Euler)."""
+        """The rotor: J dω/dt = T_motor - friction - load (semi-implicit Euler); the load
+        and the Coulomb friction hold the rotor at rest up to their sum (T32)."""
         m = self.mech
-        ap = self.ap
         self.current_ma = self.run_current()
         amps = self.current_ma / 1000
         rotor_elec = self.rotor * ELEC_PER_USTEP
-        if self.closed:
-            torque = self._closed_loop_torque(amps)
-        else:
-            torque = m.torque_per_amp * amps * math.sin(self.cmd * ELEC_PER_USTEP - rotor_elec)
-        inertia = m.rotor_inertia + m.load_inertia
         per_rad = 256 * self.fullsteps / (2 * math.pi)
         omega = self.rotor_v / per_rad
-        net = torque - m.load - m.viscous * omega
+        if self.closed:
+            torque = self._closed_loop_torque(amps)
+            field = omega  # the commutation follows the encoder
+        else:
+            torque = m.torque_per_amp * amps * math.sin(self.cmd * ELEC_PER_USTEP - rotor_elec)
+            field = self.vel * 256 / self.usteps / per_rad
+        torque *= self._current_reach(amps, omega, field)
+        inertia = m.rotor_inertia + m.load_inertia
+        net = torque - m.viscous * omega
+        holding = m.friction + abs(m.load)
         if self.faults.stall:
             self.rotor_v = 0.0
             return
-        if omega == 0.0 and abs(net) <= m.friction:
+        if omega == 0.0 and abs(net) <= holding:
             self.rotor_v = 0.0
         else:
             sign = 1.0 if (omega > 0 or (omega == 0.0 and net > 0)) else -1.0
-            alpha = (net - sign * m.friction) / inertia
+            alpha = (net - sign * holding) / inertia
             new = omega + alpha * DT
             if omega != 0.0 and (new > 0) != (omega > 0):
-                new = 0.0  # friction stops the rotor, it does not reverse it
+                new = 0.0  # friction and load stop the rotor, they do not reverse it
             self.rotor_v = new * per_rad
             self.rotor += self.rotor_v * DT
-        del ap
+
+    def _current_reach(self, amps: float, omega: float, field: float) -> float:
+        """The share of the set current the chopper can drive (0-1): the supply less the
+        back EMF over the winding's impedance at the current's electrical frequency. The
+        motor's torque falls with speed above the corner speed and ends where the back
+        EMF reaches the supply (decision T31).
+
+        ``omega`` is the rotor's speed, ``field`` the speed of the current vector, both
+        in mechanical rad/s."""
+        if amps == 0.0:
+            return 1.0
+        m = self.mech
+        k_e = m.torque_per_amp / math.sqrt(2)  # V s/rad per phase, peak: equal to k_t
+        headroom = m.supply_v - k_e * abs(omega)
+        if headroom <= 0.0:
+            return 0.0
+        w_e = abs(field) * self.fullsteps / 4  # 50 pole pairs for 200 full steps
+        reach = headroom / math.hypot(m.resistance, w_e * m.inductance)
+        return min(1.0, reach / (amps * math.sqrt(2)))
 
     def _closed_loop_torque(self, amps: float) -> float:
         """§8.2-8.8: commutation from the encoder with an advance angle from the position
@@ -572,9 +615,13 @@ class Axis:
         if not self.cl_ready:
             return 0.0
         enc_to_rotor = 256 * self.fullsteps / self.enc_res
-        measured = (self.encoder() - self.enc_offset) * enc_to_rotor
-        err = (self.pos * enc_to_rotor - measured) * ELEC_PER_USTEP  # electrical radians
-        slip = (self.rotor_v - self.vel * enc_to_rotor) * ELEC_PER_USTEP
+        # the regulation compares ramp and encoder in the host's coordinates (both carry
+        # what SAP 1/209 and the reference search set); the commutation needs the rotor's
+        # own angle, the encoder without that offset
+        enc = self.encoder()
+        measured = (enc - self.enc_offset) * enc_to_rotor
+        err = (self.pos - enc) * enc_to_rotor * ELEC_PER_USTEP  # electrical radians
+        slip = (self.rotor_v - self.vel * 256 / self.usteps) * ELEC_PER_USTEP
         gain = ap[136] / 10
         damp = CL_DAMPING * (1.0 + ap[137] / 100)
         # PI on the position error (the integral holds a load without a standing error),
@@ -583,7 +630,7 @@ class Axis:
         self.cl_integral = max(-math.pi / 2, min(math.pi / 2, self.cl_integral))
         delta = gain * err + self.cl_integral - damp * slip
         self.delta = max(-math.pi / 2, min(math.pi / 2, delta))
-        self._current_scale(abs(round(self.pos) - self.encoder()))
+        self._current_scale(abs(round(self.pos) - enc))
         rotor_elec = self.rotor * ELEC_PER_USTEP
         angle = measured * ELEC_PER_USTEP + self.delta - rotor_elec
         return m.torque_per_amp * amps * math.sin(angle)
@@ -641,9 +688,7 @@ class Axis:
             enc = self.encoder()
             d = enc - self._enc_last
             self._enc_last = enc
-            per_s = d / self._enc_acc_s
-            if not self.closed:
-                per_s *= self.usteps * self.fullsteps / self.enc_res
+            per_s = d / self._enc_acc_s * self.usteps * self.fullsteps / self.enc_res
             self.measured_v = per_s
             self._enc_acc_s = 0.0
 

@@ -93,7 +93,9 @@ class Interpreter:
         return self.state == RUNNING
 
     def run(self, address: int | None) -> None:
-        """Command 129: run from ``address`` or from the current program counter."""
+        """Command 129: run from ``address`` or from the current program counter. What the
+        program set up stays (a program stopped by 128 goes on where it was); the timers
+        count their periods from the start (decision T29)."""
         if address is not None:
             self.pc = address
         elif self.state == RESET:
@@ -109,7 +111,8 @@ class Interpreter:
         self.wait = None
 
     def reset(self) -> None:
-        """Command 131: stopped, program counter, stack, registers and interrupts reset."""
+        """Command 131: stopped, program counter, stack, registers, interrupt vectors,
+        enables and timers reset (decision T29); bank 3 keeps its settings."""
         self.state = RESET
         self.pc = 0
         self.stack.clear()
@@ -121,6 +124,7 @@ class Interpreter:
         self.enabled.clear()
         self.global_enabled = False
         self.pending.clear()
+        self.timer_next.clear()
 
     def step(self) -> None:
         """Command 130: execute one instruction."""
@@ -132,9 +136,13 @@ class Interpreter:
             self.pc += 1
 
     def start_download(self, address: int) -> None:
+        """Command 132: the program is replaced, so it is stopped and reset as by 131: no
+        vector, enable or timer of the old code stays armed; the status reads stopped
+        (decision T29)."""
+        self.reset()
+        self.state = STOPPED
         self.download = True
         self.dl_ptr = address
-        self.stop()
 
     def store(self, cmd: Command) -> int:
         """In download mode: the command goes to program memory (§4.3); the address."""

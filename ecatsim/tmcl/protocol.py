@@ -171,16 +171,21 @@ class Reply:
     raw: bytes | None = None
 
 
+#: the pause after which a serial receiver drops a partial telegram (decision T3)
+SERIAL_GAP_NS = 20_000_000
+
+
 class Framer:
     """Cuts a byte stream into 9-byte telegrams.
 
     Between telegrams a real module's receiver restarts after a pause in the byte stream;
     a partial telegram older than ``gap_ns`` is dropped when the next byte arrives
-    (decision T3), so one lost or extra byte costs only the telegram it hit."""
+    (decision T3), so one lost or extra byte costs only the telegram it hit. A TCP stream
+    has no timing (decision T25): its framer has no gap (``gap_ns`` None)."""
 
     __slots__ = ("_buf", "_last_ns", "dropped", "gap_ns")
 
-    def __init__(self, gap_ns: int = 20_000_000) -> None:
+    def __init__(self, gap_ns: int | None = SERIAL_GAP_NS) -> None:
         self._buf = bytearray()
         self._last_ns = 0
         self.gap_ns = gap_ns
@@ -189,7 +194,8 @@ class Framer:
 
     def feed(self, data: bytes, now_ns: int) -> list[bytes]:
         """The complete telegrams ``data`` finishes, in order."""
-        if self._buf and now_ns - self._last_ns > self.gap_ns:
+        gap = self.gap_ns
+        if self._buf and gap is not None and now_ns - self._last_ns > gap:
             self.dropped += len(self._buf)
             self._buf.clear()
         self._last_ns = now_ns

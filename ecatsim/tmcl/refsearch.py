@@ -53,9 +53,24 @@ def _home(toward: int, bounce: str | None) -> list[Leg]:
     ]
 
 
+def _home_edge(toward: int, bounce: str | None) -> list[Leg]:
+    """With the inverted home switch (+128) the home level is active everywhere but over
+    the switch, an open-ended range: the search drives until it becomes active (an edge,
+    not a level it starts on), then calibrates that switching point as §9's hints say:
+    released slowly, re-entered slowly, the reference in the middle (decision T27)."""
+    return [
+        Leg(toward, True, "home", (False, True), bounce=bounce),
+        Leg(-toward, False, "home", (False,), (True,)),
+        Leg(toward, False, "home", (True,), (True,)),
+    ]
+
+
 def legs_for(mode: int) -> list[Leg]:
-    """The legs of a search mode 1-8 (§9.1.1)."""
+    """The legs of a search mode 1-8, +128 (§9.1.1)."""
     m = mode & 0x7F
+    if mode & 0x80 and 5 <= m <= 8:
+        toward = -1 if m in (5, 8) else 1
+        return _home_edge(toward, {5: "left", 6: "right"}.get(m))
     if m in (1, 4):
         return _calibrate("left", -1)
     if m == 2:
@@ -120,13 +135,21 @@ class RefSearch(RefSearchLike):
         if leg.bounce is not None and self._level(axis, leg.bounce):
             self.legs = [x.reversed() if i >= self.leg else x for i, x in enumerate(self.legs)]
             self.legs[self.leg] = Leg(-leg.direction, True, leg.switch, leg.levels)
+            self.step = 0
             self._drive(axis, self.legs[self.leg])
+            return
+        ahead = "right" if leg.direction > 0 else "left"
+        if (self.mode & 0x7F) <= 6 and leg.switch != ahead and self._level(axis, ahead):
+            # a stop switch the search does not look for ends it there (decision T27);
+            # modes 7 and 8 ignore the end switches (§9.1.1)
+            self.abort(axis)
             return
         while (
             self.step < len(leg.levels) and self._level(axis, leg.switch) == leg.levels[self.step]
         ):
             if self.step < len(leg.note) and leg.note[self.step]:
-                self.notes.append(axis.pos)
+                # where the rotor is: the encoder in closed loop, the ramp in open loop
+                self.notes.append(float(axis.encoder()) if axis.closed else axis.pos)
             self.step += 1
         if self.step == len(leg.levels):
             self.stopping = True

@@ -178,7 +178,7 @@ class TmclDoor:
     # ------------------------------------------------------------- lines
 
     def _add(self, line: Line) -> None:
-        st = LineState(line)
+        st = LineState(line, Framer(line.gap_ns))
         if any(m.gp0[67] & 1 for m in self.modules):  # §4.4.4: start up in ASCII mode
             st.ascii = next(m for m in self.modules if m.gp0[67] & 1)
         self.lines[line.fileno()] = st
@@ -255,7 +255,7 @@ class TmclDoor:
     def _receive_ascii(self, st: LineState, data: bytes, now_ns: int) -> None:
         mod = st.ascii
         assert mod is not None
-        echo, lines = st.editor.feed(data, mod.gp0[67])
+        echo, lines = st.editor.feed(data, self._echo_mode)
         if echo:
             st.line.send(echo)
         for text in lines:
@@ -281,6 +281,11 @@ class TmclDoor:
             self._queue(st, m, A.reply_text(m.host_address, m.address, r.status, r.value), now_ns)
             if st.ascii is None:
                 return
+
+    def _echo_mode(self, address: int) -> int | None:
+        """Global parameter 67 of the module with ``address``; None: no such module."""
+        m = self.module(address)
+        return None if m is None else m.gp0[67]
 
     def _queue(self, st: LineState, m: Module, data: bytes, now_ns: int) -> None:
         """Send after the telegram pause of global parameter 75 (ms, decision T5)."""

@@ -19,6 +19,7 @@ from pathlib import Path
 from urllib.parse import urlsplit
 
 from ecatsim.errors import UserError
+from ecatsim.tmcl.protocol import SERIAL_GAP_NS
 
 #: reply bytes one line may owe before the client is cut off (TCP) or bytes dropped (pty)
 MAX_BACKLOG = 65536
@@ -29,6 +30,9 @@ class Line:
     """One byte stream: a TCP client or a pty master."""
 
     name = "line"
+    #: the pause that drops a partial telegram (decision T3); None: the stream has no
+    #: timing, as over TCP (decision T25)
+    gap_ns: int | None = SERIAL_GAP_NS
 
     def __init__(self, fd: int) -> None:
         self.fd = fd
@@ -78,6 +82,11 @@ class Line:
 
 
 class TcpLine(Line):
+    """A TCP client. TCP delivers a byte stream in segments of its own choosing (Nagle, a
+    host writing byte by byte): a telegram is its next 9 bytes however long they take."""
+
+    gap_ns = None
+
     def __init__(self, sock: socket.socket, peer: str) -> None:
         super().__init__(sock.fileno())
         self.sock = sock

@@ -37,7 +37,7 @@ def test_ascii_round_trip_with_echo_and_back_to_binary(bench: Bench) -> None:
     assert bench.send(b"AGAP 4, 0\r") == b"AGAP 4, 0\rBA 100 1000\r"
     assert bench.send(b"AGAP 99, 0\r").endswith(b"BA 3 0\r")
     assert bench.send(b"AGAX\x08P 4\r").endswith(b"BA 100 1000\r")  # backspace edits
-    assert bench.send(b"BGAP 4\r") == b"BGAP 4\r"  # module 2 is not on this line
+    assert bench.send(b"BGAP 4\r") == b""  # module 2 is not on this line: no echo (T30)
     assert bench.send(b"ABIN\r") == b"ABIN\r"
     assert bench.send(frame(P.GAP, 4))[:3] == bytes([2, 1, P.OK])
 
@@ -67,4 +67,24 @@ def test_start_up_in_ascii_mode() -> None:
     assert isinstance(st, LineState) and st.ascii is b.m
     b.door.receive(st, b"AGGP 66, 0\r", b.clock.now_ns())
     assert bytes(line.sent) == b"BA 100 1\r"
+    b.door.close()
+
+
+def test_echo_only_when_the_module_is_addressed() -> None:
+    """§4.4.4: "every character that is entered is echoed back when the module is
+    addressed" (decision T30): on a line with modules 1 and 3, a line for address 2 is
+    neither echoed nor answered; each module's own 67 chooses the echo of its lines."""
+    from ecatsim.tmcl.module import ModuleConfig
+
+    b = Bench([ModuleConfig(address=1), ModuleConfig(address=3)])
+    b.door.modules[1].gp0[67] = 16  # module 3: the whole line after CR
+    b.send(frame(P.ASCII_MODE))
+    assert b.send(b"B") == b""  # nobody has address 2
+    assert b.send(b"GAP 4\r") == b""
+    assert b.send(b"  ") == b""  # spaces before the address character wait for it
+    assert b.send(b"A") == b"  A"
+    assert b.send(b"GAP 6\r") == b"GAP 6\rBA 100 128\r"
+    assert b.send(b"CGAP 6") == b""
+    assert b.send(b"\r") == b"CGAP 6\rBC 100 128\r"
+    assert b.send(b"X\x08AGGP 66\r") == b"AGGP 66\rBA 100 1\r"  # X erased: A decides
     b.door.close()
