@@ -477,6 +477,8 @@ class Axis:
         after = (self.pos, self.vel, self.rotor, self.rotor_v, self.current_ma)
         busy = self.enc_init == 1 or (self.closed and not self.cl_ready)
         busy = busy or self.home_search is not None or (self.closed and not self.reached)
+        # closed loop at rest: the regulation works on until the encoder shows the target
+        busy = busy or (self.closed and self.mode == POSITION and self.encoder() != self.target)
         self.settled = after == before and not busy and self.rotor_v == 0.0
 
     def _ramp(self) -> None:
@@ -574,23 +576,32 @@ class Axis:
             self.rotor += self.rotor_v * DT
 
     def _current_reach(self, amps: float, omega: float, field: float) -> float:
-        """The share of the set current the chopper can drive (0-1): the supply less the
-        back EMF over the winding's impedance at the current's electrical frequency. The
-        motor's torque falls with speed above the corner speed and ends where the back
-        EMF reaches the supply (decision T31).
+        """The share of the set current the chopper can drive (0-1), decision T31.
 
-        ``omega`` is the rotor's speed, ``field`` the speed of the current vector, both
-        in mechanical rad/s."""
+        Per phase the supply must cover the resistive and inductive drops and the back
+        EMF; with the current in phase with the back EMF (the torque-forming part):
+        V² = (R I + E)² + (X I)², E = k_e ω, X = p ω_field L, p pole pairs (50 for 200
+        full steps), k_e = k_t in SI units. Solved for the peak current I, it is V/R at
+        rest, falls once the inductance and the back EMF take the voltage (the corner
+        speed) and ends where E reaches V: the pull-out torque falls with speed.
+
+        ``omega`` is the rotor's speed, ``field`` the speed of the current vector (the
+        ramp's in open loop), both mechanical rad/s."""
         if amps == 0.0:
             return 1.0
         m = self.mech
-        k_e = m.torque_per_amp / math.sqrt(2)  # V s/rad per phase, peak: equal to k_t
-        headroom = m.supply_v - k_e * abs(omega)
-        if headroom <= 0.0:
+        k_e = m.torque_per_amp / math.sqrt(2)  # V s/rad per phase, peak
+        e = k_e * abs(omega)
+        v = m.supply_v
+        if e >= v:
             return 0.0
-        w_e = abs(field) * self.fullsteps / 4  # 50 pole pairs for 200 full steps
-        reach = headroom / math.hypot(m.resistance, w_e * m.inductance)
-        return min(1.0, reach / (amps * math.sqrt(2)))
+        r = m.resistance
+        x = abs(field) * self.fullsteps / 4 * m.inductance
+        z2 = r * r + x * x
+        if z2 <= 0.0:
+            return 1.0
+        peak = (math.sqrt(r * r * e * e - z2 * (e * e - v * v)) - r * e) / z2
+        return min(1.0, peak / (amps * math.sqrt(2)))
 
     def _closed_loop_torque(self, amps: float) -> float:
         """§8.2-8.8: commutation from the encoder with an advance angle from the position

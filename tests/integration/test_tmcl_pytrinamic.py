@@ -9,9 +9,11 @@ needs root.
 from __future__ import annotations
 
 import os
+import socket
 import subprocess
 import sys
 import time
+import tty
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -20,6 +22,7 @@ from pytrinamic.connections import SerialTmclInterface, SocketTmclInterface
 from pytrinamic.modules import TMCM1311
 from pytrinamic.tmcl import TMCLReplyStatusError
 
+from ecatsim.tmcl import protocol as P
 from ecatsim.tmcl.module import ModuleConfig
 from ecatsim.tmcl.motor import Mechanics, Switches
 from tests.support.tmcl import Served, served
@@ -206,6 +209,238 @@ def test_closed_loop_positioning_holds_the_encoder_deviation_under_a_load_step(
         assert 0 < worst < 2_000
         assert motor.get_axis_parameter(AP.ExtendedErrorFlags) == 0  # no deviation
         iface.close()
+
+
+def _closed_loop(s: Served, m: TMCM1311) -> None:
+    """Closed loop on (§8.1) with a deviation limit, initialised."""
+    motor = m.motors[0]
+    motor.set_axis_parameter(AP.MaxPositionEncoderDeviation, 2_000)
+    motor.set_axis_parameter(AP.ClosedLoopMode, 1)
+    s.advance(0.2)
+    assert motor.get_axis_parameter(AP.CLInitFlag) == 1
+
+
+def _rotor(s: Served) -> float:
+    rotor: float = s.in_loop(lambda: s.door.modules[0].axis.rotor)
+    return rotor
+
+
+def test_closed_loop_setting_the_position_at_rest_leaves_the_rotor_still(
+    lines: list[str],
+) -> None:
+    """SAP 1 ("for reference point setting", §6) and SAP 209 change the coordinates, not
+    the rotor; MVP then reaches its targets (AP 8) in the new coordinates (decision T26)."""
+    with served(listen=lines) as s:
+        iface = interface(s)
+        m = TMCM1311(iface)
+        motor = m.motors[0]
+        _closed_loop(s, m)
+        m.move_to(0, 40_000)  # encoder steps: one revolution of the 40000-step encoder
+        s.advance(2.5)
+        assert motor.get_position_reached() == 1
+        at = _rotor(s)
+        assert abs(at - 51_200) < 3  # one revolution: 51200 motor microsteps
+        motor.set_axis_parameter(AP.ActualPosition, 0)
+        s.advance(1.0)
+        assert motor.actual_position == 0
+        assert motor.get_position_reached() == 1
+        assert abs(_rotor(s) - at) < 3  # still: not one step
+        motor.set_axis_parameter(AP.EncoderPosition, -5_000)
+        s.advance(1.0)
+        assert motor.actual_position == -5_000
+        assert motor.get_axis_parameter(AP.EncoderPosition, signed=True) == -5_000
+        assert motor.get_position_reached() == 1
+        assert abs(_rotor(s) - at) < 3
+        m.move_to(0, 15_000)  # 20000 encoder steps on: half a revolution
+        s.advance(0.1)
+        assert motor.get_position_reached() == 0
+        s.advance(2.0)
+        assert motor.get_position_reached() == 1
+        assert abs(motor.actual_position - 15_000) <= 50  # the position window (134)
+        assert abs(_rotor(s) - at - 25_600) < 3
+        # closed loop off and on again: the coordinates go on, the rotor stays
+        motor.set_axis_parameter(AP.ClosedLoopMode, 0)
+        s.advance(0.2)
+        assert motor.actual_position == 19_200  # 15000 encoder steps in microsteps
+        motor.set_axis_parameter(AP.ClosedLoopMode, 1)
+        s.advance(0.5)
+        assert motor.actual_position == 15_000
+        m.move_to(0, 0)
+        s.advance(2.5)
+        assert motor.get_position_reached() == 1
+        assert abs(_rotor(s) - at - 6_400) < 3  # 0 is now 5000 encoder steps further on
+        assert motor.get_axis_parameter(AP.ExtendedErrorFlags) == 0
+        iface.close()
+
+
+def test_closed_loop_reference_search_ends_at_zero_on_the_switch(lines: list[str]) -> None:
+    """RFS mode 1 in closed loop: position 0 at the left switch, moves reach after it."""
+    with served([ModuleConfig(switches=Switches(left=-30_000))], listen=lines) as s:
+        iface = interface(s)
+        m = TMCM1311(iface)
+        motor = m.motors[0]
+        _closed_loop(s, m)
+        motor.set_axis_parameter(AP.ReferenceSearchMode, 1)
+        motor.set_axis_parameter(AP.MaxAcceleration, 512_000)
+        motor.set_axis_parameter(AP.ReferenceSearchSpeed, 51_200)
+        motor.set_axis_parameter(AP.ReferenceSwitchSpeed, 5_120)
+        iface.reference_search(0, 0)
+        s.advance(0.3)
+        assert iface.reference_search(2, 0) == 0  # running
+        s.advance(3.0)
+        assert iface.reference_search(2, 0) != 0
+        assert motor.get_position_reached() == 1
+        assert motor.actual_position == 0
+        assert abs(_rotor(s) - (-30_000)) < 3  # the switching point of the left switch
+        m.move_to(0, 10_000)
+        s.advance(2.0)
+        assert motor.get_position_reached() == 1
+        assert abs(motor.actual_position - 10_000) <= 50
+        assert abs(_rotor(s) - (-30_000 + 12_800)) < 3
+        assert motor.get_axis_parameter(AP.ExtendedErrorFlags) == 0
+        iface.close()
+
+
+def _search(s: Served, m: TMCM1311, mode: int, seconds: float) -> tuple[float, float]:
+    """Run RFS ``mode`` for ``seconds`` of simulated time in 50 ms slices; the rotor's
+    lowest and highest position on the way."""
+    motor = m.motors[0]
+    motor.set_axis_parameter(AP.ReferenceSearchMode, mode)
+    motor.set_axis_parameter(AP.MaxAcceleration, 512_000)  # soft stops of 2560 steps
+    motor.set_axis_parameter(AP.ReferenceSearchSpeed, 51_200)
+    motor.set_axis_parameter(AP.ReferenceSwitchSpeed, 5_120)
+    m.connection.reference_search(0, 0)
+    low = high = _rotor(s)
+    for _ in range(round(seconds / 0.05)):
+        s.advance(0.05)
+        r = _rotor(s)
+        low, high = min(low, r), max(high, r)
+    return low, high
+
+
+def test_reference_search_133_and_135_inverted_home_finish_at_its_edge(
+    lines: list[str],
+) -> None:
+    """Modes 5 and 7 + 128 (§9.1.1: the home switch inverted): the home level is active
+    everywhere but over the switch (here 29000-31000 motor microsteps), so the search
+    finds where it becomes active in the search direction and calibrates that switching
+    point (§9: released and re-entered slowly, the middle of the two). Mode 133 searches
+    in negative direction, turns at the left stop switch and finds the edge at 31000; 135
+    searches in positive direction and finds it too (decision T27). Neither drives through
+    a stop switch."""
+    sw = Switches(left=-20_000, right=60_000, home=30_000, home_width=2_000)
+    for mode in (133, 135):
+        with served([ModuleConfig(switches=sw)], listen=lines) as s:
+            iface = interface(s)
+            m = TMCM1311(iface)
+            motor = m.motors[0]
+            low, high = _search(s, m, mode, 12.0)
+            assert iface.reference_search(2, 0) != 0, mode  # finished
+            assert motor.actual_position == 0
+            assert abs(_rotor(s) - 31_000) < 3, mode
+            assert motor.get_position_reached() == 1
+            assert low > -20_000 - 4_000 and high < 60_000, (mode, low, high)
+            # AP 9 reads the input itself: on over the switch, off beyond its edge
+            m.move_to(0, -1_000)
+            s.advance(0.5)
+            assert motor.get_axis_parameter(AP.HomeSwitch) == 1
+            m.move_to(0, 1_000)
+            s.advance(0.5)
+            assert motor.get_axis_parameter(AP.HomeSwitch) == 0
+            iface.close()
+
+
+def test_reference_search_133_without_a_home_switch_stops_at_the_right_switch(
+    lines: list[str],
+) -> None:
+    """Mode 133 where no home switch is fitted: it turns at the left stop switch, and the
+    right one ends the search there instead of being driven through (decision T27)."""
+    sw = Switches(left=-20_000, right=40_000)
+    with served([ModuleConfig(switches=sw)], listen=lines) as s:
+        iface = interface(s)
+        m = TMCM1311(iface)
+        low, high = _search(s, m, 133, 6.0)
+        assert iface.reference_search(2, 0) != 0  # over
+        assert m.motors[0].actual_velocity == 0
+        assert -24_000 < low <= -20_000
+        assert 40_000 <= high < 44_000  # stopped at the right switch with the ramp (149)
+        iface.close()
+
+
+class _BytewiseSocket:
+    """pytrinamic's socket, but every telegram goes out one byte per TCP segment, 50 ms of
+    the door's clock apart, each byte read by the door before the next is sent."""
+
+    def __init__(self, sock: socket.socket, s: Served) -> None:
+        self.sock = sock
+        self.s = s
+
+    def sendall(self, data: bytes) -> None:
+        for byte in data:
+            before = self.s.door.frames
+            self.sock.sendall(bytes([byte]))
+            self._wait_read(before)
+            self.s.advance(0.05)
+
+    def _wait_read(self, frames_before: int) -> None:
+        deadline = time.monotonic() + 5
+        while time.monotonic() < deadline:
+            pending = self.s.in_loop(
+                lambda: sum(st.framer.pending for st in self.s.door.lines.values())
+            )
+            if pending or self.s.door.frames != frames_before:
+                return
+            time.sleep(0.002)
+        raise AssertionError("the door did not read the byte")
+
+    def __getattr__(self, name: str) -> object:
+        return getattr(self.sock, name)
+
+
+def test_tcp_telegram_in_bytes_50_ms_apart_is_answered() -> None:
+    """Over TCP a telegram has no timing (decision T25): 9 bytes, each in its own
+    segment 50 ms apart (the serial line's 20 ms pause of T3 would drop them), are one
+    telegram; pytrinamic gets its replies."""
+    with served(listen=["tcp://127.0.0.1:0"]) as s:
+        iface = SocketTmclInterface(s.url)
+        raw = iface._socket
+        assert raw is not None
+        raw.settimeout(5)  # a lost telegram fails the test instead of hanging it
+        iface._socket = _BytewiseSocket(raw, s)
+        try:
+            m = TMCM1311(iface)
+            t0 = s.clock.now_ns()
+            assert iface.get_version_string() == "1311V111"
+            assert s.clock.now_ns() - t0 == 9 * 50_000_000
+            m.motors[0].set_axis_parameter(AP.MaxVelocity, 12_345)
+            assert m.motors[0].get_axis_parameter(AP.MaxVelocity) == 12_345
+            assert s.in_loop(lambda: s.door.modules[0].errors) == 0
+        finally:
+            iface._socket = raw
+            iface.close()
+
+
+def test_pty_keeps_the_serial_pause(tmp_path: Path) -> None:
+    """On a serial line (pty) the 20 ms pause still drops a partial telegram (T3)."""
+    with served(listen=[f"pty:{tmp_path / 'tty'}"]) as s:
+        pty = s.door.status()["listen"][0].removeprefix("pty:")
+        fd = os.open(pty, os.O_RDWR | os.O_NOCTTY)
+        try:
+            tty.setraw(fd)
+            frame = P.encode_command(1, P.Command(P.GAP, 4, 0, 0))
+            os.write(fd, frame[:4])
+            deadline = time.monotonic() + 5
+            while s.in_loop(lambda: sum(x.framer.pending for x in s.door.lines.values())) < 4:
+                assert time.monotonic() < deadline
+                time.sleep(0.002)
+            s.advance(0.05)
+            os.write(fd, frame)  # the stale 4 bytes are dropped: this one is answered
+            reply = b""
+            while len(reply) < 9:
+                reply += os.read(fd, 9 - len(reply))
+            assert reply[:4] == bytes([2, 1, P.OK, P.GAP])
+        finally:
+            os.close(fd)
 
 
 # ----------------------------------------------------------------- the real command

@@ -198,3 +198,83 @@ def test_direct_mode_is_answered_while_a_program_runs(bench: Bench) -> None:
     assert bench.gap(4) == 51200
     assert bench.m.interp.accu == 0
     assert bench.value(P.GGP, 128) == 1
+
+
+def test_a_new_download_disarms_the_old_programs_interrupts_and_timers(bench: Bench) -> None:
+    """Decision T29: 132 replaces the program, so it resets the interpreter as 131 does
+    (vectors, enables, global enable, timers); 129 then starts the new code alone. Bank 3
+    (the timer period) is a parameter and stays."""
+    download(
+        bench,
+        [
+            (P.VECT, 0, 0, 6),
+            (P.SGP, 0, 3, 100),
+            (P.EI, 0, 0, 0),
+            (P.EI, 255, 0, 0),
+            (P.WAIT, 0, 0, 50),
+            (P.JA, 0, 0, 4),
+            (P.GGP, 20, 2, 0),  # 6: the timer's handler counts in user variable 20
+            (P.CALC, 0, 0, 1),
+            (P.AGP, 20, 2, 0),
+            (P.RETI, 0, 0, 0),
+        ],
+    )
+    bench.value(P.RUN_APP, 1, 0, 0)
+    bench.advance(0.35)
+    assert bench.value(P.GGP, 20, 2) == 3
+    # the new program: a loop counting in variable 21; its cell 6 is where the old
+    # handler was, and would run (and RETI) if the old timer still fired
+    download(
+        bench,
+        [
+            (P.GGP, 21, 2, 0),
+            (P.CALC, 0, 0, 1),
+            (P.AGP, 21, 2, 0),
+            (P.WAIT, 0, 0, 10),
+            (P.JA, 0, 0, 0),
+            (P.STOP, 0, 0, 0),
+            (P.SGP, 22, 2, 1),  # 6
+            (P.RETI, 0, 0, 0),
+        ],
+    )
+    it = bench.m.interp
+    assert (it.vectors, it.enabled, it.global_enabled, it.timer_next) == ({}, set(), False, {})
+    assert bench.value(P.APP_STATUS) == 0  # stopped, at 0
+    assert bench.value(P.GGP, 0, 3) == 100  # bank 3 keeps the period
+    bench.value(P.RUN_APP, 0, 0, 0)
+    bench.advance(0.5)
+    assert bench.value(P.GGP, 20, 2) == 3  # the old handler never ran again
+    assert bench.value(P.GGP, 22, 2) == 0  # nor did its cell in the new code
+    assert 4 <= bench.value(P.GGP, 21, 2) <= 6  # the new loop: every 100 ms
+
+
+def test_stop_and_run_continue_with_the_programs_interrupts(bench: Bench) -> None:
+    """Decision T29: 128 then 129 (no address) goes on where the program was, with what it
+    set up; 131 resets it all, timers included."""
+    download(
+        bench,
+        [
+            (P.VECT, 0, 0, 6),
+            (P.SGP, 0, 3, 100),
+            (P.EI, 0, 0, 0),
+            (P.EI, 255, 0, 0),
+            (P.WAIT, 0, 0, 50),
+            (P.JA, 0, 0, 4),
+            (P.GGP, 20, 2, 0),
+            (P.CALC, 0, 0, 1),
+            (P.AGP, 20, 2, 0),
+            (P.RETI, 0, 0, 0),
+        ],
+    )
+    bench.value(P.RUN_APP, 1, 0, 0)
+    bench.advance(0.25)
+    bench.value(P.STOP_APP)
+    bench.advance(1.0)
+    assert bench.value(P.GGP, 20, 2) == 2
+    bench.value(P.RUN_APP, 0, 0, 0)  # continue: the timer counts its period from here
+    bench.advance(0.25)
+    assert bench.value(P.GGP, 20, 2) == 4
+    bench.value(P.STOP_APP)
+    bench.value(P.RESET_APP)
+    it = bench.m.interp
+    assert (it.vectors, it.enabled, it.timer_next) == ({}, set(), {})
