@@ -125,7 +125,7 @@ class LineEditor:
         self.buf = bytearray()
         #: the echo mode (67) of the module the line addresses; None: nobody addressed
         #: (no echo); -1: the address character has not come yet
-        self.mode = -1
+        self.mode: int | None = -1
 
     def _decide(self, echo_mode: Callable[[int], int | None]) -> None:
         text = bytes(self.buf).lstrip(b" \t")
@@ -135,9 +135,7 @@ class LineEditor:
         c = text[0] & 0xDF  # upper case
         self.mode = echo_mode(c - 0x40) if 0x41 <= c <= 0x5A else None
 
-    def feed(
-        self, data: bytes, echo_mode: Callable[[int], int | None]
-    ) -> tuple[bytes, list[str]]:
+    def feed(self, data: bytes, echo_mode: Callable[[int], int | None]) -> tuple[bytes, list[str]]:
         """(echo bytes, complete lines). ``echo_mode(address)`` is global parameter 67 of
         the module with that address, None when the line has none."""
         echo = bytearray()

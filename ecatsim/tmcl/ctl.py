@@ -20,7 +20,7 @@ HELP = {
     "ggp": "ggp ADDR N BANK: read global parameter N of BANK",
     "fault": "fault ADDR KIND on|off: overtemperature, encoder_loss, undervoltage, short, stall",
     "switch": "switch ADDR left|right|home on|off|auto: force a switch or let the position say",
-    "load": "load ADDR NM: the external load torque on the shaft (Nm)",
+    "load": "load ADDR NM: the machine's load torque (Nm): resists motion, never drives it",
     "input": "input ADDR PORT 0|1: a digital input IN_0-IN_7",
     "analog": "analog ADDR 0|4 VALUE: an analog input AIN_0/AIN_4 (0-4095)",
 }

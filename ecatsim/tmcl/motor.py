@@ -6,7 +6,9 @@ run is a function of the commands and their arrival times only.
 
 Units inside: the rotor angle in motor microsteps (1/256 full step, whatever axis
 parameter 140 says), torques in Nm. Positions the host sees are microsteps at the chosen
-resolution in open loop and encoder steps in closed loop (§6, §8.1).
+resolution in open loop and encoder steps in closed loop (§6, §8.4); speeds and
+accelerations are pps, microsteps of the chosen resolution per second, in both (§5.7.1,
+§6.1, decision T7).
 
 Ref: TMCM-1311 TMCL firmware manual §5.7.1-5.7.4 (motion commands), §6 (axis
 parameters), §6.1 (velocity units), §7 (stallGuard2), §8 (closed loop), §9 (switches).
@@ -693,7 +695,7 @@ class Axis:
         del ap
 
     def _measure_speed(self) -> None:
-        """Axis parameter 131: encoder speed over 10 ms windows, in the host's unit."""
+        """Axis parameter 131: encoder speed over 10 ms windows, in pps (T7)."""
         self._enc_acc_s += DT
         if self._enc_acc_s >= 0.01:
             enc = self.encoder()

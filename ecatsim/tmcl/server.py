@@ -13,7 +13,8 @@ tmcl:
   modules:                     # optional: default one module at address 1
     - address: 1
       motor: {torque_per_amp: 0.4, rotor_inertia: 3.0e-5, load_inertia: 0.0,
-              friction: 0.01, viscous: 0.02, load: 0.0}
+              friction: 0.01, viscous: 0.002, load: 0.0,
+              resistance: 0.75, inductance: 0.0025, supply_v: 24.0}
       switches: {left: -512000, right: 512000, home: 25600, home_width: 2560}
       analog: [0, 0]
 ```
