@@ -479,8 +479,14 @@ class Axis:
         after = (self.pos, self.vel, self.rotor, self.rotor_v, self.current_ma)
         busy = self.enc_init == 1 or (self.closed and not self.cl_ready)
         busy = busy or self.home_search is not None or (self.closed and not self.reached)
-        # closed loop at rest: the regulation works on until the encoder shows the target
-        busy = busy or (self.closed and self.mode == POSITION and self.encoder() != self.target)
+        # closed loop at rest: the regulation works on until the encoder shows the target,
+        # or its integral can give no more (a blocked rotor, a lost encoder)
+        busy = busy or (
+            self.closed
+            and self.mode == POSITION
+            and self.encoder() != self.target
+            and abs(self.cl_integral) < math.pi / 2
+        )
         self.settled = after == before and not busy and self.rotor_v == 0.0
 
     def _ramp(self) -> None:

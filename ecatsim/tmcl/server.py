@@ -355,8 +355,17 @@ def _floats(src: str, key: str, data: object, cls: type[Mechanics] | type[Switch
             continue
         if isinstance(v, bool) or not isinstance(v, int | float):
             raise _err(src, f"{key}.{k}", f"expected a number, got {v!r}")
+        if cls is Mechanics and k in _POSITIVE and not v > 0:
+            raise _err(src, f"{key}.{k}", f"expected a number above 0, got {v!r}")
+        if cls is Mechanics and k in _NOT_NEGATIVE and not v >= 0:
+            raise _err(src, f"{key}.{k}", f"expected 0 or more, got {v!r}")
         kw[k] = float(v)
     return cls(**kw)
+
+
+#: motor keys a physical machine has above zero, or at least zero
+_POSITIVE = ("rotor_inertia", "supply_v", "torque_per_amp")
+_NOT_NEGATIVE = ("load_inertia", "friction", "viscous", "resistance", "inductance")
 
 
 def _module_config(src: str, i: int, data: object) -> ModuleConfig:

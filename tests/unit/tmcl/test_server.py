@@ -60,6 +60,14 @@ def test_segment_file_tmcl_key_builds_a_door(tmp_path: Path) -> None:
             r"modules\[1\].address: 1 is used twice",
         ),
         ({"listen": "tcp://h:1", "modules": [{"motor": {"mass": 1}}]}, r"motor.mass: unknown"),
+        (
+            {"listen": "tcp://h:1", "modules": [{"motor": {"supply_v": 0}}]},
+            r"modules\[0\].motor.supply_v: expected a number above 0, got 0$",
+        ),
+        (
+            {"listen": "tcp://h:1", "modules": [{"motor": {"inductance": -1e-3}}]},
+            r"motor.inductance: expected 0 or more",
+        ),
         ({"listen": "tcp://h:1", "modules": [{"analog": [5000, 0]}]}, r"analog: expected two"),
     ],
 )
