@@ -61,7 +61,7 @@ EV_SM1 = EV_SM0 << 1
 PD_EVENTS = (EV_SM0 << SM_PD_OUT) | (EV_SM0 << SM_PD_IN)  # outputs written, inputs read
 EVENT_MASK = EV_AL_CONTROL | EV_SM_ACTIVATION | EV_WATCHDOG_PD | EV_SYNC0 | (0x0D * EV_SM0)
 #: SAFEOP -> OP waits for the first outputs this long, then is refused with 0x001B: before
-#: the master's own wait (ETG.2000 SafeopOpTimeout, 10 s by default). Decision S10.
+#: the master's own wait (ETG.2000 SafeopOpTimeout, 10 s by default). Decision F5.
 OP_WAIT_NS = 9_000_000_000
 
 
@@ -201,7 +201,7 @@ class Firmware:
                 self._write_inputs(now_ns)
         self.pd_masked = dc and not p.u8(DC_ACTIVATION_STATUS) & 0x01
         if self.op_requested_ns and now_ns - self.op_requested_ns >= OP_WAIT_NS:
-            self.op_requested_ns = 0  # no outputs in time: SAFEOP with 0x001B (decision S10)
+            self.op_requested_ns = 0  # no outputs in time: SAFEOP with 0x001B (decision F5)
             self.fail(AlState.SAFEOP, al.CODE_SM_WATCHDOG, now_ns)
         self.service_mailbox(ev, now_ns)
 
@@ -238,7 +238,7 @@ class Firmware:
 
     def _outputs_received(self, now_ns: int) -> None:
         """SM2 was written in SAFEOP or OP: the outputs are valid; a SAFEOP -> OP request
-        that waited for them completes now (decision S10)."""
+        that waited for them completes now (decision F5)."""
         self.outputs_seen = True
         if self.op_requested_ns and self.state is _SAFEOP:
             self.op_requested_ns = 0
@@ -284,7 +284,7 @@ class Firmware:
             self._refuse(code)
             return
         if tr == Transition.SO and not self.outputs_seen and self.app.rx_size() > 0:
-            # OP only with valid outputs: SAFEOP until SM2 is first written (decision S10)
+            # OP only with valid outputs: SAFEOP until SM2 is first written (decision F5)
             self.op_requested_ns = now_ns or 1
             self.log.info("al_op_waits_for_outputs")
             return

@@ -87,7 +87,7 @@ def test_full_walk_to_op_and_back() -> None:
     request(m, 0x14)
     assert al(m) == (0x04, 0)
     request(m, 0x08)
-    assert al(m) == (0x04, 0)  # OP waits for the first outputs (decision S10)
+    assert al(m) == (0x04, 0)  # OP waits for the first outputs (decision F5)
     m.apwr(0, 0x1100, bytes(12))
     assert al(m) == (0x08, 0)
     request(m, 0x02)
@@ -107,7 +107,7 @@ def to_safeop(m: TinyMaster) -> None:
 def test_safeop_to_op_waits_for_the_first_outputs() -> None:
     """SAFEOP -> OP completes when SM2 is first written, however long the master takes;
     outputs written in SAFEOP before the request count. ETG.1000.6 §6.4.1.2 (SO: "start
-    output update"); decision S10."""
+    output update"); decision F5."""
     seg, clock = segment_of(1)
     m = TinyMaster(seg, clock)
     to_safeop(m)
