@@ -122,7 +122,11 @@ def _image(sc: SlaveConfig, desc: DeviceDescription) -> bytearray:
             return EepromStore.load(sc.eeprom)
         except SiiError as exc:
             raise UserError(str(exc)) from exc
-    img = build_image(desc, serial=sc.serial, alias=sc.alias)
+    try:
+        img = build_image(desc, serial=sc.serial, alias=sc.alias)
+    except SiiError as exc:  # e.g. an ESI whose SII does not fit its EEPROM size
+        where = sc.esi or sc.description or f"the {sc.device} description"
+        raise UserError(f"{where}: {exc}") from exc
     if sc.eeprom is not None:
         try:
             EepromStore.save(sc.eeprom, img)
