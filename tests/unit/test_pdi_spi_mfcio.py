@@ -123,3 +123,18 @@ def test_wd_cfg_bit_1_retriggers_on_the_pdi_chip_deselect(board, cfg: int) -> No
         assert status["wd_max"] == 12_500  # the longest gap between two deselects
     clock.advance(1_500_000)  # the microcontroller stops
     assert block.status(clock.now_ns())["wd_active"] is True
+
+
+def test_the_microcontroller_owns_the_esc_events(board) -> None:  # type: ignore[no-untyped-def]
+    """Decision M32: with a microcontroller on the PDI the block acknowledges no event for
+    it (M25 is for the board without one): the expired process-data watchdog's AL event
+    0x0220.6 waits for the microcontroller's read of 0x0440."""
+    m, clock, block, spi = board
+    clock.advance(1_000_000)
+    assert m.lrw(0, mb0() + bytes(36)).wkc == 3  # SM2 written: the watchdog runs (100 ms)
+    clock.advance(150_000_000)
+    m.fprd(STATION, 0x0130, 2)  # a frame: the block runs after it
+    assert spi(NOP)[0] & 0x40  # the address phase shows the event (§3.5.1)
+    assert m.fprd(STATION, 0x0440, 1).data[0] & 0x01 == 0  # expired
+    spi(bytes([0x0440 >> 5, ((0x0440 & 0x1F) << 3) | 3, 0xFF, 0xFF]))  # the MCU reads 0x0440
+    assert not spi(NOP)[0] & 0x40
