@@ -129,7 +129,7 @@ def test_the_microcontroller_owns_the_esc_events(board) -> None:  # type: ignore
     """Decision M32: with a microcontroller on the PDI the block acknowledges no event for
     it (M25 is for the board without one): the expired process-data watchdog's AL event
     0x0220.6 waits for the microcontroller's read of 0x0440."""
-    m, clock, block, spi = board
+    m, clock, _block, spi = board
     clock.advance(1_000_000)
     assert m.lrw(0, mb0() + bytes(36)).wkc == 3  # SM2 written: the watchdog runs (100 ms)
     clock.advance(150_000_000)
