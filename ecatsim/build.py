@@ -122,7 +122,11 @@ def _image(sc: SlaveConfig, desc: DeviceDescription) -> bytearray:
             return EepromStore.load(sc.eeprom)
         except SiiError as exc:
             raise UserError(str(exc)) from exc
-    img = build_image(desc, serial=sc.serial, alias=sc.alias)
+    try:
+        img = build_image(desc, serial=sc.serial, alias=sc.alias)
+    except SiiError as exc:  # e.g. an ESI whose SII does not fit its EEPROM size
+        where = sc.esi or sc.description or f"the {sc.device} description"
+        raise UserError(f"{where}: {exc}") from exc
     if sc.eeprom is not None:
         try:
             EepromStore.save(sc.eeprom, img)
@@ -155,10 +159,17 @@ def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
         pdi = Pdi(esc)
         layout = mailbox_layout(image)
         if sc.device == "tmc8460":
-            # no firmware behind the PDI: the ESC runs in device emulation (SII word 0) and
-            # the MFCIO block serves the memory blocks (TMC8460 §6.1, §6.5)
+            # the MFCIO block serves the memory blocks (TMC8460 §6.1, §6.5); without a
+            # microcontroller the ESC runs in device emulation (SII word 0)
             wiring = parse_wiring(sc.mfcio, cfg.source, f"slaves[{i}].mfcio")
             block = MfcioBlock(pdi, wiring, clock.now_ns())
+            if sc.firmware == "external" and sc.pdi_socket is not None:
+                # a microcontroller on the PDI SPI beside the MFCIO block (§3.1.2, decision
+                # M32): its socket is served, the block sees its chip select (§6.4)
+                what = f"{cfg.source}: slaves[{i}].pdi_socket"
+                mcu = ExternalFirmware(pdi, sc.pdi_socket, clock, SpiTiming(), what)
+                mcu.chip_select = block
+                block.mcu = mcu
             esc.on_reset = block.reset
             escs.append(esc)
             firmware.append(block)

@@ -47,6 +47,8 @@ def build_doors(cfg: SegmentConfig, segment: Segment | None = None) -> DoorHost 
             for pos, fw in enumerate(segment.firmware):
                 if isinstance(fw, ExternalFirmware):
                     built[f"pdi{pos}"] = fw
+                elif isinstance(fw, MfcioBlock) and isinstance(fw.mcu, ExternalFirmware):
+                    built[f"pdi{pos}"] = fw.mcu  # a TMC8460 with MFCIO and a microcontroller
                 sock = cfg.slaves[pos].mfc_socket if pos < len(cfg.slaves) else None
                 if sock is not None and isinstance(fw, MfcioBlock):
                     what = f"{cfg.source}: slaves[{pos}].mfc_socket"

@@ -121,6 +121,7 @@ cdef class Esc(SmHost):
                    rs="long long")
     cpdef void reg_read_hooks(self, long long s, long long e, bint pdi) except *
     cpdef void _er_dc_system_time(self, long long ra, long long rs) except *
+    cpdef void _pr_dc_system_time(self, long long ra, long long rs) except *
     @cython.locals(value="unsigned long long", lo="unsigned long long", hi="unsigned long long",
                    nbytes="long long")
     cpdef void _ew_dc_system_time(self, long long ra, long long rs, object old) except *

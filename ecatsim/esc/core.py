@@ -847,9 +847,11 @@ class Esc(SmHost):
             if entry is None:  # pragma: no cover
                 break
             fn, ra, rs = entry
-            if ra == DC_SYSTEM_TIME and not pdi:
-                # the FRMW of every cycle reads it: a C call in the compiled core (P14)
-                self._er_dc_system_time(ra, rs)
+            if ra == DC_SYSTEM_TIME:
+                if not pdi:  # the FRMW of every cycle reads it: a C call when compiled (P14)
+                    self._er_dc_system_time(ra, rs)
+                elif s <= ra:  # PDI: latched when the first byte is read (Table 95)
+                    self._pr_dc_system_time(ra, rs)
             else:
                 fn(self, ra, rs)
             i = _first(hooked, ra + rs, e) if ra + rs < e else -1
@@ -1196,6 +1198,11 @@ class Esc(SmHost):
     def _er_dc_system_time(self, ra: int, rs: int) -> None:
         """ECAT read of 0x0910: system time at the frame's SOF. Ref: §5.50.2 Table 95."""
         self.dc.refresh_system_time(self.ctx.t_ns)
+
+    def _pr_dc_system_time(self, ra: int, rs: int) -> None:
+        """PDI read of 0x0910: the running system time, latched when the first byte is
+        read, at the host time of the PDI access. Ref: TMC8460 §5.50.2 Table 95."""
+        self.dc.latch_system_time(self.ctx.pdi_ns)
 
     def _ew_dc_system_time(self, ra: int, rs: int, old: bytes) -> None:
         """ECAT write of 0x0910 feeds the time control loop. Ref: §5.50.2 Table 95."""

@@ -42,6 +42,7 @@ cdef class DcUnit:
     cpdef unsigned long long offset(self) except? 0
     cpdef unsigned long long system_time(self, long long t_ns) except? 0
     cpdef void refresh_system_time(self, long long frame_t_ns) except *
+    cpdef void latch_system_time(self, long long t_ns) except *
     @cython.locals(t="long long", m=bytearray, delay="unsigned long long",
                    offset="unsigned long long", local_now="unsigned long long",
                    local="unsigned long long", diff="long long", start="long long",

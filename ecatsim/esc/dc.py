@@ -173,6 +173,13 @@ class DcUnit:
         """
         _put64(self.mem, DC_SYSTEM_TIME, self.system_time(self.arrival_ns(frame_t_ns)))
 
+    def latch_system_time(self, t_ns: int) -> None:
+        """PDI read of 0x0910: the system time at host time ``t_ns``, latched into the
+        register (the DC unit runs whether or not a master uses it).
+        Ref: TMC8460 §5.50.2 Table 95.
+        """
+        _put64(self.mem, DC_SYSTEM_TIME, self.system_time(t_ns))
+
     def system_time_written(self, frame_t_ns: int, value: int, nbytes: int) -> bool:
         """Compare the written system time with the local copy and feed the control loop.
 

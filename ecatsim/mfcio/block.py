@@ -18,7 +18,7 @@ from __future__ import annotations
 import struct
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 from ecatsim.esc.pdi import (
     AL_STATUS,
@@ -50,7 +50,7 @@ from ecatsim.mfcio.pwm import MARK_A, MARK_B, MARK_CENTER, MARK_START, Pwm
 from ecatsim.mfcio.spi import SpiMaster, make_device
 from ecatsim.mfcio.stepdir import StepDir
 from ecatsim.mfcio.timebase import PWM_TICK_NS, TICK_NS, pwm_ticks, ticks
-from ecatsim.mfcio.watchdog import CFG_MFC_CSN, CFG_SOF, OUTPUT_LINES, IoWatchdog
+from ecatsim.mfcio.watchdog import CFG_MFC_CSN, CFG_PDI_CSN, CFG_SOF, OUTPUT_LINES, IoWatchdog
 
 AL_INIT, AL_PREOP, AL_BOOT, AL_SAFEOP, AL_OP = 1, 2, 3, 4, 8
 _U64 = struct.Struct("<Q")
@@ -83,6 +83,15 @@ _MARK_IRQ = {
     MARK_A: irqmod.SRC_PWM_A,
     MARK_B: irqmod.SRC_PWM_B,
 }
+
+
+class Mcu(Protocol):
+    """A microcontroller on the PDI SPI beside the block (TMC8460 §3.1.2): it runs after
+    each run of the block and starts over with it."""
+
+    def service(self, now_ns: int) -> None: ...
+
+    def reset(self) -> None: ...
 
 
 @dataclass(frozen=True, slots=True)
@@ -122,6 +131,9 @@ class MfcioBlock:
         w = wiring
         self.shaft = Shaft(w.stepper, w.encoder) if w.stepper or w.encoder else None
         self.nes_pin = wiring.nes
+        #: the microcontroller on the PDI SPI, if the board has one (``firmware: external``):
+        #: it owns the ESC's events, so the block acknowledges none of them (decision M32)
+        self.mcu: Mcu | None = None
         self.reset()
 
     # ------------------------------------------------------------------ lifecycle
@@ -161,6 +173,9 @@ class MfcioBlock:
         self.runs = 0
         self.mb1_writes = 0
         self.emergency = False
+        self._sync0_ev = False
+        if self.mcu is not None:
+            self.mcu.reset()
 
     # ------------------------------------------------------------------ gating
 
@@ -249,9 +264,10 @@ class MfcioBlock:
         ev = pdi.al_event()
         if ev & EV_SM_ACTIVATION or self.windows is None:
             self.windows = self._read_windows()
-        if ev & EV_WATCHDOG_PD:  # acknowledged for the absent firmware (decision M25)
+        mcu = self.mcu
+        if ev & EV_WATCHDOG_PD and mcu is None:  # for the absent firmware (decision M25)
             pdi.u8(WD_STATUS_PD)
-        if ev & (EV_SYNC0 | EV_SYNC1):  # acknowledge (TMC8460 §5.50.4 Table 106)
+        if ev & (EV_SYNC0 | EV_SYNC1) and mcu is None:  # acknowledge (§5.50.4 Table 106)
             if ev & EV_SYNC0:
                 pdi.u8(DC_SYNC0_STATUS)
             if ev & EV_SYNC1:
@@ -280,8 +296,10 @@ class MfcioBlock:
         active = bool(pdi.u8(DC_ACTIVATION) & 0x01)
         if not (active and self._sync_active):
             events.discard(Trigger.SYNC0)
-        if ev & EV_SYNC0:
+        sync0_ev = bool(ev & EV_SYNC0)
+        if sync0_ev and not (mcu is not None and self._sync0_ev):  # a new pulse's event
             events.add(Trigger.SYNC0)
+        self._sync0_ev = sync0_ev
         self._sync_active = active
         self._dc = marks
         self._intake(ev)
@@ -291,6 +309,8 @@ class MfcioBlock:
         self._output_mb1()
         if self.tracer is not None:
             self.tracer(now_ns, self)
+        if mcu is not None:
+            mcu.service(now_ns)
 
     def _dc_marks(self) -> tuple[bytes, bytes, bytes, bytes]:
         """Registers that change with a SYNC0/SYNC1 pulse (next pulse times) and a
@@ -603,7 +623,7 @@ class MfcioBlock:
         Ref: TMC8460 §3.6, §6.2, §6.4 Table 135 bit 4, §6.15."""
         self.advance(now_ns)
         self.wd.event(CFG_MFC_CSN, ticks(now_ns))
-        self._mfc_event(Trigger.MFC_CS)
+        self._cs_event(Trigger.MFC_CS)
         for i, b in enumerate(data):
             hit = R.by_spi_addr(addr + i)
             if hit is None:
@@ -621,14 +641,14 @@ class MfcioBlock:
         if self.windows is None:
             self.windows = self._read_windows()
         self._transfer_writable(set())
-        self._mfc_event(Trigger.MFC_DESELECT)
+        self._cs_event(Trigger.MFC_DESELECT)
 
     def mfc_read(self, addr: int, n: int, now_ns: int) -> bytes:
         """An MFC CTRL SPI read: every register is readable (its unit value).
         Ref: TMC8460 §6.4 ("read access ... always possible")."""
         self.advance(now_ns)
         self.wd.event(CFG_MFC_CSN, ticks(now_ns))
-        self._mfc_event(Trigger.MFC_CS)
+        self._cs_event(Trigger.MFC_CS)
         out = bytearray()
         cache: dict[int, int] = {}
         for i in range(n):
@@ -640,11 +660,25 @@ class MfcioBlock:
             if r.num not in cache:
                 cache[r.num] = self.unit_value(r.num)
             out.append((cache[r.num] >> (8 * byte)) & 0xFF)
-        self._mfc_event(Trigger.MFC_DESELECT)
+        self._cs_event(Trigger.MFC_DESELECT)
         return bytes(out)
 
-    def _mfc_event(self, trig: Trigger) -> None:
-        """Registers triggered by MFC CTRL SPI chip select/deselect move now."""
+    def pdi_chip_select(self, now_ns: int) -> None:
+        """PDI_SPI_CSN falls (a PDI SPI frame begins): registers with trigger 7 move.
+        Ref: TMC8460 §6.4 Table 136."""
+        self.advance(now_ns)
+        self._cs_event(Trigger.PDI_CS)
+
+    def pdi_chip_deselect(self, now_ns: int) -> None:
+        """PDI_SPI_CSN rises (the frame ends): the IO watchdog retriggers if WD_CFG bit 1
+        is set, registers with trigger 8 move. Ref: TMC8460 §6.4 Table 136, §6.11.2
+        Table 151 (cfg_pdi_csn_enable: "positive edge on PDI_SPI_CSN")."""
+        self.advance(now_ns)
+        self.wd.event(CFG_PDI_CSN, ticks(now_ns))
+        self._cs_event(Trigger.PDI_DESELECT)
+
+    def _cs_event(self, trig: Trigger) -> None:
+        """Registers triggered by an SPI chip select/deselect (PDI or MFC CTRL) move now."""
         for r in WRITABLE:
             if self._trigger(r.num) == trig:
                 self._take(r.num, self.shadow[r.num])

@@ -6,13 +6,15 @@ for the firmware and the AL status changes when the firmware writes it (§5.21, 
 The firmware's SPI frames arrive on a socket (:mod:`ecatsim.pdi_spi.door`); each frame is
 decoded by :func:`ecatsim.pdi_spi.protocol.transfer` against the PDI face. Its
 complete accesses reload the PDI watchdog (§5.40); the PDI interrupt (AL event request
-AND AL event mask, §5.30, §5.32) raises the IRQ line on the socket beside it.
+AND AL event mask, §5.30, §5.32) raises the IRQ line on the socket beside it. On a TMC8460
+with MFCIO the MFCIO block sees each frame's chip select and deselect (§6.4 Table 136
+triggers 7/8, §6.11.2 WD_CFG bit 1).
 """
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from ecatsim.clock import Clock
 from ecatsim.esc.pdi import AL_EVENT_MASK, Pdi
@@ -24,6 +26,14 @@ PDI_CONFIG = 0x0150
 LATE_SAMPLE = 0x20
 
 
+class ChipSelect(Protocol):
+    """What watches PDI_SPI_CSN beside the SPI slave: the TMC8460's MFCIO block (§6.4)."""
+
+    def pdi_chip_select(self, now_ns: int) -> None: ...
+
+    def pdi_chip_deselect(self, now_ns: int) -> None: ...
+
+
 class ExternalFirmware:
     """The PDI of one slave on a socket: a segment ``Serviceable`` and a front door."""
 
@@ -32,6 +42,8 @@ class ExternalFirmware:
         self.clock = clock
         self.timing = timing
         self.socket = SpiSocket(path, self._transfer, what)
+        #: told of each frame's chip select and deselect (a TMC8460 with MFCIO)
+        self.chip_select: ChipSelect | None = None
         self._irq = False
         self._wd_deadline = 0
         self.reset()
@@ -62,9 +74,17 @@ class ExternalFirmware:
         self._irq = level
 
     def _transfer(self, mosi: bytes) -> bytes:
-        self.pdi.access_time(self.clock.now_ns())
+        """One frame: chip select, the datagram, chip deselect (a frame of no bytes is a
+        chip select without clocks: the line still toggles)."""
+        now = self.clock.now_ns()
+        cs = self.chip_select
+        if cs is not None:
+            cs.pdi_chip_select(now)
+        self.pdi.access_time(now)
         late = bool(self.pdi.u8(PDI_CONFIG) & LATE_SAMPLE)
         miso = transfer(self, mosi, self.timing, late)
+        if cs is not None:
+            cs.pdi_chip_deselect(self.clock.now_ns())
         self._check_irq()
         return miso
 

@@ -11,7 +11,7 @@ cdef long long AL_CONTROL, AL_EVENT_MASK, AL_STATUS, AL_STATUS_CODE, DC_ACTIVATI
 cdef long long DC_ACTIVATION_STATUS, DC_SYNC0_STATUS, EV_AL_CONTROL, EV_SM0
 cdef long long EV_SM_ACTIVATION, EV_SYNC0, EV_WATCHDOG_PD, WD_STATUS_PD
 cdef long long SM_MBX_OUT, SM_MBX_IN, SM_PD_OUT, SM_PD_IN
-cdef long long EV_SM1, PD_EVENTS, EVENT_MASK
+cdef long long EV_SM1, PD_EVENTS, EVENT_MASK, OP_WAIT_NS
 
 
 cdef class Firmware:
@@ -21,6 +21,8 @@ cdef class Firmware:
     cdef public object od, emergency, device, coe
     cdef public bint pd_masked
     cdef public object refuse_next
+    cdef public bint outputs_seen
+    cdef public long long op_requested_ns
     cdef public bint bootstrap_supported
     cdef public object state
     cdef public bint error
@@ -31,4 +33,5 @@ cdef class Firmware:
     cpdef void service(self, long long now_ns) except *
     @cython.locals(want="long long")
     cpdef void service_mailbox(self, long long ev, long long now_ns) except *
+    cpdef void _outputs_received(self, long long now_ns) except *
     cpdef void _write_inputs(self, long long now_ns) except *

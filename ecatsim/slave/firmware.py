@@ -60,6 +60,9 @@ _OP = AlState.OP
 EV_SM1 = EV_SM0 << 1
 PD_EVENTS = (EV_SM0 << SM_PD_OUT) | (EV_SM0 << SM_PD_IN)  # outputs written, inputs read
 EVENT_MASK = EV_AL_CONTROL | EV_SM_ACTIVATION | EV_WATCHDOG_PD | EV_SYNC0 | (0x0D * EV_SM0)
+#: SAFEOP -> OP waits for the first outputs this long, then is refused with 0x001B: before
+#: the master's own wait (ETG.2000 SafeopOpTimeout, 10 s by default). Decision F5.
+OP_WAIT_NS = 9_000_000_000
 
 
 @dataclass(frozen=True, slots=True)
@@ -110,6 +113,10 @@ class Firmware:
         self.pd_masked = False
         #: injected fault: refuse the next state change with this AL status code
         self.refuse_next: int | None = None
+        #: outputs (SM2) received since SAFEOP was entered; SAFEOP -> OP waits for them
+        self.outputs_seen = False
+        #: host time of a SAFEOP -> OP request waiting for the first outputs (0: none)
+        self.op_requested_ns = 0
         self.bootstrap_supported = bootstrap_supported
         self.state = AlState.INIT
         self.error = False
@@ -127,6 +134,8 @@ class Firmware:
         self.state = AlState.INIT
         self.error = False
         self.code = al.CODE_NONE
+        self.outputs_seen = False
+        self.op_requested_ns = 0
         p = self.pdi
         if not p.operational():
             return
@@ -172,21 +181,28 @@ class Firmware:
                 p.u8(DC_SYNC0_STATUS)  # acknowledges the event
                 if ev & (EV_SM0 << SM_PD_OUT):
                     out = p.sm_read(SM_PD_OUT)
-                    if out is not None and self.state is _OP:
-                        self.app.set_outputs(out, now_ns)
+                    if out is not None:
+                        self._outputs_received(now_ns)
+                        if self.state is _OP:
+                            self.app.set_outputs(out, now_ns)
                 self._write_inputs(now_ns)
             elif pd_events & (EV_SM0 << SM_PD_IN) and p.u8(DC_ACTIVATION_STATUS) & 0x01:
                 self._write_inputs(now_ns)  # no pulse yet: keep the inputs fresh meanwhile
         else:
             if ev & (EV_SM0 << SM_PD_OUT):
                 out = p.sm_read(SM_PD_OUT)
-                if out is not None and self.state is _OP:
-                    self.app.set_outputs(out, now_ns)  # free run: applied when SM2 is written
+                if out is not None:
+                    self._outputs_received(now_ns)
+                    if self.state is _OP:
+                        self.app.set_outputs(out, now_ns)  # free run: applied when SM2 is written
             if ev & EV_SYNC0:
                 p.u8(DC_SYNC0_STATUS)
             if pd_events:
                 self._write_inputs(now_ns)
         self.pd_masked = dc and not p.u8(DC_ACTIVATION_STATUS) & 0x01
+        if self.op_requested_ns and now_ns - self.op_requested_ns >= OP_WAIT_NS:
+            self.op_requested_ns = 0  # no outputs in time: SAFEOP with 0x001B (decision F5)
+            self.fail(AlState.SAFEOP, al.CODE_SM_WATCHDOG, now_ns)
         self.service_mailbox(ev, now_ns)
 
     def service_mailbox(self, ev: int, now_ns: int) -> None:
@@ -220,6 +236,14 @@ class Firmware:
         if self.mbx is not None and self.state is not _INIT:
             self.mbx.repeat()
 
+    def _outputs_received(self, now_ns: int) -> None:
+        """SM2 was written in SAFEOP or OP: the outputs are valid; a SAFEOP -> OP request
+        that waited for them completes now (decision F5)."""
+        self.outputs_seen = True
+        if self.op_requested_ns and self.state is _SAFEOP:
+            self.op_requested_ns = 0
+            self._enter(Transition.SO, _OP, now_ns)
+
     def _write_inputs(self, now_ns: int) -> None:
         if self.state is _SAFEOP or self.state is _OP:
             self.pdi.sm_write(SM_PD_IN, self.app.get_inputs(now_ns))
@@ -235,6 +259,7 @@ class Firmware:
         """
         req = al.parse_state(ctrl)
         ack = bool(ctrl & al.AL_ERROR)
+        self.op_requested_ns = 0  # a new request replaces one still waiting for outputs
         if req is None:
             self._refuse(al.CODE_UNKNOWN_STATE)
             return
@@ -258,6 +283,11 @@ class Firmware:
         if code:
             self._refuse(code)
             return
+        if tr == Transition.SO and not self.outputs_seen and self.app.rx_size() > 0:
+            # OP only with valid outputs: SAFEOP until SM2 is first written (decision F5)
+            self.op_requested_ns = now_ns or 1
+            self.log.info("al_op_waits_for_outputs")
+            return
         self._enter(tr, req, now_ns)
 
     def _refuse(self, code: int) -> None:
@@ -269,6 +299,7 @@ class Firmware:
 
     def fail(self, to: AlState, code: int, now_ns: int) -> None:
         """A local error: drop to ``to`` with the error bit and ``code``. Ref: §6.4.1.4."""
+        self.op_requested_ns = 0
         self._stop_for(to, now_ns)
         self.state = to
         self.error = True
@@ -338,6 +369,7 @@ class Firmware:
         elif tr == Transition.PS:
             p.sm_deactivate(SM_PD_OUT, False)
             p.sm_deactivate(SM_PD_IN, False)
+            self.outputs_seen = False
             self.state = to
             self._write_inputs(now_ns)
         else:
@@ -353,8 +385,11 @@ class Firmware:
             self.mbx.reset()
 
     def _stop_for(self, to: AlState, now_ns: int) -> None:
-        """Stop what the target state does not run: PD below SAFEOP, mailbox in INIT."""
+        """Stop what the target state does not run: PD below SAFEOP, mailbox in INIT.
+        Leaving OP or SAFEOP forgets the outputs received (OP waits for new ones)."""
         p = self.pdi
+        if to != AlState.OP:
+            self.outputs_seen = False
         if al.RANK[to] < al.RANK[AlState.SAFEOP] and self.state in (AlState.SAFEOP, AlState.OP):
             p.sm_deactivate(SM_PD_OUT, True)
             p.sm_deactivate(SM_PD_IN, True)

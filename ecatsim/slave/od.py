@@ -25,6 +25,13 @@ class ObjectCode(IntEnum):
     RECORD = 9
 
 
+#: Data types of the standard's records, for the SDO Info object description.
+#: Ref: CiA 301 §7.4.4 Table 44 (complex data types); ETG.1000.6 §5.6.7.
+PDO_MAPPING_TYPE = 0x0021
+IDENTITY_TYPE = 0x0023
+#: any other record (a manufacturer's structure without its own type index): decision C16
+RECORD_TYPE = 0x002A
+
 # SDO abort codes used here. Ref: ETG.1000.6 Table 41.
 ABORT_TOGGLE = 0x0503_0000
 ABORT_COMMAND = 0x0504_0001
@@ -240,6 +247,9 @@ class OdObject:
     #: checks the object after a write (sub written, 0 for complete access) and raises
     #: SdoAbort to reject it; the previous values are then restored
     validate: Callable[[int], None] | None = None
+    #: a RECORD's data type when the standard defines one (IDENTITY 0x0023, PDO_MAPPING
+    #: 0x0021; ETG.1000.6 §5.6.7, CiA 301 §7.4.4); 0 for the generic record type
+    record_type: int = 0
 
     def commit(self, changes: list[tuple[Entry, int | str | bytes]], sub: int) -> None:
         """Store values, let ``validate`` veto the new state, then notify ``on_write``."""
@@ -266,8 +276,10 @@ class OdObject:
         if self.code == ObjectCode.VAR:
             return self.entries[0].type_code
         if self.code == ObjectCode.ARRAY and 1 in self.entries:
-            return self.entries[1].type_code
-        return 0x002A if self.code == ObjectCode.RECORD else 0
+            return self.entries[1].type_code  # an array's element type (1C12: UNSIGNED16)
+        if self.code == ObjectCode.RECORD:
+            return self.record_type or RECORD_TYPE
+        return 0
 
 
 class ObjectDictionary:

@@ -15,7 +15,14 @@ import yaml
 
 from ecatsim.description import DescriptionError, DeviceDescription, PdoDescription
 from ecatsim.slave.al import AlState
-from ecatsim.slave.od import Entry, ObjectCode, ObjectDictionary, OdObject
+from ecatsim.slave.od import (
+    IDENTITY_TYPE,
+    PDO_MAPPING_TYPE,
+    Entry,
+    ObjectCode,
+    ObjectDictionary,
+    OdObject,
+)
 
 MAX_PDO_ENTRIES = 9  # TMC8670 §2.1: dynamic mapping with max. 9 entries
 PREOP_ONLY = (int(AlState.PREOP),)
@@ -47,7 +54,14 @@ def _pdo_mapping(index: int, pdo: PdoDescription | None, name: str) -> OdObject:
         entries[s] = Entry(
             s, f"Mapping entry {s}", "UNSIGNED32", access="rw", default=v, write_states=PREOP_ONLY
         )
-    return OdObject(index, name, ObjectCode.RECORD, entries, source="TMC8670 §4.1.7/§4.1.8")
+    return OdObject(
+        index,
+        name,
+        ObjectCode.RECORD,
+        entries,
+        source="TMC8670 §4.1.7/§4.1.8",
+        record_type=PDO_MAPPING_TYPE,
+    )
 
 
 def _assign(index: int, pdo_index: int, name: str) -> OdObject:
@@ -83,6 +97,7 @@ def communication_objects(desc: DeviceDescription) -> list[OdObject]:
             3: Entry(3, "Revision number", "UNSIGNED32", default=idn.revision),
         },
         source="TMC8670 §4.1.6 Tables 16, 17 (subindices 1-3; the serial is in the SII only)",
+        record_type=IDENTITY_TYPE,
     )
     types = {"mbx_out": 1, "mbx_in": 2, "pd_out": 3, "pd_in": 4, "unused": 0}
     smt = {

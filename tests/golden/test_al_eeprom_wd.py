@@ -87,11 +87,62 @@ def test_full_walk_to_op_and_back() -> None:
     request(m, 0x14)
     assert al(m) == (0x04, 0)
     request(m, 0x08)
+    assert al(m) == (0x04, 0)  # OP waits for the first outputs (decision F5)
+    m.apwr(0, 0x1100, bytes(12))
     assert al(m) == (0x08, 0)
     request(m, 0x02)
     assert al(m) == (0x02, 0)
     request(m, 0x01)
     assert al(m) == (0x01, 0)
+
+
+def to_safeop(m: TinyMaster) -> None:
+    mailbox_sms(m)
+    request(m, 0x02)
+    pd_sms(m)
+    request(m, 0x04)
+    assert al(m) == (0x04, 0)
+
+
+def test_safeop_to_op_waits_for_the_first_outputs() -> None:
+    """SAFEOP -> OP completes when SM2 is first written, however long the master takes;
+    outputs written in SAFEOP before the request count. ETG.1000.6 §6.4.1.2 (SO: "start
+    output update"); decision F5."""
+    seg, clock = segment_of(1)
+    m = TinyMaster(seg, clock)
+    to_safeop(m)
+    request(m, 0x08)
+    assert al(m) == (0x04, 0)
+    clock.advance(5_000_000_000)
+    assert m.aprd(0, 0x1200, 17).wkc == 1  # the master reads inputs: the firmware runs
+    assert al(m) == (0x04, 0)
+    m.apwr(0, 0x1100, bytes(12))
+    assert al(m) == (0x08, 0)
+    request(m, 0x04)  # back to SAFEOP: the outputs are forgotten
+    assert al(m) == (0x04, 0)
+    request(m, 0x08)
+    assert al(m) == (0x04, 0)
+    request(m, 0x04)  # a new request replaces the waiting one
+    m.apwr(0, 0x1100, bytes(12))
+    assert al(m) == (0x04, 0)
+    request(m, 0x08)  # outputs seen in SAFEOP: OP at once
+    assert al(m) == (0x08, 0)
+
+
+def test_safeop_to_op_without_outputs_is_refused_with_001b() -> None:
+    seg, clock = segment_of(1)
+    m = TinyMaster(seg, clock)
+    to_safeop(m)
+    request(m, 0x08)
+    clock.advance(8_999_000_000)
+    m.aprd(0, 0x1200, 17)
+    assert al(m) == (0x04, 0)
+    clock.advance(1_000_000)  # 9 s: before the master's SafeopOpTimeout (10 s)
+    m.aprd(0, 0x1200, 17)
+    assert al(m) == (0x14, 0x001B)  # SAFEOP, error: sync manager watchdog
+    m.apwr(0, 0x1100, bytes(12))
+    request(m, 0x18)  # OP with the error acknowledged, outputs there
+    assert al(m) == (0x08, 0)
 
 
 def test_al_status_read_clears_ecat_event() -> None:

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import struct
 
+import pytest
+
 from ecatsim.slave.firmware import Firmware
 from tests.support.tinymaster import TinyMaster, segment_of
 
@@ -131,3 +133,47 @@ def test_emergency_updates_error_objects() -> None:
     assert fw.od.value(0x1001) == 0x03
     if 0x603F in fw.od:
         assert fw.od.value(0x603F) == 0x2310
+
+
+SDO_INFO_REQ = struct.pack("<H", 8 << 12)
+
+
+def object_description(index: int) -> bytes:
+    """The whole reply mailbox to SDO Info "get object description" for ``index``."""
+    m, _ = preop()
+    send(m, SDO_INFO_REQ + struct.pack("<BBHH", 0x03, 0, 0, index), 1)
+    r = recv(m)
+    assert r is not None
+    return r[: 6 + struct.unpack_from("<H", r)[0]]
+
+
+def test_sdo_info_object_description_of_identity_exact_bytes() -> None:
+    """0x1018 is the IDENTITY record, data type 0x0023 (CiA 301 §7.4.4; ETG.1000.6 §5.6.3.5
+    Table 48: index, data type, max subindex, object code, name)."""
+    assert object_description(0x1018) == bytes.fromhex(
+        "1b00 0000 0013"  # mailbox: 27 bytes, CoE, counter 1
+        "0080 0400 0000"  # CoE SDO Info, get object description response, no fragments left
+        "1810 2300 03 09"  # 0x1018, IDENTITY, max subindex 3, RECORD
+        "4964656e74697479206f626a656374"  # "Identity object"
+    )
+
+
+@pytest.mark.parametrize(
+    ("index", "data_type", "max_sub", "code", "name"),
+    [
+        (0x1600, 0x0021, 9, 9, b"Receive PDO mapping"),  # PDO_MAPPING record
+        (0x1A00, 0x0021, 9, 9, b"Transmit PDO mapping"),
+        (0x1C12, 0x0006, 1, 8, b"Sync manager 2 PDO assignment"),  # ARRAY of UNSIGNED16
+        (0x1C13, 0x0006, 1, 8, b"Sync manager 3 PDO assignment"),
+        (0x1C00, 0x0005, 4, 8, b"Sync manager communication type"),  # ARRAY of UNSIGNED8
+        (0x1008, 0x0009, 0, 7, b"Manufacturer device name"),  # VAR: its own type
+    ],
+)
+def test_sdo_info_object_description_types(
+    index: int, data_type: int, max_sub: int, code: int, name: bytes
+) -> None:
+    """The object's data type: a record's standard type, an array's element type.
+    Ref: ETG.1000.6 §5.6.3.5 Table 48, §5.6.7.4 (1C00, 1C12, 1C13); CiA 301 §7.4.4."""
+    body = struct.pack("<HHBB", index, data_type, max_sub, code) + name
+    head = struct.pack("<HHBB", 6 + len(body), 0, 0, 0x13)
+    assert object_description(index) == head + bytes.fromhex("0080 0400 0000") + body

@@ -161,3 +161,33 @@ def test_the_pdi_emulation_pin_until_the_eeprom_loads(pin: bool) -> None:
     assert blank.mem[0x0141] & 0x01 == int(pin)
     seg, _ = segment_of(1, pdi_emulation=pin)
     assert seg.escs[0].mem[0x0141] & 0x01 == 0  # the default SII's word 0: emulation off
+
+
+def read_system_time(fw: ExternalFirmware, addr: int = 0x0910, n: int = 8) -> int:
+    """A 3-byte-addressed read with the wait state byte, as SOES's SPI drivers send it."""
+    head = [addr >> 5, ((addr & 0x1F) << 3) | 6, ((addr >> 13) << 5) | (3 << 2), 0xFF]
+    got = fw._transfer(bytes([*head, *bytes(n - 1), 0xFF]))  # a frame off the socket
+    return int.from_bytes(got[4:], "little")
+
+
+def test_a_pdi_read_of_0x0910_is_the_running_system_time(chip) -> None:  # type: ignore[no-untyped-def]
+    """§5.50.2 Table 95: "PDI read access: Local copy of the System Time. Time latched when
+    reading first byte (0x0910)"; with no master using DC the local clock still runs."""
+    _, clock, m, fw = chip
+    first = read_system_time(fw)
+    # the slave's local clock starts at 1_000_003_000 ns, the host clock is at 1 s
+    assert first == 1_000_003_000 + 1_000_000_000
+    clock.advance(1_000_000)
+    assert read_system_time(fw) == first + 1_000_000
+    assert read_system_time(fw, n=4) == (first + 1_000_000) & 0xFFFFFFFF  # SOES reads 4 bytes
+    # DC on: the master's offset (0x0920) is part of the system time the PDI reads
+    m.apwr(0, 0x0920, struct.pack("<Q", 0x0000_0010_0000_0000))
+    clock.advance(1_000_000)
+    on = read_system_time(fw)
+    assert on == first + 2_000_000 + 0x0000_0010_0000_0000
+    clock.advance(1_000_000)
+    assert read_system_time(fw) - on == 1_000_000
+    # only a read that starts at 0x0910 latches: the upper half alone is the latched one
+    clock.advance(5 << 32)
+    assert read_system_time(fw, 0x0914, 4) == (on + 1_000_000) >> 32
+    assert errors(m) == (0, 0)

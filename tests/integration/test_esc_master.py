@@ -136,6 +136,27 @@ def test_eeprom_write_survives_restart(
     assert image.read_bytes()[0x40:0x42] == b"\x34\x12"
 
 
+def test_op_waits_for_the_first_outputs(daemon_factory: Any, master_factory: Any) -> None:
+    """Decision F5: an OP request before any process data leaves the drive in SAFEOP, no
+    error; the first outputs (SM2 written by the cyclic LRW) complete the transition, as
+    SOEM's usual flow (process data while it waits for OP) expects. ETG.1000.6 §6.4.1.2."""
+    daemon_factory()
+    master = master_factory()
+    assert master.config_init() == 1
+    master.config_map()
+    assert master.state_check(pysoem.SAFEOP_STATE, 2_000_000) == pysoem.SAFEOP_STATE
+    s = master.slaves[0]
+    master.state = pysoem.OP_STATE
+    master.write_state()
+    assert master.state_check(pysoem.OP_STATE, 300_000) == pysoem.SAFEOP_STATE
+    assert s._fprd(0x0130, 2) == b"\x04\x00"  # SAFEOP, no error
+    assert s._fprd(0x0134, 2) == b"\x00\x00"
+    master.send_processdata()
+    assert master.receive_processdata(RX_TIMEOUT_US) == 3  # LRW: outputs and inputs
+    assert master.state_check(pysoem.OP_STATE, 200_000) == pysoem.OP_STATE
+    assert s._fprd(0x0134, 2) == b"\x00\x00"
+
+
 def test_watchdog_expiry_gives_001b(daemon_factory: Any, master_factory: Any) -> None:
     daemon_factory()
     master = master_factory()

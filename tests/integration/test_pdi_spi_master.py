@@ -141,3 +141,51 @@ def test_100k_random_frames_on_the_socket_then_op(
     finally:
         fw.kill()
         fw.wait()
+
+
+def system_time_frame(c: socket.socket) -> int:
+    """0x0910 over the PDI SPI: 3-byte address, read with the wait state byte, 8 bytes."""
+    mosi = bytes([0x0910 >> 5, ((0x0910 & 0x1F) << 3) | 6, 3 << 2, 0xFF]) + bytes(7) + b"\xff"
+    c.sendall(struct.pack("<H", len(mosi)) + mosi)
+    got = b""
+    while len(got) < len(mosi):
+        got += c.recv(len(mosi) - len(got))
+    return int.from_bytes(got[4:], "little")
+
+
+def test_firmware_reads_the_running_system_time(
+    daemon_factory: Any, master_factory: Any, tmp_path: Path
+) -> None:
+    """TMC8460 §5.50.2 Table 95: a PDI read of 0x0910 is the system time latched when its
+    first byte is read, with DC unused and with the master's DC running. Two reads about
+    1 ms apart differ by the time between them: at least the time from the first answer
+    to the second request, at most the time from the first request to the second answer."""
+    sock = tmp_path / "pdi.sock"
+    daemon_factory("--config", str(segment(tmp_path, sock)))
+    c = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    c.connect(str(sock))
+
+    def two_reads() -> tuple[int, int, int]:
+        t0 = time.monotonic_ns()
+        a = system_time_frame(c)
+        t1 = time.monotonic_ns()
+        time.sleep(0.001)
+        t2 = time.monotonic_ns()
+        b = system_time_frame(c)
+        t3 = time.monotonic_ns()
+        return b - a, t2 - t1, t3 - t0
+
+    try:
+        delta, inner, outer = two_reads()
+        assert 1_000_000 <= inner <= delta <= outer  # DC off: the local clock runs anyway
+        assert delta < 50_000_000
+        master = master_factory()
+        assert master.config_init() == 2
+        master.config_dc()  # the master's DC: offsets, delays, the time loop
+        delta, inner, outer = two_reads()
+        assert 1_000_000 <= inner <= delta + 100_000 and delta <= outer + 100_000
+        # the same system time the master reads (latched at its frame, a little earlier)
+        ecat = int.from_bytes(master.slaves[0]._fprd(0x0910, 8), "little")
+        assert 0 < system_time_frame(c) - ecat < 100_000_000
+    finally:
+        c.close()

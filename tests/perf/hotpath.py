@@ -36,7 +36,7 @@ def calibrate(n: int = 200_000) -> float:
 def configure_to_op(m: TinyMaster, n_slaves: int, ecat_irq: bool = False) -> None:
     """Bring a segment to OP the way SOEM does: slaves to defaults (loops auto, alias off,
     error counters, EEPROM to EtherCAT), INIT, clear FMMUs/SMs, addresses, mailbox SMs,
-    PREOP, process-data SMs and FMMUs, SAFEOP, OP. ``ecat_irq``: the process-data SMs
+    PREOP, process-data SMs and FMMUs, SAFEOP, a cycle, OP. ``ecat_irq``: the process-data SMs
     also raise ECAT events, and the ECAT event mask lets every event through."""
     m.bwr(0x0101, b"\x00")  # DL control: auto loop on every port
     m.bwr(0x0103, b"\x00")  # alias off
@@ -61,6 +61,8 @@ def configure_to_op(m: TinyMaster, n_slaves: int, ecat_irq: bool = False) -> Non
         m.apwr(pos, 0x0600, struct.pack("<IHBBHBBB3x", out_lad, 12, 0, 7, 0x1100, 0, 2, 1))
         m.apwr(pos, 0x0610, struct.pack("<IHBBHBBB3x", in_lad, 17, 0, 7, 0x1200, 0, 1, 1))
         m.apwr(pos, 0x0120, b"\x04\x00")
+    m.lrw(0, bytes(n_slaves * 29))  # a first cycle: SAFEOP -> OP waits for outputs (F5)
+    for pos in range(n_slaves):
         m.apwr(pos, 0x0120, b"\x08\x00")
 
 

@@ -29,7 +29,7 @@ EXPECTED = {
     (AlState.SAFEOP, AlState.PREOP): (0x02, 0),
     (AlState.SAFEOP, AlState.BOOT): (0x14, 0x0011),
     (AlState.SAFEOP, AlState.SAFEOP): (0x04, 0),
-    (AlState.SAFEOP, AlState.OP): (0x08, 0),
+    (AlState.SAFEOP, AlState.OP): (0x04, 0),  # until the first outputs (decision F5)
     (AlState.OP, AlState.INIT): (0x01, 0),
     (AlState.OP, AlState.PREOP): (0x02, 0),
     (AlState.OP, AlState.BOOT): (0x18, 0x0011),
@@ -56,6 +56,8 @@ def _goto(m: TinyMaster, state: AlState) -> None:
         AlState.OP: [2, 4, 8],
     }[state]
     for s in path:
+        if s == 8:
+            m.apwr(0, 0x1100, bytes(12))  # outputs: SAFEOP -> OP needs them (decision F5)
         m.apwr(0, 0x0120, struct.pack("<H", s))
     assert _al(m) == (int(state), 0)
 
