@@ -152,6 +152,7 @@ def run(
             "link",
             "door",
             "mfcio",
+            "pd",
         ]
     ),
 )
@@ -175,6 +176,8 @@ def ctl_cmd(
     door tmcl|lin COMMAND [ARGS]    a request for a TMCL or LIN front door (door tmcl help)
     mfcio SLAVE [status|pins|set gpioN 0|1|open|set nes 0|1|read REG|write REG V]
                                     a TMC8460's MFCIO block (MFC CTRL SPI for read/write)
+    pd SLAVE [ENTRY [VALUE]]        process data: every mapped entry with its value; one
+                                    entry (0xIIII:SS or name); or set an input to VALUE
     """
     import json
 
@@ -223,6 +226,14 @@ def ctl_cmd(
             }
         elif command == "door":
             req = {"cmd": "door", "door": args[0], "command": args[1], "args": list(args[2:])}
+        elif command == "pd":
+            req = {"cmd": "pd", "slave": num(args[0])}
+            if len(args) > 1:
+                req["entry"] = args[1]
+            if len(args) > 2:
+                req["value"] = parse_value(args[2])
+            if len(args) > 3:
+                raise ValueError(args[3])
         elif command == "poke":
             req = {"cmd": "poke", "slave": num(args[0]), "addr": num(args[1]), "data": args[2]}
         else:
@@ -240,6 +251,10 @@ def ctl_cmd(
         click.echo(f"ecatsim: error: ctl {command}: {reply.get('error')}", err=True)
     elif command == "status":
         click.echo(format_status(reply))
+    elif command == "pd":
+        from ecatsim.pd import format_entries
+
+        click.echo(format_entries(reply.get("entries", [reply])))
     else:
         click.echo(json.dumps({k: v for k, v in reply.items() if k != "ok"}, indent=2))
     if not reply.get("ok"):
