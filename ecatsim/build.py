@@ -44,8 +44,8 @@ from ecatsim.slave.emcy import Emergency
 from ecatsim.slave.firmware import Firmware, MailboxLayout
 from ecatsim.slave.foe import FoeServer
 from ecatsim.slave.mailbox import MailboxEngine
-from ecatsim.slave.od_build import build_od
 from ecatsim.slave.od import ObjectDictionary
+from ecatsim.slave.od_build import build_od
 from ecatsim.slave.pdo import CoeDevice, PdoImage, PdoRules
 from ecatsim.wire.mailbox import MbxType
 
@@ -189,8 +189,8 @@ def generic_model(
     key = (sc.esi, sc.product, sc.revision, sc.device_type)
     if key not in cache:
         try:
-            model = from_esi(sc.esi, sc.product, sc.revision, sc.device_type,
-                             hint=f"pick one with {where}.device_type (or product:/revision:)")  # fmt: skip
+            hint = f"pick one with {where}.device_type (or product:/revision:)"
+            model = from_esi(sc.esi, sc.product, sc.revision, sc.device_type, hint=hint)
         except EsiError as exc:
             raise UserError(str(exc)) from exc
         if model.warnings:

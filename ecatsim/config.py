@@ -231,7 +231,9 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
         device_type = s.get("device_type")
         if device_type is not None and not isinstance(device_type, str):
             raise _err(src, f"{key}.device_type", f"expected the <Type> text, got {device_type!r}")
-        product = _int(src, f"{key}.product", s["product"], 0, 0xFFFFFFFF) if "product" in s else None
+        product = (
+            _int(src, f"{key}.product", s["product"], 0, 0xFFFFFFFF) if "product" in s else None
+        )
         revision = (
             _int(src, f"{key}.revision", s["revision"], 0, 0xFFFFFFFF) if "revision" in s else None
         )

@@ -139,8 +139,14 @@ def format_entries(entries: list[dict[str, Any]]) -> str:
     rows = [["entry", "dir", "bits", "value", "name", "pdo"]]
     for e in entries:
         v = e["value"]
-        value = f"{v} (0x{v & 0xFFFFFFFFFFFFFFFF:X})" if isinstance(v, int) and not -10 < v < 10 else str(v)
+        value = (
+            f"{v} (0x{v & 0xFFFFFFFFFFFFFFFF:X})"
+            if isinstance(v, int) and not -10 < v < 10
+            else str(v)
+        )
         rows.append([e["entry"], e["direction"][:3], str(e["bits"]), value, e["name"],
                      f"{e['pdo']} {e['pdo_name']}"])  # fmt: skip
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
-    return "\n".join("  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip() for r in rows)
+    return "\n".join(
+        "  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip() for r in rows
+    )

@@ -62,6 +62,5 @@ def signals_of(raw: Any, od: ObjectDictionary, where: str) -> list[Signal]:
         return resolve
 
     return [
-        make_signal(item, f"{where}[{i}]", resolver(f"{where}[{i}]"))
-        for i, item in enumerate(raw)
+        make_signal(item, f"{where}[{i}]", resolver(f"{where}[{i}]")) for i, item in enumerate(raw)
     ]

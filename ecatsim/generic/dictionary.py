@@ -261,11 +261,14 @@ def _object(types: Dictionary, ob: ET.Element, index: int, where: str, warn: set
     positional = len(infos) == len(items)
     for k, item in enumerate(items):
         e = _entry(item, item.name)
-        si = infos[k] if positional else by_name.get(item.name)
-        _default(e, si.find("Info") if si is not None else None, warn)
+        sub_info = infos[k] if positional else by_name.get(item.name)
+        _default(e, sub_info.find("Info") if sub_info is not None else None, warn)
         entries[item.sub] = e
     if 0 not in entries:
         entries[0] = Entry(0, "Number of entries", "UNSIGNED8", default=max(entries))
     if entries[0].dtype != "UNSIGNED8":
-        entries[0] = Entry(0, entries[0].name, "UNSIGNED8", default=entries[0].value)
+        v0 = entries[0].value
+        entries[0] = Entry(
+            0, entries[0].name, "UNSIGNED8", default=v0 if isinstance(v0, int) else 0
+        )
     return OdObject(index, name, code, entries, source=where)

@@ -113,7 +113,9 @@ class MiniMaster:
         if SM_MBX_OUT in by_type and SM_MBX_IN in by_type:
             (i0, s0), (i1, s1) = by_type[SM_MBX_OUT], by_type[SM_MBX_IN]
             for i, s in ((i0, s0), (i1, s1)):
-                self.fpwr(station, SM_REG + 8 * i, struct.pack("<HHBBBB", s[0], s[1], s[2], 0, 1, 0))
+                self.fpwr(
+                    station, SM_REG + 8 * i, struct.pack("<HHBBBB", s[0], s[1], s[2], 0, 1, 0)
+                )
             mbx = (s0[0], s0[1], s1[0], s1[1])
         self.state(station, PREOP, "INIT->PREOP")
         coe = mbx is not None and bool(sii.protocols & 0x04)
@@ -136,7 +138,9 @@ class MiniMaster:
             if t not in by_type or not sizes[t]:
                 continue
             i, s = by_type[t]
-            self.fpwr(station, SM_REG + 8 * i, struct.pack("<HHBBBB", s[0], sizes[t], s[2], 0, 1, 0))
+            self.fpwr(
+                station, SM_REG + 8 * i, struct.pack("<HHBBBB", s[0], sizes[t], s[2], 0, 1, 0)
+            )
             typ = 2 if t == SM_PD_OUT else 1
             reg = struct.pack("<IHBBHBBB3x", logical[t], sizes[t], 0, 7, s[0], 0, typ, 1)
             self.fpwr(station, FMMU_REG + 16 * fmmu, reg)

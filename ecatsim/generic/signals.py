@@ -57,7 +57,9 @@ def _params(raw: Any, where: str, allowed: set[str]) -> dict[str, Any]:
         raise SignalError(f"{where}: expected a mapping like {{period_ms: 100}}")
     bad = set(raw) - allowed
     if bad:
-        raise SignalError(f"{where}.{sorted(bad)[0]}: unknown key (use: {', '.join(sorted(allowed))})")
+        raise SignalError(
+            f"{where}.{sorted(bad)[0]}: unknown key (use: {', '.join(sorted(allowed))})"
+        )
     return raw
 
 
@@ -68,7 +70,9 @@ def make_signal(raw: Any, where: str, resolve: Callable[[str], Entry]) -> Signal
     kinds = [k for k in raw if k in KINDS]
     bad = set(raw) - {"input", *KINDS}
     if bad:
-        raise SignalError(f"{where}.{sorted(bad)[0]}: unknown key (use input and one of: {', '.join(KINDS)})")
+        raise SignalError(
+            f"{where}.{sorted(bad)[0]}: unknown key (use input and one of: {', '.join(KINDS)})"
+        )
     if len(kinds) != 1:
         raise SignalError(f"{where}: give exactly one of: {', '.join(KINDS)}")
     kind = kinds[0]

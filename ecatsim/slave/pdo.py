@@ -206,9 +206,7 @@ def check_assignment(od: ObjectDictionary, assign: int, rules: PdoRules) -> None
     for p in pdos:
         clash = rules.exclude.get(p, frozenset()) & set(pdos)
         if clash:
-            raise SdoAbort(
-                ABORT_PARAM_INCOMPATIBLE, f"PDO 0x{p:04X} excludes 0x{min(clash):04X}"
-            )
+            raise SdoAbort(ABORT_PARAM_INCOMPATIBLE, f"PDO 0x{p:04X} excludes 0x{min(clash):04X}")
 
 
 def _check_mandatory(od: ObjectDictionary, assign: int, rules: PdoRules) -> None:
@@ -254,9 +252,7 @@ def install(od: ObjectDictionary, rules: PdoRules = DEFAULT_RULES) -> None:
             assign_validator(idx)
 
 
-def _image_fields(
-    od: ObjectDictionary, assign: int, rules: PdoRules
-) -> tuple[list[Field], int]:
+def _image_fields(od: ObjectDictionary, assign: int, rules: PdoRules) -> tuple[list[Field], int]:
     fields: list[Field] = []
     bits = 0
     if assign in od:
