@@ -60,6 +60,10 @@ def cli(ctx: click.Context, debug: bool) -> None:
 @click.option("--udp", "udp", help="Serve EtherCAT over UDP on HOST:PORT (port 34980 = 0x88A4).")
 @click.option("--config", "config_path", type=click.Path(path_type=Path), help="Segment YAML.")
 @click.option("--slaves", type=int, help="Repeat the default device N times.")
+@click.option("--eni", type=click.Path(path_type=Path), help="The segment an ENI (ETG.2100) lists.")
+@click.option(
+    "--esi-dir", "esi_dir", type=click.Path(path_type=Path), help="With --eni: ESIs of its slaves."
+)
 @log_format_option
 @click.option("--trace-frames", is_flag=True, help="Log every frame (slow; for debugging).")
 @click.option("--allow-ip-iface", is_flag=True, help="Allow an interface with an IPv4 address.")
@@ -95,6 +99,8 @@ def run(
     udp: str | None,
     config_path: Path | None,
     slaves: int | None,
+    eni: Path | None,
+    esi_dir: Path | None,
     log_format: str,
     trace_frames: bool,
     allow_ip_iface: bool,
@@ -127,6 +133,8 @@ def run(
         trace=trace,
         ctl=ctl,
         user=user,
+        eni=eni,
+        esi_dir=esi_dir,
     )
     run_daemon(opts)
 
@@ -389,6 +397,40 @@ def esi_export(output: Path, device: str, description: Path | None) -> None:
         raise UserError(str(exc)) from exc
     atomic_write(output, export_esi(desc, od))
     click.echo(f"{output}: ESI of {desc.name}")
+
+
+@esi.command("check")
+@click.argument("files", nargs=-1, type=click.Path(path_type=Path))
+@click.option("--esi-dir", "esi_dir", type=click.Path(path_type=Path), help="Every *.xml here too.")
+def esi_check(files: tuple[Path, ...], esi_dir: Path | None) -> None:
+    """Build every device of every ESI in process and bring it to OP through the loopback
+    link with a minimal master: one line per device (ok, or what failed)."""
+    from ecatsim.generic.check import check_files
+
+    paths = list(files) + (sorted(esi_dir.glob("*.xml")) if esi_dir is not None else [])
+    if not paths:
+        raise UserError("esi check: give ESI files or --esi-dir DIR")
+    failed = 0
+    for line, ok in check_files(paths):
+        click.echo(line)
+        failed += not ok
+    if failed:
+        raise SystemExit(1)
+
+
+@cli.group()
+def eni() -> None:
+    """ENI (ETG.2100) files."""
+
+
+@eni.command("show")
+@click.argument("eni_path", metavar="ENI.xml", type=click.Path(path_type=Path))
+@click.option("--esi-dir", "esi_dir", type=click.Path(path_type=Path), help="ESIs of its slaves.")
+def eni_show(eni_path: Path, esi_dir: Path | None) -> None:
+    """List the ENI's slaves and the model each one gets."""
+    from ecatsim.eni import format_slaves, load_eni
+
+    click.echo(format_slaves(load_eni(eni_path, esi_dir)))
 
 
 cli.add_command(bench)

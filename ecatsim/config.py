@@ -144,10 +144,19 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
     """Validate a loaded YAML document into a SegmentConfig."""
     if not isinstance(data, dict):
         raise UserError(f"{src}: expected a mapping with a 'slaves:' list at the top level")
-    unknown = set(data) - {"slaves", "faults", *DOOR_KEYS}
+    top = ("slaves", "eni", "esi_dir", "faults", *DOOR_KEYS)
+    unknown = set(data) - set(top)
     if unknown:
         k = sorted(unknown)[0]
-        raise _err(src, k, f"unknown key (allowed: {', '.join(('slaves', 'faults', *DOOR_KEYS))})")
+        raise _err(src, k, f"unknown key (allowed: {', '.join(top)})")
+    if "eni" in data:
+        if "slaves" in data:
+            raise _err(src, "eni", "the ENI lists the slaves: give eni: or slaves:, not both")
+        from ecatsim.eni import eni_segment_slaves
+
+        esi_dir = _path(src, base, "esi_dir", data["esi_dir"]) if "esi_dir" in data else None
+        eni = _path(src, base, "eni", data["eni"])
+        data = {**data, "slaves": eni_segment_slaves(eni, esi_dir)}
     doors: list[tuple[str, dict[str, object]]] = []
     for k in DOOR_KEYS:
         if k in data:
@@ -155,9 +164,13 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
                 raise _err(src, k, f"expected a mapping (see 'ecatsim {k} --help')")
             doors.append((k, data[k]))
     raw = data.get("slaves")
-    if not isinstance(raw, list) or not raw:
+    if isinstance(raw, tuple):  # made from an ENI
+        out: list[SlaveConfig] = list(raw)
+        raw = []
+    elif not isinstance(raw, list) or not raw:
         raise _err(src, "slaves", "expected a non-empty list of slaves")
-    out: list[SlaveConfig] = []
+    else:
+        out = []
     for i, s in enumerate(raw):
         key = f"slaves[{i}]"
         if not isinstance(s, dict):

@@ -2,7 +2,8 @@
 master does (station address, mailbox SMs, PREOP, PDO sizes from CoE 0x1C12/0x1C13 or the
 SII, process data SMs and FMMUs, SAFEOP, OP) and reports the first step that fails.
 
-For ``ecatsim esi check``: frames go through ``Segment.process`` as the daemon runs them.
+For ``ecatsim esi check``: frames go over the loopback link to the daemon's own frame
+handling (``Daemon.handle_one``), in process.
 Ref: ETG.1000.6 §6.4 (AL state machine); ETG.1000.4 §5.6 (mailbox); ETG.1000.6 §5.6.2.4
 (SDO upload); ETG.2010 (SII SyncM, PDO categories); TMC8460 §5.48/§5.49 (FMMU/SM registers).
 """
@@ -11,10 +12,11 @@ from __future__ import annotations
 
 import struct
 
+from ecatsim.daemon import Daemon
+from ecatsim.link.loopback import LoopbackLink
 from ecatsim.segment import Segment
 from ecatsim.sii.image import parse_image
 from ecatsim.wire import datagram as dg
-from ecatsim.wire.frame import ecat_offset
 
 AL_CONTROL, AL_STATUS, AL_CODE = 0x0120, 0x0130, 0x0134
 SM_REG, FMMU_REG = 0x0800, 0x0600
@@ -33,16 +35,17 @@ class MiniMaster:
     def __init__(self, seg: Segment) -> None:
         self.seg = seg
         self.counter = 0
+        self.link = LoopbackLink()
+        self.daemon = Daemon(self.link, seg)
+        self.buf = bytearray(2048)
 
     def _one(self, datagram: bytes) -> tuple[bytes, int]:
-        raw = bytearray(dg.ethernet_frame([datagram]))
-        n = len(raw)
-        off = ecat_offset(raw, n, True)
-        if not self.seg.process(raw, off, n):
-            self.seg.service()
+        self.link.master_send(dg.ethernet_frame([datagram]))
+        self.daemon.handle_one(self.buf)
+        raw = self.link.master_recv()
+        if raw is None:
             raise BringUpError("a frame was lost")
-        self.seg.service()
-        p = off + 2
+        p = 14 + 2
         length = dg.HEADER.unpack_from(raw, p)[4] & dg.LEN_MASK
         data = bytes(raw[p + 10 : p + 10 + length])
         (wkc,) = struct.unpack_from("<H", raw, p + 10 + length)

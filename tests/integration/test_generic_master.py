@@ -1,0 +1,129 @@
+"""A generic slave from its ESI under real masters: pysoem (identity, SDO Information against
+the Dictionary, defaults, config_map sizes, OP, process data through ``ctl pd``), KickCAT,
+and a mixed segment of a TMC8670, an ESI slave and a TMC8460.
+
+Ref: ETG.2000 §5 (Device, Dictionary, RxPdo/TxPdo); ETG.1000.6 §5.6.3 (SDO Information),
+§5.6.7.4 (PDO assignment and mapping), §6.4 (AL state machine).
+"""
+
+from __future__ import annotations
+
+import struct
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from typing import Any
+
+import pysoem
+import pytest
+
+import ecatsim.client
+from ecatsim.ctl import request
+from tests.integration.netns import NetnsPair
+from tests.integration.test_esc_master import RX_TIMEOUT_US, to_op
+from tests.support.kickcat import kickcat_trial
+
+pytestmark = pytest.mark.integration
+
+ESI = Path(__file__).resolve().parents[1] / "data" / "esi" / "acme-io.xml"
+ACME_IO8 = f"  - esi: {ESI}\n    device_type: ACME-IO8\n"
+
+
+def dictionary_indices() -> set[int]:
+    root = ET.parse(ESI).getroot()
+    dev = next(
+        d for d in root.iter("Device") if (d.findtext("Type") or "").strip() == "ACME-IO8"
+    )
+    return {int(o.findtext("Index", "").replace("#x", ""), 16) for o in dev.iter("Object")}
+
+
+def start(daemon_factory: Any, tmp_path: Path, slaves: str) -> Path:
+    seg = tmp_path / "segment.yaml"
+    seg.write_text("slaves:\n" + slaves)
+    sock = tmp_path / "ctl.sock"
+    daemon_factory("--config", str(seg), "--ctl", str(sock))
+    return sock
+
+
+def cycle(m: Any, n: int = 3) -> None:
+    for _ in range(n):
+        m.send_processdata()
+        m.receive_processdata(RX_TIMEOUT_US)
+
+
+def test_esi_slave_under_pysoem(master_factory: Any, daemon_factory: Any, tmp_path: Path) -> None:
+    sock = start(daemon_factory, tmp_path, ACME_IO8)
+    m = master_factory()
+    assert m.config_init() == 1
+    s = m.slaves[0]
+    assert (s.man, s.id, s.rev) == (0x00ACE000, 0x1001, 0x10000)
+    # SDO Information lists every object of the ESI's Dictionary, with its name
+    listed = {o.index: o for o in s.od}
+    assert dictionary_indices() <= set(listed)
+    assert listed[0x6010].name == b"Analog input" and listed[0x6010].object_code == 9
+    assert listed[0x8010].object_code == 8  # ARRAY
+    assert listed[0x1C13].entries[1].data_type == pysoem.ECT_UNSIGNED16
+    # sampled defaults read back as the ESI gives them
+    assert struct.unpack("<I", s.sdo_read(0x1000, 0))[0] == 5001
+    assert s.sdo_read(0x1008, 0) == b"ACME-IO8"
+    assert struct.unpack("<h", s.sdo_read(0x6010, 17))[0] == -5
+    assert s.sdo_read(0x6020, 0) == struct.pack("<f", 21.5)
+    assert struct.unpack("<3H", s.sdo_read(0x8010, 1, ca=True)) == (100, 200, 300)
+    assert s.sdo_read(0x8000, 0) == b"\x02"
+    # a Fixed PDO refuses remapping with the proper abort
+    with pytest.raises(pysoem.SdoError) as e:
+        s.sdo_write(0x1A00, 0, b"\x00")
+    assert e.value.abort_code == 0x06010002
+    # config_map: exactly the default-assigned PDOs' bytes (RxPDO 8+16 bits, TxPDO 8+8+48)
+    to_op(m)
+    assert (len(s.output), len(s.input)) == (3, 8)
+    assert s.state == pysoem.OP_STATE
+    # an input set with ctl pd reaches the master within a few cycles
+    assert request(sock, {"cmd": "pd", "slave": 0, "entry": "Channel 1", "value": 1})["ok"]
+    assert request(sock, {"cmd": "pd", "slave": 0, "entry": "Counter", "value": 123456})["ok"]
+    for _ in range(10):
+        cycle(m, 1)
+        if s.input[0] & 1 and struct.unpack_from("<i", s.input, 4)[0] == 123456:
+            break
+    assert s.input[0] & 1 and struct.unpack_from("<i", s.input, 4)[0] == 123456
+    # outputs the master writes are seen by ctl pd and by the client
+    s.output = bytes([0x02, 0x34, 0x12])
+    cycle(m)
+    got = request(sock, {"cmd": "pd", "slave": 0, "entry": "0x7000:02"})
+    assert got["value"] == 1 and got["direction"] == "output"
+    with ecatsim.client.connect(socket=sock) as bus:
+        assert bus.slave(0).pd["Setpoint"] == 0x1234
+        bus.slave(0).pd["0x6000:03"] = 1
+        assert bus.slave(0).state == "OP"
+    for _ in range(10):
+        cycle(m, 1)
+        if s.input[1] & 0x02:
+            break
+    assert s.input[1] & 0x02
+
+
+def test_kickcat_on_an_esi_slave(
+    netns_pair: NetnsPair, daemon_factory: Any, tmp_path: Path
+) -> None:
+    start(daemon_factory, tmp_path, ACME_IO8)
+    result = kickcat_trial(netns_pair, cycles=100)
+    assert result == {"ok": True, "stage": "done", "slaves": 1, "cycles": 100}
+
+
+def test_mixed_segment_tmc8670_esi_slave_tmc8460(
+    master_factory: Any, daemon_factory: Any, tmp_path: Path
+) -> None:
+    slaves = "  - device: tmc8670\n" + ACME_IO8 + "  - device: tmc8460\n"
+    sock = start(daemon_factory, tmp_path, slaves)
+    m = master_factory()
+    assert m.config_init() == 3
+    ids = [(s.man, s.id) for s in m.slaves]
+    assert ids == [(0x286, 8670), (0x00ACE000, 0x1001), (0x286, 8460)]
+    to_op(m)
+    assert [len(s.input) for s in m.slaves[:2]] == [17, 8]
+    request(sock, {"cmd": "pd", "slave": 1, "entry": "Analog/Value", "value": -300})
+    for _ in range(10):
+        cycle(m, 1)
+        if struct.unpack_from("<h", m.slaves[1].input, 2)[0] == -300:
+            break
+    assert struct.unpack_from("<h", m.slaves[1].input, 2)[0] == -300
+    assert all(s.state == pysoem.OP_STATE for s in m.slaves)
