@@ -196,10 +196,16 @@ def synthesize(slave: ET.Element, identity: Identity, name: str, where: str) -> 
     protocols: tuple[str, ...] = ()
     rx_area = tx_area = MailboxArea(0, 0)
     if mbx is not None:
-        rx_area = MailboxArea(_n(mbx, "Send/Start", where, 0x1000), _n(mbx, "Send/Length", where, 128))
-        tx_area = MailboxArea(_n(mbx, "Recv/Start", where, 0x1080), _n(mbx, "Recv/Length", where, 128))
+        rx_area = MailboxArea(
+            _n(mbx, "Send/Start", where, 0x1000), _n(mbx, "Send/Length", where, 128)
+        )
+        tx_area = MailboxArea(
+            _n(mbx, "Recv/Start", where, 0x1080), _n(mbx, "Recv/Length", where, 128)
+        )
         protocols = tuple(
-            PROTOCOLS[p.text.strip()] for p in mbx.findall("Protocol") if p.text and p.text.strip() in PROTOCOLS
+            PROTOCOLS[p.text.strip()]
+            for p in mbx.findall("Protocol")
+            if p.text and p.text.strip() in PROTOCOLS
         )
         if not protocols and mbx.find("CoE") is not None:
             protocols = ("coe",)
@@ -227,12 +233,13 @@ def synthesize(slave: ET.Element, identity: Identity, name: str, where: str) -> 
     tx_bits = sum(s.pdo.bits for s in specs[TX_ASSIGN] if s.assigned)
     mb_end = max(rx_area.offset + rx_area.size, tx_area.offset + tx_area.size, 0x1000)
     pd_out = (mb_end + 0xFF) & ~0xFF
+    unused = SmConfig(0, 0, 0, 0, "unused")
     sms = [
-        SmConfig(rx_area.offset, rx_area.size, 0x26, 1, "mbx_out") if mbx is not None else SmConfig(0, 0, 0, 0, "unused"),
-        SmConfig(tx_area.offset, tx_area.size, 0x22, 1, "mbx_in") if mbx is not None else SmConfig(0, 0, 0, 0, "unused"),
+        SmConfig(rx_area.offset, rx_area.size, 0x26, 1, "mbx_out") if mbx is not None else unused,
+        SmConfig(tx_area.offset, tx_area.size, 0x22, 1, "mbx_in") if mbx is not None else unused,
         _sm(pd, 2, pd_out, 0x64, (rx_bits + 7) // 8, "pd_out"),
         _sm(pd, 3, pd_out + 0x100, 0x20, (tx_bits + 7) // 8, "pd_in"),
-    ]  # fmt: skip
+    ]
     desc = DeviceDescription(
         source=where,
         name=name,
@@ -244,9 +251,14 @@ def synthesize(slave: ET.Element, identity: Identity, name: str, where: str) -> 
         identity=identity,
         esc=ESC,
         mailbox=MailboxConfig(
-            rx_area, tx_area, MailboxArea(0, 0), MailboxArea(0, 0), protocols,
-            COE_DETAILS if "coe" in protocols else (), "foe" in protocols,
-        ),  # fmt: skip
+            rx_area,
+            tx_area,
+            MailboxArea(0, 0),
+            MailboxArea(0, 0),
+            protocols,
+            COE_DETAILS if "coe" in protocols else (),
+            "foe" in protocols,
+        ),
         sync_managers=tuple(sms),
         fmmus=("outputs", "inputs", "mbx_state") if mbx is not None else ("outputs", "inputs"),
         rxpdos=tuple(s.pdo for s in specs[RX_ASSIGN]),

@@ -43,7 +43,8 @@ def check_files(paths: list[Path]) -> Iterator[tuple[str, bool]]:
             root = parse_root(path)
             devices = device_ids(root, path)
         except EsiError as exc:
-            yield f"{path}: FAILED: {exc}".replace(f"{path}: {path}: ", f"{path}: "), False
+            msg = str(exc).removeprefix(f"{path}: ")
+            yield f"{path}: FAILED: {msg}", False
             continue
         for _d, tname, pc, rv in devices:
             line, ok = check_device(path, tname, pc, rv)

@@ -30,9 +30,7 @@ ACME_IO8 = f"  - esi: {ESI}\n    device_type: ACME-IO8\n"
 
 def dictionary_indices() -> set[int]:
     root = ET.parse(ESI).getroot()
-    dev = next(
-        d for d in root.iter("Device") if (d.findtext("Type") or "").strip() == "ACME-IO8"
-    )
+    dev = next(d for d in root.iter("Device") if (d.findtext("Type") or "").strip() == "ACME-IO8")
     return {int(o.findtext("Index", "").replace("#x", ""), 16) for o in dev.iter("Object")}
 
 

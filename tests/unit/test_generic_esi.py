@@ -205,3 +205,27 @@ def test_minimal_master_reports_the_failing_step() -> None:
     fw_of(seg).refuse_next = 0x0011
     with pytest.raises(BringUpError, match="INIT->PREOP refused: AL status code 0x0011"):
         MiniMaster(seg).to_op(0)  # type: ignore[arg-type]
+
+
+def test_esi_check_over_a_folder_one_line_per_device(tmp_path: Path) -> None:
+    from click.testing import CliRunner
+
+    from ecatsim.cli import cli
+
+    (tmp_path / "acme-io.xml").write_bytes(ACME.read_bytes())
+    (tmp_path / "broken.xml").write_text("<EtherCATInfo><Vendor><Id>#x1</Id>")
+    r = CliRunner().invoke(cli, ["esi", "check", "--esi-dir", str(tmp_path)])
+    lines = [ln for ln in r.output.splitlines() if ln.startswith(str(tmp_path))]
+    assert r.exit_code == 1 and "Traceback" not in r.output
+    assert len(lines) == 4
+    assert lines[0].endswith(
+        "ACME-IO8 (0x00001001/0x00010000): ok: OP, outputs 3 bytes, inputs 8 bytes"
+    )
+    assert (
+        "ACME-DI4" in lines[1]
+        and "FAILED: PREOP->SAFEOP refused: AL status code 0x001E" in lines[1]
+    )
+    assert lines[2].endswith(
+        "ACME-AO1 (0x00001003/0x00020000): ok: OP, outputs 2 bytes, inputs 2 bytes"
+    )
+    assert lines[3].startswith(f"{tmp_path / 'broken.xml'}: FAILED: not a readable XML file")
