@@ -31,6 +31,8 @@ NO_SM = 0xFF
 #: configurable PDOs get room for this many entries at least (ETG.2000 gives no number)
 MIN_CONFIGURABLE_ENTRIES = 8
 PREOP_ONLY = (int(AlState.PREOP),)
+#: SII word 0 bit 8 = register 0x0141 bit 0. Ref: ETG.2010 Table 2; TMC8460 §5.26.
+DEVICE_EMULATION = 0x0100
 #: a generic PDO is at most one SM's worth of bytes (ESC SM length register, 16 bit)
 MAX_BITS = 0xFFFF * 8
 #: ESI constructs ecatsim does not model, warned about by name when present
@@ -255,8 +257,14 @@ def from_esi(
             return read_objects(d, where, w)
 
         dictionary(warn)  # once now: the warnings, and a broken Dictionary fails early
+    esc = desc.esc
+    if esc.pdi_control & DEVICE_EMULATION:
+        # the ESC would answer AL control itself and no firmware would copy process data
+        warn.add("ConfigData device emulation (0x0141 bit 0): off, the emulated firmware runs")
+        esc = dataclasses.replace(esc, pdi_control=esc.pdi_control & ~DEVICE_EMULATION)
     desc = dataclasses.replace(
         desc,
+        esc=esc,
         rxpdos=tuple(s.pdo for s in rx),
         txpdos=tuple(s.pdo for s in tx),
     )

@@ -125,3 +125,59 @@ def test_mixed_segment_tmc8670_esi_slave_tmc8460(
             break
     assert struct.unpack_from("<h", m.slaves[1].input, 2)[0] == -300
     assert all(s.state == pysoem.OP_STATE for s in m.slaves)
+
+
+ENI_PAIR = Path(__file__).resolve().parents[1] / "data" / "eni" / "unknown-pair.xml"
+
+
+def eni_coe_init_cmds() -> list[list[tuple[int, int, bytes, bool]]]:
+    """Per slave, the CoE InitCmds of the ENI's PS transition, as an ENI-driven master
+    sends them in PREOP."""
+    from ecatsim.generic.dictionary import num
+
+    out = []
+    for s in ET.parse(ENI_PAIR).getroot().findall("Config/Slave"):
+        out.append(
+            [
+                (
+                    num(c.findtext("Index")),
+                    num(c.findtext("SubIndex")),
+                    bytes.fromhex(c.findtext("Data") or ""),
+                    c.get("CompleteAccess") == "true",
+                )
+                for c in s.findall("Mailbox/CoE/InitCmds/InitCmd")
+                if c.findtext("Transition") == "PS"
+            ]
+        )
+    return out
+
+
+def test_eni_of_two_unknown_slaves_reaches_op_under_an_eni_driven_master(
+    master_factory: Any, daemon_factory: Any, tmp_path: Path
+) -> None:
+    """No ESI and no ProcessData: the slaves are made from the ENI; the master applies the
+    ENI's CoE InitCmds (assignments, mappings, complete access, a vendor object) as SOEM's
+    ENI support does, every one is accepted, and the segment matches the ENI."""
+    sock = tmp_path / "ctl.sock"
+    daemon_factory("--eni", str(ENI_PAIR), "--ctl", str(sock))
+    m = master_factory()
+    assert m.config_init() == 2
+    root = ET.parse(ENI_PAIR).getroot()
+    for s, el in zip(m.slaves, root.findall("Config/Slave"), strict=True):
+        info = el.find("Info")
+        assert info is not None
+        assert s.man == 0x00BEEF00 and s.id == int(info.findtext("ProductCode") or 0)
+        assert s.name == (info.findtext("Name") or "")[:40]
+    for s, cmds in zip(m.slaves, eni_coe_init_cmds(), strict=True):
+        for index, sub, data, ca in cmds:
+            s.sdo_write(index, sub, data, ca=ca)  # an abort raises SdoError: none may
+    assert struct.unpack("<H", m.slaves[0].sdo_read(0x8000, 1))[0] == 5
+    to_op(m)
+    assert [(len(s.output), len(s.input)) for s in m.slaves] == [(2, 6), (0, 3)]
+    request(sock, {"cmd": "pd", "slave": 1, "entry": "0x6100:02", "value": 0x5A})
+    for _ in range(10):
+        cycle(m, 1)
+        if m.slaves[1].input[2] == 0x5A:
+            break
+    assert m.slaves[1].input[2] == 0x5A
+    assert all(s.state == pysoem.OP_STATE for s in m.slaves)
