@@ -74,6 +74,7 @@ def test_esi_slave_under_pysoem(master_factory: Any, daemon_factory: Any, tmp_pa
     # config_map: exactly the default-assigned PDOs' bytes (RxPDO 8+16 bits, TxPDO 8+8+48)
     to_op(m)
     assert (len(s.output), len(s.input)) == (3, 8)
+    m.read_state()
     assert s.state == pysoem.OP_STATE
     # an input set with ctl pd reaches the master within a few cycles
     assert request(sock, {"cmd": "pd", "slave": 0, "entry": "Channel 1", "value": 1})["ok"]
@@ -124,6 +125,7 @@ def test_mixed_segment_tmc8670_esi_slave_tmc8460(
         if struct.unpack_from("<h", m.slaves[1].input, 2)[0] == -300:
             break
     assert struct.unpack_from("<h", m.slaves[1].input, 2)[0] == -300
+    m.read_state()
     assert all(s.state == pysoem.OP_STATE for s in m.slaves)
 
 
@@ -180,4 +182,5 @@ def test_eni_of_two_unknown_slaves_reaches_op_under_an_eni_driven_master(
         if m.slaves[1].input[2] == 0x5A:
             break
     assert m.slaves[1].input[2] == 0x5A
+    m.read_state()
     assert all(s.state == pysoem.OP_STATE for s in m.slaves)
