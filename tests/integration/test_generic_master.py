@@ -9,6 +9,8 @@ Ref: ETG.2000 §5 (Device, Dictionary, RxPdo/TxPdo); ETG.1000.6 §5.6.3 (SDO Inf
 from __future__ import annotations
 
 import struct
+import subprocess
+import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
@@ -89,6 +91,14 @@ def test_esi_slave_under_pysoem(master_factory: Any, daemon_factory: Any, tmp_pa
     cycle(m)
     got = request(sock, {"cmd": "pd", "slave": 0, "entry": "0x7000:02"})
     assert got["value"] == 1 and got["direction"] == "output"
+    shown = subprocess.run(
+        [sys.executable, "-m", "ecatsim", "ctl", "--socket", str(sock), "pd", "0"],
+        capture_output=True, text=True, check=True,
+    ).stdout.splitlines()  # fmt: skip
+    assert shown[0].split() == ["entry", "dir", "bits", "value", "name", "pdo"]
+    assert len(shown) == 1 + 9  # every mapped entry: 2 + 1 outputs, 4 + 2 inputs
+    assert shown[1].split()[:4] == ["0x7000:01", "out", "1", "0"]
+    assert shown[8].split()[:4] == ["0x6010:11", "inp", "16", "-5"]
     with ecatsim.client.connect(socket=sock) as bus:
         assert bus.slave(0).pd["Setpoint"] == 0x1234
         bus.slave(0).pd["0x6000:03"] = 1

@@ -229,3 +229,27 @@ def test_esi_check_over_a_folder_one_line_per_device(tmp_path: Path) -> None:
         "ACME-AO1 (0x00001003/0x00020000): ok: OP, outputs 2 bytes, inputs 2 bytes"
     )
     assert lines[3].startswith(f"{tmp_path / 'broken.xml'}: FAILED: not a readable XML file")
+
+
+@pytest.mark.parametrize(
+    ("slave", "msg"),
+    [
+        ({"device": "tmc8670", "signals": []}, r"slaves\[0\]\.signals: for a generic slave only"),
+        ({"device": "generic"}, r"slaves\[0\]\.device: a generic slave needs esi: FILE"),
+        ({"esi": "acme-io.xml", "product": "x"}, r"slaves\[0\]\.product: expected an integer"),
+        ({"esi": "acme-io.xml", "device_type": "NOPE"}, r"acme-io.xml: no device with type NOPE"),
+    ],
+)
+def test_generic_slave_entry_errors_are_one_line(slave: dict[str, object], msg: str) -> None:
+    with pytest.raises(UserError, match=msg):
+        segment(slave)
+
+
+def test_ctl_pd_table_for_people() -> None:
+    from ecatsim.pd import format_entries
+
+    seg, _ = segment({"esi": "acme-io.xml", "device_type": "ACME-IO8"})
+    rows = format_entries(pd_request(fw_of(seg).app, {})["entries"]).splitlines()
+    assert rows[0].split() == ["entry", "dir", "bits", "value", "name", "pdo"]
+    assert rows[3].split() == ["0x7010:00", "out", "16", "256", "(0x100)", "Setpoint", "0x1601",
+                               "Setpoint"]  # fmt: skip
