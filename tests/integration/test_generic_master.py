@@ -73,6 +73,15 @@ def test_esi_slave_under_pysoem(master_factory: Any, daemon_factory: Any, tmp_pa
     with pytest.raises(pysoem.SdoError) as e:
         s.sdo_write(0x1A00, 0, b"\x00")
     assert e.value.abort_code == 0x06010002
+    # ctl pd lists every mapped entry (here in PREOP, before the watchdog runs)
+    shown = subprocess.run(
+        [sys.executable, "-m", "ecatsim", "ctl", "--socket", str(sock), "pd", "0"],
+        capture_output=True, text=True, check=True,
+    ).stdout.splitlines()  # fmt: skip
+    assert shown[0].split() == ["entry", "dir", "bits", "value", "name", "pdo"]
+    assert len(shown) == 1 + 9  # every mapped entry: 2 + 1 outputs, 4 + 2 inputs
+    assert shown[1].split()[:4] == ["0x7000:01", "out", "1", "0"]
+    assert shown[8].split()[:4] == ["0x6010:11", "inp", "16", "-5"]
     # config_map: exactly the default-assigned PDOs' bytes (RxPDO 8+16 bits, TxPDO 8+8+48)
     to_op(m)
     assert (len(s.output), len(s.input)) == (3, 8)
@@ -91,14 +100,6 @@ def test_esi_slave_under_pysoem(master_factory: Any, daemon_factory: Any, tmp_pa
     cycle(m)
     got = request(sock, {"cmd": "pd", "slave": 0, "entry": "0x7000:02"})
     assert got["value"] == 1 and got["direction"] == "output"
-    shown = subprocess.run(
-        [sys.executable, "-m", "ecatsim", "ctl", "--socket", str(sock), "pd", "0"],
-        capture_output=True, text=True, check=True,
-    ).stdout.splitlines()  # fmt: skip
-    assert shown[0].split() == ["entry", "dir", "bits", "value", "name", "pdo"]
-    assert len(shown) == 1 + 9  # every mapped entry: 2 + 1 outputs, 4 + 2 inputs
-    assert shown[1].split()[:4] == ["0x7000:01", "out", "1", "0"]
-    assert shown[8].split()[:4] == ["0x6010:11", "inp", "16", "-5"]
     with ecatsim.client.connect(socket=sock) as bus:
         assert bus.slave(0).pd["Setpoint"] == 0x1234
         bus.slave(0).pd["0x6000:03"] = 1
