@@ -253,3 +253,17 @@ def test_ctl_pd_table_for_people() -> None:
     assert rows[0].split() == ["entry", "dir", "bits", "value", "name", "pdo"]
     assert rows[3].split() == ["0x7010:00", "out", "16", "256", "(0x100)", "Setpoint", "0x1601",
                                "Setpoint"]  # fmt: skip
+
+
+def test_mailbox_foe_and_dc_op_modes_from_the_esi() -> None:
+    from ecatsim.wire.mailbox import MbxType
+
+    seg, _ = segment({"esi": "acme-io.xml", "device_type": "ACME-IO8"})
+    fw = fw_of(seg)
+    assert fw.bootstrap_supported and fw.mbx is not None
+    assert int(MbxType.FOE) in fw.mbx.handlers and int(MbxType.COE) in fw.mbx.handlers
+    img = parse_image(bytes(seg.escs[0].eeprom.image))  # type: ignore[attr-defined]
+    assert img.mailbox == (0x1000, 0x80, 0x1080, 0x80, 0x1000, 128, 0x1080, 128)
+    assert img.protocols == 0x04 | 0x08 | 0x20  # CoE, FoE, VoE as the ESI declares
+    assert [(d[4], d[3]) for d in img.dc] == [("FreeRun", 0x0000), ("DC", 0x0300)]
+    assert [s[0] for s in img.sms] == [0x1000, 0x1080, 0x1100, 0x1180]
