@@ -163,9 +163,10 @@ class Dictionary:
         return code, out
 
 
-def _default(e: Entry, info: ET.Element | None, warn: set[str]) -> None:
+def _default(e: Entry, info: ET.Element | None, warn: set[str], where: str) -> None:
     """Set an entry's default from <Info>: DefaultData (little-endian hex), DefaultValue,
-    DefaultString; MinValue/MaxValue as its limits (integers)."""
+    DefaultString; MinValue/MaxValue as its limits (integers). What is not a number is a
+    warning naming the entry; the entry keeps 0 / no limit."""
     if info is None:
         return
     data = _text(info, "DefaultData")
@@ -184,18 +185,24 @@ def _default(e: Entry, info: ET.Element | None, warn: set[str]) -> None:
             v = string
         elif value is not None:
             v = _value(e, value)
-        lo, hi = _text(info, "MinValue"), _text(info, "MaxValue")
-        if not e.is_string and e.dtype not in ("REAL32", "REAL64"):
-            if lo is not None:
-                e.minimum = num(lo)
-            if hi is not None:
-                e.maximum = num(hi)
     except ValueError:
-        warn.add(f"a default or limit that is not a number ({data or value or lo or hi!r})")
-        return
+        warn.add(f"{where}: default {data or value!r} is not a number")
     if v is not None:
         e.default = v if not isinstance(v, bytes) else v.hex()
         e.value = v
+    if e.is_string or e.dtype in ("REAL32", "REAL64"):
+        return
+    for tag in ("MinValue", "MaxValue"):
+        t = _text(info, tag)
+        if t is None:
+            continue
+        try:
+            if tag == "MinValue":
+                e.minimum = num(t)
+            else:
+                e.maximum = num(t)
+        except ValueError:
+            warn.add(f"{where}: {tag} {t!r} is not a number (no limit)")
 
 
 def _value(e: Entry, text: str) -> int | str:
@@ -249,7 +256,7 @@ def _object(types: Dictionary, ob: ET.Element, index: int, where: str, warn: set
     entries: dict[int, Entry] = {}
     if code == ObjectCode.VAR:
         e = _entry(items[0], name)
-        _default(e, info, warn)
+        _default(e, info, warn, f"object 0x{index:04X}")
         entries[0] = e
         return OdObject(index, name, code, entries, source=where)
     infos = info.findall("SubItem") if info is not None else []
@@ -262,7 +269,8 @@ def _object(types: Dictionary, ob: ET.Element, index: int, where: str, warn: set
     for k, item in enumerate(items):
         e = _entry(item, item.name)
         sub_info = infos[k] if positional else by_name.get(item.name)
-        _default(e, sub_info.find("Info") if sub_info is not None else None, warn)
+        info_el = sub_info.find("Info") if sub_info is not None else None
+        _default(e, info_el, warn, f"object 0x{index:04X}:{item.sub:02X}")
         entries[item.sub] = e
     if 0 not in entries:
         entries[0] = Entry(0, "Number of entries", "UNSIGNED8", default=max(entries))

@@ -267,3 +267,23 @@ def test_mailbox_foe_and_dc_op_modes_from_the_esi() -> None:
     assert img.protocols == 0x04 | 0x08 | 0x20  # CoE, FoE, VoE as the ESI declares
     assert [(d[4], d[3]) for d in img.dc] == [("FreeRun", 0x0000), ("DC", 0x0300)]
     assert [s[0] for s in img.sms] == [0x1000, 0x1080, 0x1100, 0x1180]
+
+
+def test_odd_dictionary_constructs_are_warnings_not_crashes() -> None:
+    m = from_esi(DATA / "odd-dictionary.xml")
+    assert m.warnings == [
+        "<Object> #4 without a readable <Index> (left out)",
+        "Access 'xx' (read as ro)",
+        "ConfigData device emulation (0x0141 bit 0): off, the emulated firmware runs",
+        "ReadRestrictions (reads allowed in every state)",
+        "WriteRestrictions 'Sometimes'",
+        "data type 'WEIRD' (read as UNSIGNED16)",
+        "nested record type 'DTINNER' (read as bytes)",
+        "object 0x2001: default 'zz' is not a number",
+        "object 0x2002: MaxValue 'lots' is not a number (no limit)",
+    ]
+    od = m.build_od()
+    assert od.value(0x2004) == -7 and od.entry(0x2000, 2).bits == 12
+    assert m.desc.esc.pdi_control == 0x0C05  # device emulation cleared
+    seg, _ = segment({"esi": "odd-dictionary.xml"})
+    assert MiniMaster(seg).to_op(0) == "OP, outputs 0 bytes, inputs 0 bytes"  # type: ignore[arg-type]
