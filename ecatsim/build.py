@@ -29,6 +29,7 @@ from ecatsim.esc.pdi import Pdi
 from ecatsim.esi import EsiError, read_esi
 from ecatsim.generic.device import GenericDevice, signals_of
 from ecatsim.generic.model import GenericModel, from_esi
+from ecatsim.generic.pinio import PinIo
 from ecatsim.generic.signals import SignalError
 from ecatsim.mfcio.block import MfcioBlock
 from ecatsim.mfcio.parts import parse_wiring
@@ -243,8 +244,16 @@ def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
         if sc.firmware == "external" and sc.pdi_socket is not None:
             what = f"{cfg.source}: slaves[{i}].pdi_socket"
             fw = ExternalFirmware(pdi, sc.pdi_socket, clock, SpiTiming(), what)
+        elif model is not None and not desc.mailbox.protocols:
+            # no mailbox, no microcontroller: the ESC in device emulation, the process image
+            # of the ESI's PDOs (through an OD nobody serves) on the ESI's SMs
+            od = model.build_od()
+            gdev = GenericDevice(od, _signals(sc, od, cfg.source, i))
+            sm_of = {s.type: n for n, s in reversed(list(enumerate(desc.sync_managers)))}
+            fw = PinIo(pdi, PdoImage(od, gdev, model.rules), sm_of.get("pd_out"),
+                       sm_of.get("pd_in"))  # fmt: skip
         elif model is not None and "coe" not in desc.mailbox.protocols:
-            # no mailbox: the process image of the SII's PDOs, through an OD nobody serves
+            # a mailbox without CoE: the firmware, its PDOs from the ESI alone
             od = model.build_od()
             gdev = GenericDevice(od, _signals(sc, od, cfg.source, i))
             fw = gfw = Firmware(pdi, PdoImage(od, gdev, model.rules), layout)
@@ -294,5 +303,5 @@ def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
         firmware.append(fw)
         paths.append(sc.eeprom)
     seg = Segment(escs, ctx, clock, firmware, _Persist(escs, paths))
-    seg.awake = frozenset(i for i, fw in enumerate(firmware) if isinstance(fw, MfcioBlock))
+    seg.awake = frozenset(i for i, fw in enumerate(firmware) if isinstance(fw, MfcioBlock | PinIo))
     return seg

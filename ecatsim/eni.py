@@ -14,6 +14,7 @@ Ref: ETG.2100 (ENI: Config/Slave/Info, ProcessData, Mailbox, CoE InitCmds); ETG.
 
 from __future__ import annotations
 
+import dataclasses
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -249,7 +250,9 @@ def synthesize(slave: ET.Element, identity: Identity, name: str, where: str) -> 
         hardware_version="",
         software_version="",
         identity=identity,
-        esc=ESC,
+        esc=ESC
+        if mbx is not None
+        else dataclasses.replace(ESC, pdi_control=ESC.pdi_control | 0x0100),
         mailbox=MailboxConfig(
             rx_area,
             tx_area,

@@ -112,7 +112,9 @@ class MiniMaster:
         sii = parse_image(bytes(esc.eeprom.image))
         sms = list(sii.sms)
         mbx: tuple[int, int, int, int] | None = None
-        by_type = {t: (i, s) for i, s in enumerate(sms) for t in (s[5],)}
+        by_type: dict[int, tuple[int, tuple[int, int, int, int, int, int]]] = {}
+        for i, s in enumerate(sms):
+            by_type.setdefault(s[5], (i, s))  # the first SM of each kind
         if SM_MBX_OUT in by_type and SM_MBX_IN in by_type:
             (i0, s0), (i1, s1) = by_type[SM_MBX_OUT], by_type[SM_MBX_IN]
             for i, s in ((i0, s0), (i1, s1)):

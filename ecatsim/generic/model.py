@@ -242,7 +242,7 @@ def from_esi(
     except ValueError as exc:
         raise EsiError(f"{path}: <Exclude> is not a PDO index ({exc})") from exc
     for s in (*rx, *tx):
-        if s.assigned and s.pdo.sm not in (2, 3):
+        if desc.mailbox.protocols and s.assigned and s.pdo.sm not in (2, 3):
             warn.add(f"PDO 0x{s.pdo.index:04X} on SM{s.pdo.sm} (process data is SM2/SM3)")
     for tag in UNMODELLED:
         if dev.find(tag) is not None:
@@ -258,10 +258,19 @@ def from_esi(
 
         dictionary(warn)  # once now: the warnings, and a broken Dictionary fails early
     esc = desc.esc
-    if esc.pdi_control & DEVICE_EMULATION:
+    mailbox = bool(desc.mailbox.protocols)
+    if mailbox and esc.pdi_control & DEVICE_EMULATION:
         # the ESC would answer AL control itself and no firmware would copy process data
         warn.add("ConfigData device emulation (0x0141 bit 0): off, the emulated firmware runs")
         esc = dataclasses.replace(esc, pdi_control=esc.pdi_control & ~DEVICE_EMULATION)
+    elif not mailbox and not esc.pdi_control & DEVICE_EMULATION:
+        # IO without a microcontroller: the ESC answers AL control (ecatsim/generic/pinio.py)
+        warn.add("ConfigData device emulation (0x0141 bit 0): on, no mailbox and no firmware")
+        esc = dataclasses.replace(esc, pdi_control=esc.pdi_control | DEVICE_EMULATION)
+    if not mailbox:
+        for kind in ("pd_out", "pd_in"):
+            if sum(1 for sm in desc.sync_managers if sm.type == kind) > 1:
+                warn.add(f"process data on several {kind} SMs (the first one carries it all)")
     desc = dataclasses.replace(
         desc,
         esc=esc,
