@@ -122,20 +122,24 @@ def test_kickcat_on_an_esi_slave(
 def test_mixed_segment_tmc8670_esi_slave_tmc8460(
     master_factory: Any, daemon_factory: Any, tmp_path: Path
 ) -> None:
-    slaves = "  - device: tmc8670\n" + ACME_IO8 + "  - device: tmc8460\n"
+    """Also an IO slave without a mailbox (ESC device emulation, inputs on SM0)."""
+    di4 = f"  - esi: {ESI}\n    device_type: ACME-DI4\n"
+    slaves = "  - device: tmc8670\n" + ACME_IO8 + "  - device: tmc8460\n" + di4
     sock = start(daemon_factory, tmp_path, slaves)
     m = master_factory()
-    assert m.config_init() == 3
+    assert m.config_init() == 4
     ids = [(s.man, s.id) for s in m.slaves]
-    assert ids == [(0x286, 8670), (0x00ACE000, 0x1001), (0x286, 8460)]
+    assert ids == [(0x286, 8670), (0x00ACE000, 0x1001), (0x286, 8460), (0x00ACE000, 0x1002)]
     to_op(m)
-    assert [len(s.input) for s in m.slaves[:2]] == [17, 8]
+    assert [len(s.input) for s in (m.slaves[0], m.slaves[1], m.slaves[3])] == [17, 8, 1]
     request(sock, {"cmd": "pd", "slave": 1, "entry": "Analog/Value", "value": -300})
+    request(sock, {"cmd": "pd", "slave": 3, "entry": "Input 2", "value": 1})
     for _ in range(10):
         cycle(m, 1)
-        if struct.unpack_from("<h", m.slaves[1].input, 2)[0] == -300:
+        if struct.unpack_from("<h", m.slaves[1].input, 2)[0] == -300 and m.slaves[3].input[0]:
             break
     assert struct.unpack_from("<h", m.slaves[1].input, 2)[0] == -300
+    assert m.slaves[3].input == b"\x02"
     m.read_state()
     assert all(s.state == pysoem.OP_STATE for s in m.slaves)
 
