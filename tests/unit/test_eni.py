@@ -106,3 +106,44 @@ def test_broken_eni_is_one_line(tmp_path: Path) -> None:
     bad.write_text("<EtherCATConfig><Config><Slave><Info/></Slave></Config></EtherCATConfig>")
     with pytest.raises(UserError, match=r"bad.xml: <Slave> #1: missing <VendorId>"):
         load_eni(bad)
+
+
+PROCESS_DATA_ENI = """<EtherCATConfig><Config><Slave>
+  <Info><Name>Box PD</Name><VendorId>#x00BEEF00</VendorId><ProductCode>300</ProductCode>
+    <RevisionNo>1</RevisionNo></Info>
+  <ProcessData>
+    <Sm2><Type>Outputs</Type><StartAddress>#x1200</StartAddress><ControlByte>#x64</ControlByte>
+      <Enable>true</Enable><Pdo>#x1600</Pdo></Sm2>
+    <Sm3><Type>Inputs</Type><StartAddress>#x1300</StartAddress><ControlByte>#x20</ControlByte>
+      <Enable>true</Enable><Pdo>#x1A00</Pdo></Sm3>
+    <RxPdo Sm="2" Fixed="true"><Index>#x1600</Index><Name>Out</Name>
+      <Entry><Index>#x7000</Index><SubIndex>1</SubIndex><BitLen>16</BitLen><Name>Level</Name>
+        <DataType>INT</DataType></Entry></RxPdo>
+    <TxPdo Sm="3" Fixed="true"><Index>#x1A00</Index><Name>In</Name>
+      <Entry><Index>#x6000</Index><SubIndex>1</SubIndex><BitLen>1</BitLen><Name>Ready</Name>
+        <DataType>BOOL</DataType></Entry>
+      <Entry><Index>0</Index><BitLen>7</BitLen></Entry>
+      <Entry><Index>#x6000</Index><SubIndex>2</SubIndex><BitLen>32</BitLen><Name>Count</Name>
+        <DataType>UDINT</DataType></Entry></TxPdo>
+  </ProcessData>
+</Slave></Config></EtherCATConfig>
+"""
+
+
+def test_process_data_of_the_eni_without_a_mailbox(tmp_path: Path) -> None:
+    """<ProcessData> PDOs with data types and SM areas; no mailbox: device emulation."""
+    eni = tmp_path / "pd.xml"
+    eni.write_text(PROCESS_DATA_ENI)
+    seg = build_segment(parse_segment({"eni": str(eni)}, "seg.yaml"), ManualClock(1_000_000_000))
+    m = MiniMaster(seg)
+    assert m.to_op(0) == "OP, outputs 2 bytes, inputs 5 bytes"
+    app = seg.firmware[0].app  # type: ignore[attr-defined]
+    from ecatsim.pd import request as pd_request
+
+    pd_request(app, {"entry": "Ready", "value": 1})
+    pd_request(app, {"entry": "In/Count", "value": 7})
+    m.lrw(0, b"\xfe\xff")
+    m.lrw(0x8000, bytes(5))
+    assert m.lrw(0x8000, bytes(5)) == (b"\x01\x07\x00\x00\x00", 1)
+    assert pd_request(app, {"entry": "Level"})["value"] == -2
+    assert app.od.entry(0x6000, 2).dtype == "UNSIGNED32"
