@@ -242,6 +242,10 @@ def from_esi(
     except ValueError as exc:
         raise EsiError(f"{path}: <Exclude> is not a PDO index ({exc})") from exc
     for s in (*rx, *tx):
+        if len(s.pdo.entries) > 255:  # the SII's PDO category counts entries in one byte
+            raise EsiError(
+                f"{path}: PDO 0x{s.pdo.index:04X}: {len(s.pdo.entries)} entries, at most 255"
+            )
         if desc.mailbox.protocols and s.assigned and s.pdo.sm not in (2, 3):
             warn.add(f"PDO 0x{s.pdo.index:04X} on SM{s.pdo.sm} (process data is SM2/SM3)")
     for tag in UNMODELLED:

@@ -300,3 +300,24 @@ def test_io_without_mailbox_runs_in_device_emulation_on_its_own_sms() -> None:
     m.lrw(0x8000, bytes(1))
     data, wkc = m.lrw(0x8000, bytes(1))
     assert (data, wkc) == (b"\x03", 1)  # SM0 (0x1000) carries both inputs
+
+
+def test_more_than_255_names_leave_the_rest_unnamed_in_the_sii() -> None:
+    import dataclasses
+
+    from ecatsim.description import PdoDescription, PdoEntry
+    from ecatsim.sii.image import build_image
+
+    m = from_esi(ACME, device_type="ACME-IO8")
+    pdos = tuple(
+        PdoDescription(0x1A00 + k, f"Many {k}", 3, tuple(
+            PdoEntry(0x6000, 1, 1, "BOOLEAN", f"Input {100 * k + i}") for i in range(100)))
+        for k in range(3)
+    )  # fmt: skip
+    desc = dataclasses.replace(
+        m.desc, txpdos=pdos, esc=dataclasses.replace(m.desc.esc, eeprom_size_kbit=64)
+    )
+    img = parse_image(build_image(desc))
+    assert len(img.strings) == 255
+    names = [e[2] for p in img.pdos if p[0] == "TxPDO" for e in p[4]]
+    assert names[0] == "Input 0" and names[-1] == ""
