@@ -39,7 +39,8 @@ class MiniMaster:
         self.daemon = Daemon(self.link, seg)
         self.buf = bytearray(2048)
 
-    def _one(self, datagram: bytes) -> tuple[bytes, int]:
+    def exchange(self, datagram: bytes) -> tuple[bytes, int]:
+        """One datagram in a frame of its own: its reply data and WKC."""
         self.link.master_send(dg.ethernet_frame([datagram]))
         self.daemon.handle_one(self.buf)
         raw = self.link.master_recv()
@@ -52,16 +53,16 @@ class MiniMaster:
         return data, wkc
 
     def fprd(self, station: int, ado: int, n: int) -> tuple[bytes, int]:
-        return self._one(dg.build(dg.Cmd.FPRD, station, ado, bytes(n)))
+        return self.exchange(dg.build(dg.Cmd.FPRD, station, ado, bytes(n)))
 
     def fpwr(self, station: int, ado: int, data: bytes) -> int:
-        return self._one(dg.build(dg.Cmd.FPWR, station, ado, data))[1]
+        return self.exchange(dg.build(dg.Cmd.FPWR, station, ado, data))[1]
 
     def apwr(self, pos: int, ado: int, data: bytes) -> int:
-        return self._one(dg.build(dg.Cmd.APWR, (-pos) & 0xFFFF, ado, data))[1]
+        return self.exchange(dg.build(dg.Cmd.APWR, (-pos) & 0xFFFF, ado, data))[1]
 
     def lrw(self, lad: int, data: bytes) -> tuple[bytes, int]:
-        return self._one(dg.build_logical(dg.Cmd.LRW, lad, data))
+        return self.exchange(dg.build_logical(dg.Cmd.LRW, lad, data))
 
     # ----------------------------------------------------------------- steps
 

@@ -23,6 +23,7 @@ from ecatsim.generic.dictionary import num
 from ecatsim.generic.minimaster import MiniMaster
 from ecatsim.slave.al import AlState
 from ecatsim.slave.firmware import Firmware
+from ecatsim.wire import datagram as dg
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 PAIR = DATA / "eni" / "unknown-pair.xml"
@@ -75,6 +76,13 @@ def test_every_init_cmd_accepted_and_op() -> None:
         "unknown-pair.xml: <Slave> #2 (Box 2 (BX-200)): PDO 0x1605 is described nowhere: no entries"
     ]
     seg = build_segment(cfg, ManualClock(1_000_000_000))
+    m = MiniMaster(seg)
+    for s in ET.parse(PAIR).getroot().findall("Config/Slave"):  # the ESC register InitCmds
+        for c in s.findall("InitCmds/InitCmd"):
+            cmd, adp, ado = (num(c.findtext(t)) for t in ("Cmd", "Adp", "Ado"))
+            data = bytes.fromhex(c.findtext("Data") or "")
+            _reply, wkc = m.exchange(dg.build(dg.Cmd(cmd), adp, ado, data))
+            assert wkc == 1, c.findtext("Comment")
     preop = int(AlState.PREOP)
     for i, cmds in enumerate(coe_init_cmds(PAIR)):
         fw = seg.firmware[i]
@@ -85,7 +93,6 @@ def test_every_init_cmd_accepted_and_op() -> None:
             else:
                 fw.od.write(index, sub, data, preop)
         assert fw.od.value(0x1018, 1) == 0x00BEEF00
-    m = MiniMaster(seg)
     assert m.to_op(0) == "OP, outputs 2 bytes, inputs 6 bytes"
     assert m.to_op(1) == "OP, outputs 0 bytes, inputs 3 bytes"
     fw1 = seg.firmware[1]
