@@ -321,3 +321,14 @@ def test_more_than_255_names_leave_the_rest_unnamed_in_the_sii() -> None:
     assert len(img.strings) == 255
     names = [e[2] for p in img.pdos if p[0] == "TxPDO" for e in p[4]]
     assert names[0] == "Input 0" and names[-1] == ""
+
+
+def test_ctl_pd_on_the_tmc8670_too() -> None:
+    seg, _ = segment({"device": "tmc8670"})
+    got = pd_request(fw_of(seg).app, {})["entries"]
+    assert [e["entry"] for e in got][:2] == ["0x6040:00", "0x607A:00"]
+    assert got[4] == {
+        "entry": "0x6041:00", "name": "Statusword", "pdo": "0x1A00",
+        "pdo_name": "Transmit PDO mapping", "direction": "input", "bits": 16, "value": 0x40,
+    }  # fmt: skip
+    assert pd_request(fw_of(seg).app, {"entry": "Statusword", "value": 0x37})["value"] == 0x37
