@@ -29,7 +29,6 @@ from ecatsim.description import (
     MailboxArea,
     MailboxConfig,
     PdoDescription,
-    PdoEntry,
     SmConfig,
 )
 from ecatsim.errors import UserError
@@ -363,7 +362,3 @@ def format_slaves(slaves: list[EniSlave]) -> str:
         )
         lines += [f"     warning: {w}" for w in s.warnings]
     return "\n".join(lines)
-
-
-# the PdoEntry type is re-exported for callers building PDOs by hand
-__all__ = ["EniSlave", "PdoEntry", "eni_segment_slaves", "format_slaves", "load_eni", "synthesize"]

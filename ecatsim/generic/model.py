@@ -44,7 +44,6 @@ UNMODELLED = (
     "Mailbox/AoE",
     "Mailbox/VoE",
     "Dc/OpMode/Sm",
-    "Dc/OpMode/CycleTimeSync1",
 )
 
 
