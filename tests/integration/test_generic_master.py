@@ -210,3 +210,26 @@ def test_eni_of_two_unknown_slaves_reaches_op_under_an_eni_driven_master(
     assert m.slaves[1].input[2] == 0x5A
     m.read_state()
     assert all(s.state == pysoem.OP_STATE for s in m.slaves)
+
+
+def test_eni_with_a_built_in_an_esi_and_a_made_up_slave(
+    master_factory: Any, daemon_factory: Any
+) -> None:
+    """Model resolution under a real master: the TMC8670 built in, ACME-IO8 from the ESI
+    folder (its Dictionary over SDO), the third made from the ENI."""
+    eni = ENI_PAIR.parent / "mixed.xml"
+    daemon_factory("--eni", str(eni), "--esi-dir", str(ESI.parent))
+    m = master_factory()
+    assert m.config_init() == 3
+    assert [(s.man, s.id) for s in m.slaves] == [(0x286, 8670), (0x00ACE000, 0x1001),
+                                                 (0x00BEEF00, 200)]  # fmt: skip
+    assert struct.unpack("<h", m.slaves[1].sdo_read(0x6010, 17))[0] == -5  # from the ESI
+    root = ET.parse(eni).getroot()
+    from ecatsim.generic.dictionary import num
+
+    for c in root.findall("Config/Slave")[2].findall("Mailbox/CoE/InitCmds/InitCmd"):
+        data = bytes.fromhex(c.findtext("Data") or "")
+        m.slaves[2].sdo_write(num(c.findtext("Index")), num(c.findtext("SubIndex")), data,
+                              ca=c.get("CompleteAccess") == "true")  # fmt: skip
+    to_op(m)
+    assert [(len(s.output), len(s.input)) for s in m.slaves] == [(12, 17), (3, 8), (0, 3)]
