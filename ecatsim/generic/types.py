@@ -33,10 +33,8 @@ BASE_TYPES: dict[str, tuple[str, int]] = {
     "ULINT": ("UNSIGNED64", 64),
     "REAL": ("REAL32", 32),
     "LREAL": ("REAL64", 64),
-    **{f"BIT{n}": ("UNSIGNED8", n) for n in range(1, 9)},
     **{k: (k, v[1]) for k, v in DATA_TYPES.items() if v[1]},
 }
-BASE_TYPES["BIT1"] = ("BOOLEAN", 1)
 
 STRING_RE = re.compile(r"^(STRING|OCTET_STRING|UNICODE_STRING)\((\d+)\)$")
 STRING_TYPES = {

@@ -332,3 +332,14 @@ def test_ctl_pd_on_the_tmc8670_too() -> None:
         "pdo_name": "Transmit PDO mapping", "direction": "input", "bits": 16, "value": 0x40,
     }  # fmt: skip
     assert pd_request(fw_of(seg).app, {"entry": "Statusword", "value": 0x37})["value"] == 0x37
+
+
+def test_bit_string_types_keep_their_codes() -> None:
+    from ecatsim.generic.types import base_type, pdo_entry_type
+
+    assert base_type("BIT3") == ("BIT3", 3) and base_type("BOOL") == ("BOOLEAN", 1)
+    assert pdo_entry_type("BIT2", 2) == "BIT2"
+    from ecatsim.slave.od import Entry
+
+    e = Entry(1, "Mode", "BIT3", access="rw", default=5)
+    assert (e.type_code, e.bits, e.encode()) == (0x0032, 3, b"\x05")
