@@ -3,10 +3,12 @@ behind the PDI and the device behind the firmware."""
 
 from __future__ import annotations
 
+import dataclasses
 import struct
 from collections.abc import Callable
 from functools import partial
 from pathlib import Path
+from typing import Any
 
 import structlog
 
@@ -25,6 +27,10 @@ from ecatsim.errors import UserError
 from ecatsim.esc.core import Esc, FrameContext
 from ecatsim.esc.pdi import Pdi
 from ecatsim.esi import EsiError, read_esi
+from ecatsim.generic.device import GenericDevice, signals_of
+from ecatsim.generic.model import GenericModel, from_esi
+from ecatsim.generic.pinio import PinIo
+from ecatsim.generic.signals import SignalError
 from ecatsim.mfcio.block import MfcioBlock
 from ecatsim.mfcio.parts import parse_wiring
 from ecatsim.pdi_spi.external import ExternalFirmware
@@ -39,8 +45,9 @@ from ecatsim.slave.emcy import Emergency
 from ecatsim.slave.firmware import Firmware, MailboxLayout
 from ecatsim.slave.foe import FoeServer
 from ecatsim.slave.mailbox import MailboxEngine
+from ecatsim.slave.od import ObjectDictionary
 from ecatsim.slave.od_build import build_od
-from ecatsim.slave.pdo import PdoImage
+from ecatsim.slave.pdo import CoeDevice, PdoImage, PdoRules
 from ecatsim.wire.mailbox import MbxType
 
 log = structlog.get_logger("ecatsim.build")
@@ -111,22 +118,60 @@ def _description(
     return cache[key]
 
 
-def _image(sc: SlaveConfig, desc: DeviceDescription) -> bytearray:
-    if sc.esi is not None:
+#: EEPROM sizes a slave may have, in kbit (ETG.2010 word 0x3E: size in kbit - 1)
+EEPROM_KBIT = (1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024, 2048, 4096)
+
+
+def esi_image(desc: DeviceDescription, source: str, **kw: int | None) -> bytes:
+    """The SII image of an ESI's device; an EEPROM the ESI declares too small for it gets
+    the next standard size up, with one warning (hand-written ESIs often do)."""
+    try:
+        return build_image(desc, **kw)
+    except SiiError as exc:
+        error = exc
+    for kbit in EEPROM_KBIT:
+        if kbit <= desc.esc.eeprom_size_kbit:
+            continue
+        try:
+            img = build_image(replace_size(desc, kbit), **kw)
+        except SiiError as exc:
+            error = exc
+            continue
+        log.warning(
+            "eeprom_size_raised",
+            esi=source,
+            declared_bytes=desc.esc.eeprom_size_kbit * 128,
+            used_bytes=kbit * 128,
+        )
+        return img
+    raise UserError(f"{source}: {error}")
+
+
+def replace_size(desc: DeviceDescription, kbit: int) -> DeviceDescription:
+    return dataclasses.replace(desc, esc=dataclasses.replace(desc.esc, eeprom_size_kbit=kbit))
+
+
+def _image(sc: SlaveConfig, desc: DeviceDescription, generic: bool = False) -> bytearray:
+    from_esi_file = generic
+    if sc.esi is not None and not generic:
         try:
             desc = read_esi(sc.esi)
         except EsiError as exc:
             raise UserError(str(exc)) from exc
+        from_esi_file = True
     if sc.eeprom is not None and sc.eeprom.exists():
         try:
             return EepromStore.load(sc.eeprom)
         except SiiError as exc:
             raise UserError(str(exc)) from exc
-    try:
-        img = build_image(desc, serial=sc.serial, alias=sc.alias)
-    except SiiError as exc:  # e.g. an ESI whose SII does not fit its EEPROM size
-        where = sc.esi or sc.description or f"the {sc.device} description"
-        raise UserError(f"{where}: {exc}") from exc
+    if from_esi_file:
+        img = esi_image(desc, desc.source, serial=sc.serial, alias=sc.alias)
+    else:
+        try:
+            img = build_image(desc, serial=sc.serial, alias=sc.alias)
+        except SiiError as exc:  # a description whose SII does not fit its EEPROM size
+            where = sc.esi or sc.description or f"the {sc.device} description"
+            raise UserError(f"{where}: {exc}") from exc
     if sc.eeprom is not None:
         try:
             EepromStore.save(sc.eeprom, img)
@@ -138,16 +183,47 @@ def _image(sc: SlaveConfig, desc: DeviceDescription) -> bytearray:
     return bytearray(img)
 
 
+def generic_model(
+    sc: SlaveConfig, cache: dict[tuple[object, ...], GenericModel], where: str
+) -> GenericModel:
+    """The model of a generic slave: from its ENI (made there) or its ESI (read once per
+    file and device); what it does not model is one warning."""
+    if isinstance(sc.model, GenericModel):
+        return sc.model
+    assert sc.esi is not None  # config: a generic slave has an esi
+    key = (sc.esi, sc.product, sc.revision, sc.device_type)
+    if key not in cache:
+        try:
+            hint = f"pick one with {where}.device_type (or product:/revision:)"
+            model = from_esi(sc.esi, sc.product, sc.revision, sc.device_type, hint=hint)
+        except EsiError as exc:
+            raise UserError(str(exc)) from exc
+        if model.warnings:
+            log.warning("esi_not_modelled", esi=str(sc.esi), constructs=model.warnings)
+        cache[key] = model
+    return cache[key]
+
+
+def _signals(sc: SlaveConfig, od: ObjectDictionary, src: str, i: int) -> list[Any]:
+    try:
+        return signals_of(list(sc.signals) if sc.signals is not None else None, od,
+                          f"{src}: slaves[{i}].signals")  # fmt: skip
+    except SignalError as exc:
+        raise UserError(str(exc)) from exc
+
+
 def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
     """Build the ESCs, firmware and devices of a segment."""
     ctx = FrameContext()
     cache: dict[tuple[str, Path | None], DeviceDescription] = {}
+    models: dict[tuple[object, ...], GenericModel] = {}
     escs: list[Esc] = []
     firmware: list[Serviceable] = []
     paths: list[Path | None] = []
     for i, sc in enumerate(cfg.slaves):
-        desc = _description(sc, cache)
-        image = _image(sc, desc)
+        model = generic_model(sc, models, f"slaves[{i}]") if sc.device == "generic" else None
+        desc = model.desc if model is not None else _description(sc, cache)
+        image = _image(sc, desc, model is not None)
         esc = Esc(
             i,
             ctx,
@@ -179,19 +255,45 @@ def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
         if sc.firmware == "external" and sc.pdi_socket is not None:
             what = f"{cfg.source}: slaves[{i}].pdi_socket"
             fw = ExternalFirmware(pdi, sc.pdi_socket, clock, SpiTiming(), what)
+        elif model is not None and not desc.mailbox.protocols:
+            # no mailbox, no microcontroller: the ESC in device emulation, the process image
+            # of the ESI's PDOs (through an OD nobody serves) on the ESI's SMs
+            od = model.build_od()
+            gdev = GenericDevice(od, _signals(sc, od, cfg.source, i))
+            sm_of = {s.type: n for n, s in reversed(list(enumerate(desc.sync_managers)))}
+            fw = PinIo(pdi, PdoImage(od, gdev, model.rules), sm_of.get("pd_out"),
+                       sm_of.get("pd_in"))  # fmt: skip
+        elif model is not None and "coe" not in desc.mailbox.protocols:
+            # a mailbox without CoE: the firmware, its PDOs from the ESI alone
+            od = model.build_od()
+            gdev = GenericDevice(od, _signals(sc, od, cfg.source, i))
+            fw = gfw = Firmware(pdi, PdoImage(od, gdev, model.rules), layout)
+            gfw.od = od
+            gfw.device = gdev
         elif "coe" in desc.mailbox.protocols:
-            base = sc.description.parent if sc.description is not None else None
-            try:
-                od = build_od(desc, base)
-            except DescriptionError as exc:
-                raise UserError(str(exc)) from exc
+            if model is not None:
+                od = model.build_od()
+                if sc.serial is not None and 0x1018 in od and 4 in od[0x1018].entries:
+                    od.set(0x1018, 4, sc.serial)
+                rules = model.rules
+            else:
+                base = sc.description.parent if sc.description is not None else None
+                try:
+                    od = build_od(desc, base)
+                except DescriptionError as exc:
+                    raise UserError(str(exc)) from exc
+                rules = PdoRules()
             mbx = MailboxEngine(pdi)
             emcy = Emergency(mbx, od)
+            device: CoeDevice
             try:
-                device = make_coe_device(sc.device, desc, od, emcy)
+                if model is not None:
+                    device = GenericDevice(od, _signals(sc, od, cfg.source, i))
+                else:
+                    device = make_coe_device(sc.device, desc, od, emcy)
             except DescriptionError as exc:
                 raise UserError(str(exc)) from exc
-            app: Application = PdoImage(od, device)
+            app: Application = PdoImage(od, device, rules)
             foe = desc.mailbox.foe or "foe" in desc.mailbox.protocols
             fw = coe_fw = Firmware(pdi, app, layout, mbx=mbx, bootstrap_supported=foe)
             coe_fw.coe = CoeProtocol(mbx, od, coe_fw.al_state_code)
@@ -212,5 +314,5 @@ def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
         firmware.append(fw)
         paths.append(sc.eeprom)
     seg = Segment(escs, ctx, clock, firmware, _Persist(escs, paths))
-    seg.awake = frozenset(i for i, fw in enumerate(firmware) if isinstance(fw, MfcioBlock))
+    seg.awake = frozenset(i for i, fw in enumerate(firmware) if isinstance(fw, MfcioBlock | PinIo))
     return seg

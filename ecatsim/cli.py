@@ -60,6 +60,10 @@ def cli(ctx: click.Context, debug: bool) -> None:
 @click.option("--udp", "udp", help="Serve EtherCAT over UDP on HOST:PORT (port 34980 = 0x88A4).")
 @click.option("--config", "config_path", type=click.Path(path_type=Path), help="Segment YAML.")
 @click.option("--slaves", type=int, help="Repeat the default device N times.")
+@click.option("--eni", type=click.Path(path_type=Path), help="The segment an ENI (ETG.2100) lists.")
+@click.option(
+    "--esi-dir", "esi_dir", type=click.Path(path_type=Path), help="With --eni: ESIs of its slaves."
+)
 @log_format_option
 @click.option("--trace-frames", is_flag=True, help="Log every frame (slow; for debugging).")
 @click.option("--allow-ip-iface", is_flag=True, help="Allow an interface with an IPv4 address.")
@@ -95,6 +99,8 @@ def run(
     udp: str | None,
     config_path: Path | None,
     slaves: int | None,
+    eni: Path | None,
+    esi_dir: Path | None,
     log_format: str,
     trace_frames: bool,
     allow_ip_iface: bool,
@@ -127,6 +133,8 @@ def run(
         trace=trace,
         ctl=ctl,
         user=user,
+        eni=eni,
+        esi_dir=esi_dir,
     )
     run_daemon(opts)
 
@@ -152,6 +160,7 @@ def run(
             "link",
             "door",
             "mfcio",
+            "pd",
         ]
     ),
 )
@@ -175,6 +184,8 @@ def ctl_cmd(
     door tmcl|lin COMMAND [ARGS]    a request for a TMCL or LIN front door (door tmcl help)
     mfcio SLAVE [status|pins|set gpioN 0|1|open|set nes 0|1|read REG|write REG V]
                                     a TMC8460's MFCIO block (MFC CTRL SPI for read/write)
+    pd SLAVE [ENTRY [VALUE]]        process data: every mapped entry with its value; one
+                                    entry (0xIIII:SS or name); or set an input to VALUE
     """
     import json
 
@@ -223,6 +234,14 @@ def ctl_cmd(
             }
         elif command == "door":
             req = {"cmd": "door", "door": args[0], "command": args[1], "args": list(args[2:])}
+        elif command == "pd":
+            req = {"cmd": "pd", "slave": num(args[0])}
+            if len(args) > 1:
+                req["entry"] = args[1]
+            if len(args) > 2:
+                req["value"] = parse_value(args[2])
+            if len(args) > 3:
+                raise ValueError(args[3])
         elif command == "poke":
             req = {"cmd": "poke", "slave": num(args[0]), "addr": num(args[1]), "data": args[2]}
         else:
@@ -240,6 +259,10 @@ def ctl_cmd(
         click.echo(f"ecatsim: error: ctl {command}: {reply.get('error')}", err=True)
     elif command == "status":
         click.echo(format_status(reply))
+    elif command == "pd":
+        from ecatsim.pd import format_entries
+
+        click.echo(format_entries(reply.get("entries", [reply])))
     else:
         click.echo(json.dumps({k: v for k, v in reply.items() if k != "ok"}, indent=2))
     if not reply.get("ok"):
@@ -374,6 +397,40 @@ def esi_export(output: Path, device: str, description: Path | None) -> None:
         raise UserError(str(exc)) from exc
     atomic_write(output, export_esi(desc, od))
     click.echo(f"{output}: ESI of {desc.name}")
+
+
+@esi.command("check")
+@click.argument("files", nargs=-1, type=click.Path(path_type=Path))
+@click.option("--esi-dir", "esi_dir", type=click.Path(path_type=Path), help="Every *.xml here too.")
+def esi_check(files: tuple[Path, ...], esi_dir: Path | None) -> None:
+    """Build every device of every ESI in process and bring it to OP through the loopback
+    link with a minimal master: one line per device (ok, or what failed)."""
+    from ecatsim.generic.check import check_files
+
+    paths = list(files) + (sorted(esi_dir.glob("*.xml")) if esi_dir is not None else [])
+    if not paths:
+        raise UserError("esi check: give ESI files or --esi-dir DIR")
+    failed = 0
+    for line, ok in check_files(paths):
+        click.echo(line)
+        failed += not ok
+    if failed:
+        raise SystemExit(1)
+
+
+@cli.group()
+def eni() -> None:
+    """ENI (ETG.2100) files."""
+
+
+@eni.command("show")
+@click.argument("eni_path", metavar="ENI.xml", type=click.Path(path_type=Path))
+@click.option("--esi-dir", "esi_dir", type=click.Path(path_type=Path), help="ESIs of its slaves.")
+def eni_show(eni_path: Path, esi_dir: Path | None) -> None:
+    """List the ENI's slaves and the model each one gets."""
+    from ecatsim.eni import format_slaves, load_eni
+
+    click.echo(format_slaves(load_eni(eni_path, esi_dir)))
 
 
 cli.add_command(bench)

@@ -17,6 +17,12 @@ slaves:
                              # EEPROM is loaded)
     mfcio: {...}             # tmc8460 only: parts on the MFCIO pins (ecatsim/mfcio/parts.py)
     mfc_socket: /run/mfc.sock  # tmc8460 only: the MFC CTRL SPI on a socket (TMC8460 §3.6)
+  - esi: vendor.xml          # no device: a generic slave, everything from the ESI
+    device_type: EL1234      # which device of the file: its <Type> text, or ...
+    product: 0x04d23052      # ... its ProductCode / RevisionNo
+    revision: 0x00100000
+    signals:                 # optional: inputs driven without a test (ecatsim/generic/signals.py)
+      - {input: "0x6000:01", loopback: "0x7000:01"}
 faults:                      # optional: faults injected while running (ecatsim/faults/spec.py)
   - {kind: wkc, value: -1, count: 3, on_state: op}
   - {kind: drop, probability: 0.001, seed: 7}
@@ -36,7 +42,7 @@ import yaml
 from ecatsim.errors import UserError
 from ecatsim.faults.spec import FaultSpec, FaultSpecError, parse_fault
 
-DEVICE_TYPES = ("tmc8670", "echo", "tmc8460")
+DEVICE_TYPES = ("tmc8670", "echo", "tmc8460", "generic")
 #: the front doors a segment file may list beside its slaves
 DOOR_KEYS = ("tmcl", "lin")
 MAX_SLAVES = 4096
@@ -58,6 +64,10 @@ _SLAVE_KEYS = {
     "pdi_emulation",
     "mfcio",
     "mfc_socket",
+    "device_type",
+    "product",
+    "revision",
+    "signals",
 }
 #: who runs the slave firmware behind the PDI: ecatsim, or a program on the PDI socket
 FIRMWARE_KINDS = ("ecatsim", "external")
@@ -87,6 +97,14 @@ class SlaveConfig:
     mfcio: dict[str, object] | None = None
     #: device tmc8460: the MFC CTRL SPI on this socket (TMC8460 §3.6)
     mfc_socket: Path | None = None
+    #: device generic: which device of the ESI (<Type> text, ProductCode, RevisionNo)
+    device_type: str | None = None
+    product: int | None = None
+    revision: int | None = None
+    #: device generic: inputs driven without a test (validated when built)
+    signals: tuple[object, ...] | None = None
+    #: device generic from an ENI: the model made for it (ecatsim/eni.py)
+    model: object | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -126,10 +144,19 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
     """Validate a loaded YAML document into a SegmentConfig."""
     if not isinstance(data, dict):
         raise UserError(f"{src}: expected a mapping with a 'slaves:' list at the top level")
-    unknown = set(data) - {"slaves", "faults", *DOOR_KEYS}
+    top = ("slaves", "faults", *DOOR_KEYS, "eni", "esi_dir")
+    unknown = set(data) - set(top)
     if unknown:
         k = sorted(unknown)[0]
-        raise _err(src, k, f"unknown key (allowed: {', '.join(('slaves', 'faults', *DOOR_KEYS))})")
+        raise _err(src, k, f"unknown key (allowed: {', '.join(top)})")
+    if "eni" in data:
+        if "slaves" in data:
+            raise _err(src, "eni", "the ENI lists the slaves: give eni: or slaves:, not both")
+        from ecatsim.eni import eni_segment_slaves
+
+        esi_dir = _path(src, base, "esi_dir", data["esi_dir"]) if "esi_dir" in data else None
+        eni = _path(src, base, "eni", data["eni"])
+        data = {**data, "slaves": eni_segment_slaves(eni, esi_dir)}
     doors: list[tuple[str, dict[str, object]]] = []
     for k in DOOR_KEYS:
         if k in data:
@@ -137,9 +164,13 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
                 raise _err(src, k, f"expected a mapping (see 'ecatsim {k} --help')")
             doors.append((k, data[k]))
     raw = data.get("slaves")
-    if not isinstance(raw, list) or not raw:
+    if isinstance(raw, tuple):  # made from an ENI
+        out: list[SlaveConfig] = list(raw)
+        raw = []
+    elif not isinstance(raw, list) or not raw:
         raise _err(src, "slaves", "expected a non-empty list of slaves")
-    out: list[SlaveConfig] = []
+    else:
+        out = []
     for i, s in enumerate(raw):
         key = f"slaves[{i}]"
         if not isinstance(s, dict):
@@ -150,7 +181,7 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
             raise _err(
                 src, f"{key}.{k}", f"unknown key (allowed: {', '.join(sorted(_SLAVE_KEYS))})"
             )
-        dev = s.get("device", "tmc8670")
+        dev = s.get("device", "generic" if "esi" in s else "tmc8670")
         if dev not in DEVICE_TYPES:
             raise _err(
                 src,
@@ -205,6 +236,23 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
         )
         if mfc_socket is not None and (dev != "tmc8460" or count > 1):
             raise _err(src, f"{key}.mfc_socket", "one socket, for one device: tmc8460 slave")
+        if dev == "generic" and "esi" not in s:
+            raise _err(src, f"{key}.device", "a generic slave needs esi: FILE (its ESI)")
+        for k in ("device_type", "product", "revision", "signals"):
+            if k in s and dev != "generic":
+                raise _err(src, f"{key}.{k}", "for a generic slave only (esi: without device:)")
+        device_type = s.get("device_type")
+        if device_type is not None and not isinstance(device_type, str):
+            raise _err(src, f"{key}.device_type", f"expected the <Type> text, got {device_type!r}")
+        product = (
+            _int(src, f"{key}.product", s["product"], 0, 0xFFFFFFFF) if "product" in s else None
+        )
+        revision = (
+            _int(src, f"{key}.revision", s["revision"], 0, 0xFFFFFFFF) if "revision" in s else None
+        )
+        signals = s.get("signals")
+        if signals is not None and not isinstance(signals, list):
+            raise _err(src, f"{key}.signals", "expected a list like [{input: ENTRY, counter: {}}]")
         for j in range(count):
             out.append(
                 SlaveConfig(
@@ -225,6 +273,10 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
                     pdi_emulation=pdi_emulation,
                     mfcio=mfcio,
                     mfc_socket=mfc_socket,
+                    device_type=device_type,
+                    product=product,
+                    revision=revision,
+                    signals=tuple(signals) if signals is not None else None,
                 )
             )
     if len(out) > MAX_SLAVES:

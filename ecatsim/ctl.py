@@ -251,6 +251,10 @@ class ControlSocket:
                 od.set(index, sub, req["value"])
             v = od.value(index, sub)
             return {"ok": True, "value": v if not isinstance(v, bytes) else v.hex()}
+        if cmd == "pd":  # process data by entry: every mapped entry, one, or set an input
+            from ecatsim.pd import request as pd_request
+
+            return pd_request(getattr(seg.firmware[slave], "app", None), req)
         raise ValueError(f"unknown command {cmd!r}")
 
     def close(self) -> None:

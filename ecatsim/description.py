@@ -31,6 +31,8 @@ DATA_TYPES: dict[str, tuple[int, int]] = {
     "INTEGER64": (0x0015, 64),
     "UNSIGNED24": (0x0016, 24),
     "UNSIGNED64": (0x001B, 64),
+    # BIT1..BIT8 (ETG.1000.6 Table 63): bit strings of an ESI's PDO entries
+    **{f"BIT{n}": (0x002F + n, n) for n in range(1, 9)},
 }
 
 MAILBOX_PROTOCOLS = {"aoe": 0x01, "eoe": 0x02, "coe": 0x04, "foe": 0x08, "soe": 0x10, "voe": 0x20}

@@ -23,6 +23,7 @@ from ecatsim.description import (
     PdoEntry,
     SmConfig,
 )
+from ecatsim.generic.types import pdo_entry_type
 from ecatsim.slave.od import ObjectDictionary
 
 #: ETG.2000 data type names for our type names. Ref: ETG.2000 Table "base data types".
@@ -255,14 +256,13 @@ def _read_pdos(dev: ET.Element, tag: str) -> tuple[PdoDescription, ...]:
         for j, e in enumerate(p.findall("Entry")):
             ew = f"{where} <Entry> #{j + 1}"
             dt = _text(e, "DataType", ew, "")
+            bits = _num(_text(e, "BitLen", ew), f"{ew} <BitLen>")
             entries.append(
                 PdoEntry(
                     _num(_text(e, "Index", ew), f"{ew} <Index>"),
                     _num(_text(e, "SubIndex", ew, "0"), f"{ew} <SubIndex>"),
-                    _num(_text(e, "BitLen", ew), f"{ew} <BitLen>"),
-                    FROM_ESI.get(
-                        dt, "UNSIGNED8" if not dt else dt if dt in DATA_TYPES else "UNSIGNED8"
-                    ),
+                    bits,
+                    FROM_ESI[dt] if dt in FROM_ESI else pdo_entry_type(dt, bits),
                     _text(e, "Name", ew, ""),
                 )
             )
@@ -284,30 +284,71 @@ def read_esi(
 
     Several devices: pick by ``product`` and ``revision``. Ref: ETG.2000 §5.
     """
+    return read_esi_device(path, product, revision)[0]
+
+
+def parse_root(path: Path) -> ET.Element:
+    """The <EtherCATInfo> root of an ESI file; one-line EsiError otherwise."""
     try:
         root = ET.parse(path).getroot()
     except (OSError, ET.ParseError) as exc:
         raise EsiError(f"{path}: not a readable XML file ({exc})") from exc
     if root.tag != "EtherCATInfo":
         raise EsiError(f"{path}: root element is <{root.tag}>, expected <EtherCATInfo>")
-    vendor = _num(_text(root, "Vendor/Id", f"{path}"), f"{path}: <Vendor><Id>")
+    return root
+
+
+def device_ids(root: ET.Element, path: Path) -> list[tuple[ET.Element, str, int, int]]:
+    """Every <Device> of an ESI with its <Type> text, ProductCode and RevisionNo."""
     devices = root.findall("Descriptions/Devices/Device")
     if not devices:
         raise EsiError(f"{path}: no <Device> in <Descriptions><Devices>")
-    chosen = []
+    out = []
     for d in devices:
         t = d.find("Type")
         if t is None:
             raise EsiError(f"{path}: <Device> without <Type>")
         pc = _num(t.get("ProductCode"), f"{path}: <Type ProductCode>")
         rv = _num(t.get("RevisionNo", "0"), f"{path}: <Type RevisionNo>")
-        if (product is None or pc == product) and (revision is None or rv == revision):
+        out.append((d, (t.text or "").strip(), pc, rv))
+    return out
+
+
+def read_esi_device(
+    path: Path,
+    product: int | None = None,
+    revision: int | None = None,
+    device_type: str | None = None,
+    *,
+    hint: str = "pick one with --product/--revision",
+) -> tuple[DeviceDescription, ET.Element]:
+    """The description of one device of an ESI and its <Device> element.
+
+    Chosen by ``device_type`` (the <Type> text), ``product`` and ``revision``; several
+    matches are refused with their list. Ref: ETG.2000 §5 (Device/Type).
+    """
+    root = parse_root(path)
+    vendor = _num(_text(root, "Vendor/Id", f"{path}"), f"{path}: <Vendor><Id>")
+    chosen = []
+    for d, tname, pc, rv in device_ids(root, path):
+        if (
+            (product is None or pc == product)
+            and (revision is None or rv == revision)
+            and (device_type is None or tname == device_type)
+        ):
+            t = d.find("Type")
+            assert t is not None
             chosen.append((d, t, pc, rv))
     if not chosen:
-        raise EsiError(f"{path}: no device with product {product} revision {revision}")
+        want = ", ".join(
+            f"{k} {v}"
+            for k, v in (("type", device_type), ("product", product), ("revision", revision))
+            if v is not None
+        )
+        raise EsiError(f"{path}: no device with {want}")
     if len(chosen) > 1:
-        ids = ", ".join(f"{pc:#x}/{rv:#x}" for _d, _t, pc, rv in chosen)
-        raise EsiError(f"{path}: {len(chosen)} devices ({ids}): pick one with --product/--revision")
+        ids = ", ".join(f"{(t.text or '').strip()} {pc:#x}/{rv:#x}" for _d, t, pc, rv in chosen)
+        raise EsiError(f"{path}: {len(chosen)} devices ({ids}): {hint}")
     dev, typ, pc, rv = chosen[0]
     where = f"{path}: <Device {typ.text}>"
     sms = []
@@ -380,7 +421,7 @@ def read_esi(
                 _num(_text(om, "ShiftTimeSync1", ow, "0"), f"{ow} <ShiftTimeSync1>"),
             )
         )
-    return DeviceDescription(
+    desc = DeviceDescription(
         source=str(path),
         name=_text(dev, "Name", where),
         order_code=(typ.text or "").strip(),
@@ -406,3 +447,4 @@ def read_esi(
         dc=tuple(dcs),
         mfcio_config=mfcio,
     )
+    return desc, dev

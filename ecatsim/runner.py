@@ -52,12 +52,26 @@ class RunOptions:
     trace: Path | None = None
     ctl: Path | None = None
     user: str | None = None
+    #: the segment from an ENI (ETG.2100), with ESIs from this folder
+    eni: Path | None = None
+    esi_dir: Path | None = None
 
 
 def segment_config(opts: RunOptions) -> SegmentConfig:
     """The segment from --config, --slaves or the embedded default."""
     if opts.config is not None and opts.slaves is not None:
         raise UserError("--config and --slaves exclude each other: put 'count: N' in the YAML")
+    if opts.eni is not None:
+        if opts.config is not None or opts.slaves is not None:
+            raise UserError("--eni lists the slaves: leave out --config and --slaves")
+        from ecatsim.config import parse_segment
+
+        data = {"eni": str(opts.eni.resolve())}
+        if opts.esi_dir is not None:
+            data["esi_dir"] = str(opts.esi_dir.resolve())
+        return parse_segment(data, f"--eni {opts.eni}")
+    if opts.esi_dir is not None:
+        raise UserError("--esi-dir goes with --eni (the ESIs of the ENI's slaves)")
     if opts.config is not None:
         return load_segment(opts.config)
     if opts.slaves is not None:

@@ -35,6 +35,8 @@ CAT_NAMES = {
     CAT_DC: "DC",
 }
 FIRST_CATEGORY_WORD = 0x40
+#: string indices are one byte (ETG.2010 Table 4); index 0 is "no string"
+MAX_STRINGS = 255
 PROTOCOL_NAMES = ("AoE", "EoE", "CoE", "FoE", "SoE", "VoE")
 SM_TYPE_NAMES = {0: "unused", 1: "mbx_out", 2: "mbx_in", 3: "pd_out", 4: "pd_in"}
 FMMU_NAMES = {v: k for k, v in FMMU_TYPES.items()}
@@ -53,6 +55,8 @@ class _Strings:
             return 0
         b = s.encode("latin-1", "replace")[:255]
         if b not in self.items:
+            if len(self.items) == MAX_STRINGS:
+                return 0  # an index is one byte: names past the 255th stay unnamed
             self.items.append(b)
         return self.items.index(b) + 1
 

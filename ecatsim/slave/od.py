@@ -201,9 +201,10 @@ class Entry:
                 return v
             return str(v).encode("latin-1", "replace")
         n = (self.bits + 7) // 8
+        if self.dtype == "REAL32" and isinstance(v, float):
+            return struct.pack("<f", v)  # a float set from the application side
+        # an integer is the raw value: for REAL32/REAL64 its IEEE 754 bits, as decoded
         iv = int(v) if not isinstance(v, bytes) else int.from_bytes(v, "little")
-        if self.dtype == "REAL32":
-            return struct.pack("<f", float(iv))
         return (iv & ((1 << (8 * n)) - 1)).to_bytes(n, "little")
 
     def decode(self, data: bytes) -> int | str | bytes:

@@ -7,7 +7,7 @@ from ecatsim.slave.od cimport Entry
 
 
 cdef class PdoImage:
-    cdef public object od, device
+    cdef public object od, device, rules
     cdef object _plan
     cdef object _rx_st, _tx_st
     cdef tuple _rx_entries, _tx_entries

@@ -1,21 +1,25 @@
-"""PDO mapping (0x1600/0x1A00), assignment (0x1C12/0x1C13) and the compiled copy plan.
+"""PDO mapping (0x16xx/0x1Axx), assignment (0x1C12/0x1C13) and the compiled copy plan.
 
 Mapping writes are validated when they happen (object exists, is mappable, direction,
-length) and the plan is compiled at PREOP->SAFEOP, when the SM lengths are checked.
+length) and the plan is compiled at PREOP->SAFEOP, when the SM lengths are checked. What a
+device allows (which PDOs each SM may carry, fixed and mandatory ones, exclusions, bit-wise
+mapping) is a ``PdoRules``: the TMC8670's by default, an ESI's for a generic slave.
 Ref: ETG.1000.6 §5.6.7.4 (PDO mapping/assignment objects); CiA 301 §7.5.2.35/36;
-TMC8670 §2.1 (max. 9 mapping entries), §4.1.7-4.1.11.
+ETG.2000 §5 (RxPdo/TxPdo Fixed, Mandatory, Exclude); TMC8670 §2.1 (max. 9 mapping
+entries), §4.1.7-4.1.11.
 """
 
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Protocol
 
 from ecatsim.slave.al import AlState
 from ecatsim.slave.od import (
     ABORT_NO_OBJECT,
     ABORT_NOT_MAPPABLE,
+    ABORT_PARAM_INCOMPATIBLE,
     ABORT_PDO_LENGTH,
     ABORT_SI0_NOT_ZERO,
     Entry,
@@ -32,12 +36,57 @@ MAX_PDO_BITS = 256
 
 
 @dataclass(frozen=True, slots=True)
+class PdoRules:
+    """What the master may assign and map. The default is the TMC8670's: one PDO per SM
+    (0x1600, 0x1A00), byte-aligned entries, 32 bytes at most (decision C6).
+
+    Ref: ETG.2000 §5 (RxPdo/TxPdo: Fixed, Mandatory, Exclude); ETG.1000.6 §5.6.7.4.
+    """
+
+    rx_pdos: tuple[int, ...] = (RX_MAP,)
+    tx_pdos: tuple[int, ...] = (TX_MAP,)
+    max_bits: int = MAX_PDO_BITS
+    #: entries may have any bit length at any bit offset (an ESI's BOOL/BIT entries)
+    bit_mapping: bool = False
+    #: PDOs that must stay assigned
+    mandatory: frozenset[int] = frozenset()
+    #: PDO -> the PDOs it cannot be assigned with
+    exclude: dict[int, frozenset[int]] = field(default_factory=dict)
+
+    def allowed(self, assign: int) -> tuple[int, ...]:
+        return self.rx_pdos if assign == RX_ASSIGN else self.tx_pdos
+
+
+#: the TMC8670's rules
+DEFAULT_RULES = PdoRules()
+
+
+@dataclass(frozen=True, slots=True)
 class Field:
-    """One mapped entry: byte offset, byte size, the OD entry (None = padding)."""
+    """One mapped entry: byte offset, byte size, the OD entry (None = padding); an entry
+    that is not whole bytes also has its bit offset in that byte and its bit length."""
 
     offset: int
     size: int
     entry: Entry | None
+    bit: int = 0
+    bits: int = 0
+
+    @property
+    def whole_bytes(self) -> bool:
+        return self.bits == 0 or (self.bit == 0 and self.bits % 8 == 0)
+
+    def read(self, data: bytes | bytearray | memoryview) -> int:
+        """The field's bits from an image, as an unsigned integer."""
+        raw = int.from_bytes(data[self.offset : self.offset + self.size], "little")
+        return (raw >> self.bit) & ((1 << self.bits) - 1)
+
+    def write(self, out: bytearray, value: int) -> None:
+        """Put ``value``'s low bits into the field's bits of ``out``."""
+        raw = int.from_bytes(out[self.offset : self.offset + self.size], "little")
+        mask = ((1 << self.bits) - 1) << self.bit
+        raw = (raw & ~mask) | ((value << self.bit) & mask)
+        out[self.offset : self.offset + self.size] = raw.to_bytes(self.size, "little")
 
 
 @dataclass(frozen=True, slots=True)
@@ -72,6 +121,8 @@ def codec(fields: tuple[Field, ...], size: int) -> Codec | None:
     another type (strings, REAL32, 24-bit types: the per-entry path handles those)."""
     fmt, pos, entries = ["<"], 0, []
     for f in fields:
+        if not f.whole_bytes:
+            return None
         if f.offset > pos:
             fmt.append(f"{f.offset - pos}x")
         if f.entry is None:
@@ -104,24 +155,68 @@ def _mapped(od: ObjectDictionary, value: int, rx: bool) -> tuple[Entry | None, i
     return e, bits
 
 
-def mapping_fields(od: ObjectDictionary, index: int) -> tuple[list[Field], int]:
-    """Fields and total bits of a mapping object. Ref: CiA 301 §7.5.2.36."""
+def _is_rx(index: int) -> bool:
+    return 0x1600 <= index < 0x1800
+
+
+def mapping_fields(
+    od: ObjectDictionary, index: int, rules: PdoRules = DEFAULT_RULES, start: int = 0
+) -> tuple[list[Field], int]:
+    """Fields and total bits of a mapping object whose first entry sits at bit ``start``
+    of the image. Ref: CiA 301 §7.5.2.36."""
     obj = od[index]
     n = int(obj.entries[0].value)
     fields = []
-    bit = 0
+    bit = start
     for s in range(1, n + 1):
-        e, bits = _mapped(od, int(obj.entries[s].value), index == RX_MAP)
+        e, bits = _mapped(od, int(obj.entries[s].value), _is_rx(index))
         if bit % 8 or bits % 8:
-            raise SdoAbort(ABORT_NOT_MAPPABLE, "only byte-aligned mappings are supported")
-        fields.append(Field(bit // 8, bits // 8, e))
+            if not rules.bit_mapping:
+                raise SdoAbort(ABORT_NOT_MAPPABLE, "only byte-aligned mappings are supported")
+            first, last = bit // 8, (bit + bits - 1) // 8
+            fields.append(Field(first, last - first + 1, e, bit % 8, bits))
+        else:
+            fields.append(Field(bit // 8, bits // 8, e))
         bit += bits
-    if bit > MAX_PDO_BITS:
-        raise SdoAbort(ABORT_PDO_LENGTH, f"{bit} bits > {MAX_PDO_BITS}")
-    return fields, bit
+    if bit - start > rules.max_bits:
+        raise SdoAbort(ABORT_PDO_LENGTH, f"{bit - start} bits > {rules.max_bits}")
+    return fields, bit - start
 
 
-def install(od: ObjectDictionary) -> None:
+def assigned(od: ObjectDictionary, assign: int) -> list[int]:
+    """The PDOs an assignment object lists now (subindex 1..n)."""
+    if assign not in od:
+        return []
+    obj = od[assign]
+    return [int(obj.entries[s].value) for s in range(1, int(obj.entries[0].value) + 1)]
+
+
+def check_assignment(od: ObjectDictionary, assign: int, rules: PdoRules) -> None:
+    """Each assigned PDO is one the SM may carry, listed once, with none it excludes.
+
+    Ref: ETG.1000.6 §5.6.7.4.7; ETG.2000 §5 (Exclude); abort codes of Table 41.
+    """
+    pdos = assigned(od, assign)
+    allowed = rules.allowed(assign)
+    for p in pdos:
+        if p not in allowed or p not in od:
+            raise SdoAbort(ABORT_NO_OBJECT, f"PDO 0x{p:04X}")
+    if len(set(pdos)) != len(pdos):
+        raise SdoAbort(ABORT_PARAM_INCOMPATIBLE, "a PDO assigned twice")
+    for p in pdos:
+        clash = rules.exclude.get(p, frozenset()) & set(pdos)
+        if clash:
+            raise SdoAbort(ABORT_PARAM_INCOMPATIBLE, f"PDO 0x{p:04X} excludes 0x{min(clash):04X}")
+
+
+def _check_mandatory(od: ObjectDictionary, assign: int, rules: PdoRules) -> None:
+    pdos = assigned(od, assign)
+    missing = [p for p in rules.allowed(assign) if p in rules.mandatory and p not in pdos]
+    if missing:
+        raise SdoAbort(ABORT_PARAM_INCOMPATIBLE, f"mandatory PDO 0x{missing[0]:04X} unassigned")
+
+
+def install(od: ObjectDictionary, rules: PdoRules = DEFAULT_RULES) -> None:
     """Validators on the mapping and assignment objects."""
 
     def mapping_validator(index: int) -> None:
@@ -132,42 +227,49 @@ def install(od: ObjectDictionary) -> None:
                     raise SdoAbort(ABORT_SI0_NOT_ZERO, "write subindex 0 = 0 first")
                 value = int(obj.entries[sub].value)
                 if value:
-                    _mapped(od, value, index == RX_MAP)
+                    _mapped(od, value, _is_rx(index))
                 return
-            mapping_fields(od, index)
+            mapping_fields(od, index, rules)
 
         od[index].validate = check
 
-    def assign_validator(index: int, allowed: int) -> None:
+    def assign_validator(index: int) -> None:
         def check(sub: int) -> None:
             obj = od[index]
             if sub > 0 and int(obj.entries[0].value) != 0:
                 raise SdoAbort(ABORT_SI0_NOT_ZERO, "write subindex 0 = 0 first")
-            if int(obj.entries[0].value) >= 1 and int(obj.entries[1].value) != allowed:
-                raise SdoAbort(ABORT_NO_OBJECT, f"PDO 0x{int(obj.entries[1].value):04X}")
+            check_assignment(od, index, rules)
+            if sub == 0 and int(obj.entries[0].value) > 0:
+                _check_mandatory(od, index, rules)
 
         od[index].validate = check
 
-    for idx in (RX_MAP, TX_MAP):
+    for idx in (*rules.rx_pdos, *rules.tx_pdos):
         if idx in od:
             mapping_validator(idx)
-    if RX_ASSIGN in od:
-        assign_validator(RX_ASSIGN, RX_MAP)
-    if TX_ASSIGN in od:
-        assign_validator(TX_ASSIGN, TX_MAP)
+    for idx in (RX_ASSIGN, TX_ASSIGN):
+        if idx in od:
+            assign_validator(idx)
 
 
-def compile_plan(od: ObjectDictionary) -> Plan:
-    """The copy plan from the assigned PDOs. Ref: ETG.1000.6 §5.6.7.4.7."""
-    rx: list[Field] = []
-    tx: list[Field] = []
-    rx_bits = tx_bits = 0
-    if RX_ASSIGN in od and int(od[RX_ASSIGN].entries[0].value) >= 1:
-        f, rx_bits = mapping_fields(od, RX_MAP)
-        rx = f
-    if TX_ASSIGN in od and int(od[TX_ASSIGN].entries[0].value) >= 1:
-        f, tx_bits = mapping_fields(od, TX_MAP)
-        tx = f
+def _image_fields(od: ObjectDictionary, assign: int, rules: PdoRules) -> tuple[list[Field], int]:
+    fields: list[Field] = []
+    bits = 0
+    if assign in od:
+        check_assignment(od, assign, rules)
+        for p in assigned(od, assign):
+            f, n = mapping_fields(od, p, rules, bits)
+            fields += f
+            bits += n
+    return fields, bits
+
+
+def compile_plan(od: ObjectDictionary, rules: PdoRules = DEFAULT_RULES) -> Plan:
+    """The copy plan from the assigned PDOs, in assignment order.
+
+    Ref: ETG.1000.6 §5.6.7.4.7."""
+    rx, rx_bits = _image_fields(od, RX_ASSIGN, rules)
+    tx, tx_bits = _image_fields(od, TX_ASSIGN, rules)
     rx_size, tx_size = (rx_bits + 7) // 8, (tx_bits + 7) // 8
     return Plan(
         tuple(rx), tuple(tx), rx_size, tx_size, codec(tuple(rx), rx_size), codec(tuple(tx), tx_size)
@@ -191,11 +293,14 @@ class CoeDevice(Protocol):
 class PdoImage:
     """The firmware's Application for a CoE device: process images through the OD."""
 
-    def __init__(self, od: ObjectDictionary, device: CoeDevice) -> None:
+    def __init__(
+        self, od: ObjectDictionary, device: CoeDevice, rules: PdoRules = DEFAULT_RULES
+    ) -> None:
         self.od = od
         self.device = device
-        self.plan = compile_plan(od)
-        install(od)
+        self.rules = rules
+        self.plan = compile_plan(od, rules)
+        install(od, rules)
 
     @property
     def plan(self) -> Plan:
@@ -218,7 +323,7 @@ class PdoImage:
         Ref: ETG.1000.6 Table 11 (0x0024 invalid input mapping, 0x0025 invalid output).
         """
         try:
-            self.plan = compile_plan(self.od)
+            self.plan = compile_plan(self.od, self.rules)
         except SdoAbort:
             return 0x0025
         return 0
@@ -240,7 +345,10 @@ class PdoImage:
         else:
             for f in self._plan.rx:
                 if f.entry is not None:
-                    f.entry.value = f.entry.decode(data[f.offset : f.offset + f.size])
+                    if f.whole_bytes:
+                        f.entry.value = f.entry.decode(data[f.offset : f.offset + f.size])
+                    else:
+                        f.entry.value = f.read(data)
         self.device.outputs_applied(now_ns)
 
     def get_inputs(self, now_ns: int) -> bytes:
@@ -263,7 +371,10 @@ class PdoImage:
         out = bytearray(self.plan.tx_size)
         for f in self.plan.tx:
             if f.entry is not None:
-                out[f.offset : f.offset + f.size] = f.entry.encode()[: f.size]
+                if f.whole_bytes:
+                    out[f.offset : f.offset + f.size] = f.entry.encode()[: f.size]
+                else:
+                    f.write(out, int.from_bytes(f.entry.encode(), "little"))
         return bytes(out)
 
     def al_state_changed(self, state: AlState, now_ns: int) -> None:

@@ -27,6 +27,15 @@ ACC_RXPDO = 0x0040
 ACC_TXPDO = 0x0080
 
 
+def _write_bits(states: tuple[int, ...]) -> int:
+    """Access bits 3-5 (write in PREOP, SAFEOP, OP) of the states a write is allowed in."""
+    bits = 0
+    for st, bit in ((2, ACC_WRITE_PREOP), (4, ACC_WRITE_PREOP << 1), (8, ACC_WRITE_PREOP << 2)):
+        if st in states:
+            bits |= bit
+    return bits
+
+
 def _hdr(opcode: int, incomplete: bool, fragments_left: int) -> bytes:
     coe = (int(CoeService.SDO_INFO) << 12).to_bytes(2, "little")
     return (
@@ -113,7 +122,7 @@ class SdoInfo:
             raise SdoAbort(ABORT_NO_SUBINDEX)
         acc = 0 if e.access == "wo" else ACC_READ_ALL
         if e.access != "ro":
-            acc |= ACC_WRITE_PREOP if e.write_states else ACC_WRITE_ALL
+            acc |= _write_bits(e.write_states) if e.write_states else ACC_WRITE_ALL
         if e.pdo:
             acc |= ACC_RXPDO if e.access != "ro" else 0
             acc |= ACC_TXPDO
