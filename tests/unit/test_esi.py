@@ -110,17 +110,3 @@ def test_segment_yaml_loads_a_user_esi(tmp_path: Path) -> None:
     p = parse_image(bytes(seg.escs[0].eeprom.image))
     assert p.name == "My drive" and p.product_code == 8670
 
-
-def test_an_esi_whose_sii_does_not_fit_its_eeprom_is_one_line(tmp_path: Path) -> None:
-    from ecatsim.build import build_segment
-    from ecatsim.clock import ManualClock
-    from ecatsim.config import load_segment
-    from ecatsim.errors import UserError
-
-    xml = tmp_path / "d.xml"
-    assert run("esi", "export", "-o", str(xml))[0] == 0
-    xml.write_text(xml.read_text().replace("<ByteSize>4096</ByteSize>", "<ByteSize>256</ByteSize>"))
-    seg_yaml = tmp_path / "seg.yaml"
-    seg_yaml.write_text(f"slaves:\n  - device: tmc8670\n    esi: {xml.name}\n")
-    with pytest.raises(UserError, match=r"d\.xml: image of \d+ bytes does not fit a 2 kbit EEPROM"):
-        build_segment(load_segment(seg_yaml), ManualClock())
