@@ -109,4 +109,3 @@ def test_segment_yaml_loads_a_user_esi(tmp_path: Path) -> None:
     seg = build_segment(load_segment(seg_yaml), ManualClock())
     p = parse_image(bytes(seg.escs[0].eeprom.image))
     assert p.name == "My drive" and p.product_code == 8670
-
