@@ -295,16 +295,22 @@ def read_esi(
     if not devices:
         raise EsiError(f"{path}: no <Device> in <Descriptions><Devices>")
     chosen = []
+    found = []
     for d in devices:
         t = d.find("Type")
         if t is None:
             raise EsiError(f"{path}: <Device> without <Type>")
         pc = _num(t.get("ProductCode"), f"{path}: <Type ProductCode>")
         rv = _num(t.get("RevisionNo", "0"), f"{path}: <Type RevisionNo>")
+        found.append(f"--product {pc:#x} --revision {rv:#x}")
         if (product is None or pc == product) and (revision is None or rv == revision):
             chosen.append((d, t, pc, rv))
     if not chosen:
-        raise EsiError(f"{path}: no device with product {product} revision {revision}")
+        asked = " ".join(
+            f"--{k} {v} ({v:#x})" for k, v in (("product", product), ("revision", revision))
+            if v is not None
+        )  # fmt: skip
+        raise EsiError(f"{path}: no device matches {asked}; it has: {'; '.join(found)}")
     if len(chosen) > 1:
         ids = ", ".join(f"{pc:#x}/{rv:#x}" for _d, _t, pc, rv in chosen)
         raise EsiError(f"{path}: {len(chosen)} devices ({ids}): pick one with --product/--revision")
