@@ -106,7 +106,9 @@ def main() -> int:
     ax2.set_ylabel("microsteps/s")
     ax2.set_xlabel("s")
     for ax in (ax1, ax2):  # below each plot: the phase names along the top stay readable
-        ax.legend(loc="upper left", bbox_to_anchor=(0, -0.08), ncol=2, fontsize=8, frameon=False)
+        ax.legend(loc="upper right", bbox_to_anchor=(1, -0.08), ncol=2, fontsize=8, frameon=False)
+    lo, hi = ax1.get_ylim()
+    ax1.set_ylim(lo, hi + 0.12 * (hi - lo))  # room above the curves for the phase names
     last = None
     for t, *_, phase in samples:
         if phase != last:
