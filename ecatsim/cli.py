@@ -241,8 +241,10 @@ def ctl_cmd(
         click.echo(f"ecatsim: error: ctl {command}: {reply.get('error')}", err=True)
     elif command == "status":
         click.echo(format_status(reply))
-    elif set(reply) == {"ok", "commands"} and isinstance(reply["commands"], list):
-        click.echo("\n".join(str(c) for c in reply["commands"]))  # a door's help
+    elif set(reply) == {"ok", "commands"}:  # a door's help: one command a line
+        cmds = reply["commands"]
+        lines = [f"{k}: {v}" for k, v in cmds.items()] if isinstance(cmds, dict) else cmds
+        click.echo("\n".join(str(c) for c in lines))
     else:
         click.echo(json.dumps({k: v for k, v in reply.items() if k != "ok"}, indent=2))
     if not reply.get("ok"):

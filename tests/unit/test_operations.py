@@ -220,3 +220,33 @@ def test_ctl_of_a_tmcl_daemon_beside_an_ethercat_one(tmp_path: Path) -> None:
         for d in daemons:
             d.terminate()
             d.wait(10)
+
+
+def test_ctl_status_of_a_lin_only_daemon_is_a_table_of_its_nodes(tmp_path: Path) -> None:
+    from ecatsim.ctl import ControlSocket
+    from ecatsim.ctl_table import format_status
+    from ecatsim.doors import DoorHost
+    from ecatsim.lin.server import door_from_config
+
+    door = door_from_config(
+        {"pty": "lin0", "nodes": [{"name": "left"}, {"name": "right", "hw": [1, 0, 0]}]},
+        "seg.yaml",
+        tmp_path,
+    )
+    host = DoorHost({"lin": door})
+    ctl = ControlSocket(tmp_path / "ctl.sock", None, None, host)
+    try:
+        lines = format_status(ctl.status()).splitlines()
+    finally:
+        ctl.close()
+        host.close()
+    assert lines[0] == (
+        f"lin: pty {tmp_path / 'lin0'}, frames 0, errors bit 0 header 0 data 0 timeout 0, "
+        "timeouts 0"
+    )
+    assert lines[1].split() == [
+        "name", "address", "state", "actpos", "tagpos", "current", "ma", "flags"
+    ]  # fmt: skip
+    nodes = [ln.split()[:3] for ln in lines[2:]]
+    assert nodes == [["left", "0", "ShutDown"], ["right", "64", "ShutDown"]]
+    assert "{" not in "\n".join(lines)
