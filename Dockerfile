@@ -3,7 +3,8 @@
 #
 #   sudo tools/container-test.sh --base-only     # once: the base image, built offline
 #   podman build --network host -t ecatsim .
-#   podman run --rm --network host --cap-add NET_RAW --ulimit host ecatsim run --iface ecat1
+#   podman run --rm --network host --cap-add NET_RAW \
+#       --ulimit nofile=4096:4096 --ulimit nproc=4096:4096 ecatsim run --iface ecat1
 #
 # BASE (build argument): an image with python3 (3.11 or later) and its venv module. The
 # default, localhost/ecatsim-base:bookworm, is a Debian bookworm rootfs made with

@@ -250,3 +250,24 @@ def test_ctl_status_of_a_lin_only_daemon_is_a_table_of_its_nodes(tmp_path: Path)
     nodes = [ln.split()[:3] for ln in lines[2:]]
     assert nodes == [["left", "0", "ShutDown"], ["right", "64", "ShutDown"]]
     assert "{" not in "\n".join(lines)
+
+
+def test_a_control_socket_in_use_does_not_invite_a_second_daemon(tmp_path: Path) -> None:
+    """The refusal names the socket and how to see who serves it; it offers --ctl only for
+    a daemon that serves something else (the link itself is locked: decision O1)."""
+    from ecatsim.ctl import ControlSocket
+    from ecatsim.errors import UserError
+
+    path = tmp_path / "ecat1.sock"
+    live = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    live.bind(str(path))
+    try:
+        with pytest.raises(UserError) as exc:
+            ControlSocket(path, None, None)
+    finally:
+        live.close()
+    assert str(exc.value) == (
+        f"{path}: a running daemon answers on this control socket (see it with 'ecatsim ctl "
+        f"--socket {path} status'); stop it first, or give this daemon another socket with "
+        "--ctl PATH if it serves something else"
+    )
