@@ -31,7 +31,10 @@ RUN if ! command -v cc >/dev/null || ! python3 -c 'import sysconfig, os, sys; \
         && rm -rf /var/lib/apt/lists/*; \
     fi
 WORKDIR /src
-COPY pyproject.toml setup.py README.md requirements-test.lock ./
+# README.md is only the package's long description: a stub, so that editing the README
+# does not compile the core again
+COPY pyproject.toml setup.py requirements-test.lock ./
+RUN echo "ecatsim: see the project's README" > README.md
 COPY ecatsim ./ecatsim
 COPY config ./config
 # the wheel with the compiled core; the build fails unless `ecatsim --version` says
