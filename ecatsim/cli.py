@@ -251,7 +251,8 @@ def ctl_cmd(
     except (IndexError, ValueError) as exc:
         raise UserError(f"ctl {command}: bad arguments {' '.join(args)!r} (see --help)") from exc
     if sock is None:
-        sock = default_path(link) if link is not None else find_socket()
+        door = str(req["door"]) if command == "door" else None
+        sock = default_path(link) if link is not None else find_socket(door=door)
     reply = request(sock, req)
     if as_json:
         click.echo(json.dumps(reply, indent=2))
@@ -263,6 +264,10 @@ def ctl_cmd(
         from ecatsim.pd import format_entries
 
         click.echo(format_entries(reply.get("entries", [reply])))
+    elif set(reply) == {"ok", "commands"}:  # a door's help: one command a line
+        cmds = reply["commands"]
+        lines = [f"{k}: {v}" for k, v in cmds.items()] if isinstance(cmds, dict) else cmds
+        click.echo("\n".join(str(c) for c in lines))
     else:
         click.echo(json.dumps({k: v for k, v in reply.items() if k != "ok"}, indent=2))
     if not reply.get("ok"):
@@ -272,12 +277,19 @@ def ctl_cmd(
 @cli.command("plot")
 @click.argument("csv_path", metavar="TRACE.csv", type=click.Path(path_type=Path))
 @click.option("-o", "--output", required=True, type=click.Path(path_type=Path))
-@click.option("--slave", type=int, default=0, show_default=True)
-def plot_cmd(csv_path: Path, output: Path, slave: int) -> None:
-    """Plot a --trace CSV: position, velocity, torque; set point over actual."""
-    from ecatsim.trace import plot
+@click.option("--slave", type=int, help="Which slave (default: the first in the file).")
+def plot_cmd(csv_path: Path, output: Path, slave: int | None) -> None:
+    """Plot a --trace CSV: position, velocity, torque, set point over actual; or its
+    FILE.mfcio.csv: a TMC8460's steps, motor position and encoder."""
+    from ecatsim.mfcio import trace as mfcio_trace
+    from ecatsim.trace import plot, trace_columns
 
-    plot(csv_path, output, slave)
+    if trace_columns(csv_path)[: len(mfcio_trace.COLUMNS)] == mfcio_trace.COLUMNS:
+        from ecatsim.mfcio.plot import plot_mfcio
+
+        plot_mfcio(csv_path, output, slave)
+    else:
+        plot(csv_path, output, slave)
     click.echo(f"{output}: written")
 
 
@@ -343,18 +355,26 @@ def eeprom_build(
 ) -> None:
     """Build an SII image from any ESI file (written atomically)."""
     from ecatsim.esi import EsiError, read_esi
-    from ecatsim.files import atomic_write
+    from ecatsim.files import write_output
     from ecatsim.sii.image import SiiError, build_image
 
-    def num(v: str | None) -> int | None:
-        return None if v is None else int(v.replace("#x", "0x"), 0)
+    def num(option: str, v: str | None) -> int | None:
+        if v is None:
+            return None
+        try:
+            return int(v.replace("#x", "0x"), 0)
+        except ValueError:
+            e = "8670, 0x21DE or #x21DE" if option == "--product" else "65536 or 0x10000"
+            raise UserError(
+                f"{option} {v}: not a number; give it as in the ESI, e.g. {e}"
+            ) from None
 
     try:
-        desc = read_esi(esi_path, num(product), num(revision))
+        desc = read_esi(esi_path, num("--product", product), num("--revision", revision))
         image = build_image(desc, serial=serial, alias=alias)
     except (EsiError, SiiError, ValueError) as exc:
         raise UserError(str(exc)) from exc
-    atomic_write(output, image)
+    write_output(output, image)
     click.echo(f"{output}: {len(image)} bytes for {desc.name} ({desc.identity.product_code:#x})")
 
 
@@ -380,12 +400,15 @@ def esi_export(output: Path, device: str, description: Path | None) -> None:
     configuration (SII category 1) is decoded register by register in comments."""
     from ecatsim.description import DescriptionError, default_description, load_description
     from ecatsim.esi import export_esi
-    from ecatsim.files import atomic_write
+    from ecatsim.files import write_output
     from ecatsim.slave.od_build import build_od
 
     try:
         if description is not None:
-            desc = load_description(description)
+            try:
+                desc = load_description(description)
+            except DescriptionError as exc:
+                raise UserError(f"--description {exc}") from exc
         else:
             desc = default_description(f"{device}.yaml")
         od = (
@@ -395,7 +418,7 @@ def esi_export(output: Path, device: str, description: Path | None) -> None:
         )
     except DescriptionError as exc:
         raise UserError(str(exc)) from exc
-    atomic_write(output, export_esi(desc, od))
+    write_output(output, export_esi(desc, od))
     click.echo(f"{output}: ESI of {desc.name}")
 
 

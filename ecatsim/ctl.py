@@ -288,14 +288,23 @@ def _alive(path: Path) -> bool:
     return True
 
 
-def find_socket(directory: Path | None = None) -> Path:
-    """The control socket of the one daemon running, when neither --socket nor --link says.
+def find_socket(directory: Path | None = None, door: str | None = None) -> Path:
+    """The control socket of the one daemon running, when neither --socket nor --link says;
+    for a request to front door ``door``: of the one daemon that serves that door.
 
     With none or several, one line says which exist and what to pass."""
     directory = directory or run_dir()
     live = sorted(p for p in directory.glob("*.sock") if _alive(p))
     if len(live) == 1:
         return live[0]
+    if door is not None and len(live) > 1:
+        serving = [p for p in live if door in _doors_of(p)]
+        if len(serving) == 1:
+            return serving[0]
+        if not serving:
+            names = ", ".join(p.name.removesuffix(".sock") for p in live)
+            raise UserError(f"ctl: none of the running daemons ({names}) serves the door {door}")
+        live = serving
     if not live:
         raise UserError(
             f"ctl: no running daemon has a control socket in {directory}; start one with "
@@ -305,12 +314,25 @@ def find_socket(directory: Path | None = None) -> Path:
     raise UserError(f"ctl: several daemons are running ({names}); say which with --link NAME")
 
 
+def _doors_of(path: Path) -> dict[str, Any]:
+    """The front doors the daemon at ``path`` serves (none if it does not answer)."""
+    try:
+        doors = request(path, {"cmd": "status"}, timeout=1.0).get("doors")
+    except (UserError, ValueError):
+        return {}
+    return doors if isinstance(doors, dict) else {}
+
+
 def _remove_stale(path: Path) -> None:
     """Remove a socket left by a daemon that is gone; refuse one a live daemon serves."""
     if not _alive(path):
         path.unlink(missing_ok=True)
         return
-    raise UserError(f"--ctl {path}: another daemon serves this control socket; pass --ctl PATH")
+    raise UserError(
+        f"{path}: a running daemon answers on this control socket (see it with 'ecatsim ctl "
+        f"--socket {path} status'); stop it first, or give this daemon another socket with "
+        "--ctl PATH if it serves something else"
+    )
 
 
 def request(path: Path, req: dict[str, Any], timeout: float = 2.0) -> dict[str, Any]:

@@ -37,8 +37,58 @@ def _errors(s: dict[str, Any]) -> str:
     return f"rx {rx} fwd {fwd} pu {s['pu_errors']} pdi {s['pdi_errors']} lost {lost}"
 
 
+def _table(rows: list[list[str]]) -> list[str]:
+    """Rows of cells as aligned lines (the first row is the header)."""
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    return ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip() for r in rows]
+
+
+def _cell(v: Any) -> str:
+    if isinstance(v, bool):
+        return "yes" if v else "no"
+    if isinstance(v, list | tuple):
+        return ",".join(_cell(x) for x in v) or "-"
+    if isinstance(v, dict):
+        return ",".join(f"{k}={_cell(x)}" for k, x in v.items()) or "-"
+    return "-" if v is None or v == "" else str(v)
+
+
+#: the columns ``ctl status`` shows of each front door's devices (the rest: ``--json``)
+DOOR_COLUMNS: dict[str, tuple[str, ...]] = {
+    "modules": (
+        "address", "mode", "closed_loop", "actual_position", "target_position",
+        "actual_speed", "encoder", "target_reached", "program", "faults", "errors",
+    ),
+    "nodes": ("name", "address", "state", "actpos", "tagpos", "current_ma", "flags"),
+}  # fmt: skip
+
+
+def format_door(name: str, door: dict[str, Any]) -> list[str]:
+    """One front door (TMCL, LIN, a PDI or MFC CTRL socket): a line of its counters, then
+    a table of its devices (TMCL modules, LIN nodes), one per line."""
+    scalars = {k: v for k, v in door.items() if not _is_rows(v)}
+    counters = ", ".join(f"{k.replace('_', ' ')} {_cell(v)}" for k, v in scalars.items())
+    lines = [f"{name}: {counters}"]
+    for key, devices in door.items():
+        if not _is_rows(devices):
+            continue
+        cols = [c for c in DOOR_COLUMNS.get(key, ()) if c in devices[0]] or list(devices[0])
+        rows = [[c.replace("_", " ") for c in cols]]
+        rows += [[_cell(d.get(c)) for c in cols] for d in devices]
+        lines += ["  " + ln for ln in _table(rows)]
+    return lines
+
+
+def _is_rows(v: Any) -> bool:
+    return isinstance(v, list) and bool(v) and all(isinstance(x, dict) for x in v)
+
+
 def format_status(status: dict[str, Any]) -> str:
-    """The daemon's ``status`` answer as aligned text, one slave per line."""
+    """The daemon's ``status`` answer as aligned text: the EtherCAT slaves, one per line
+    (left out for a daemon that serves front doors only), then each front door."""
+    doors = status.get("doors", {})
+    if not status.get("slaves") and doors:
+        return "\n".join(ln for name, door in doors.items() for ln in format_door(name, door))
     header = ["slave", "station", "state", "AL status code", *(f"port {p}" for p in PORTS)]
     header += ["errors", "wd expiries"]
     rows = [header]
@@ -58,8 +108,7 @@ def format_status(status: dict[str, Any]) -> str:
                 f"{s['wd_expired']}{wd}",
             ]
         )
-    widths = [max(len(r[i]) for r in rows) for i in range(len(header))]
-    lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip() for r in rows]
+    lines = _table(rows)
     lines.append(f"frames {status.get('frames', 0)}, bad frames {status.get('bad_frames', 0)}")
     faults = status.get("faults", [])
     if faults:
@@ -69,6 +118,6 @@ def format_status(status: dict[str, Any]) -> str:
             lines.append(f"  #{f['id']} {f['kind']} {rest}".rstrip())
     else:
         lines.append("active faults: none")
-    for name, door in status.get("doors", {}).items():
-        lines.append(f"{name}: " + ", ".join(f"{k} {v}" for k, v in door.items()))
+    for name, door in doors.items():
+        lines += format_door(name, door)
     return "\n".join(lines)

@@ -327,6 +327,16 @@ def _mfcio(r: _Reader, raw: Any) -> bytes:
 def parse_description(data: Any, src: str) -> DeviceDescription:
     """Validate a loaded YAML document."""
     r = _Reader(src)
+    if not isinstance(data, dict):
+        what = (
+            "an XML file (an ESI? 'ecatsim eeprom build' reads those)"
+            if isinstance(data, str) and data.lstrip().startswith("<")
+            else f"YAML of type {type(data).__name__}"
+        )
+        raise DescriptionError(
+            f"{src}: not a device description: {what}; expected a YAML mapping with device:, "
+            "identity:, ... as in config/tmc8670.yaml"
+        )
     d = r.mapping(data, "", _TOP)
     dev = r.mapping(
         d.get("device", {}),

@@ -330,7 +330,9 @@ def read_esi_device(
     root = parse_root(path)
     vendor = _num(_text(root, "Vendor/Id", f"{path}"), f"{path}: <Vendor><Id>")
     chosen = []
+    found = []
     for d, tname, pc, rv in device_ids(root, path):
+        found.append(f"--product {pc:#x} --revision {rv:#x}")
         if (
             (product is None or pc == product)
             and (revision is None or rv == revision)
@@ -340,12 +342,12 @@ def read_esi_device(
             assert t is not None
             chosen.append((d, t, pc, rv))
     if not chosen:
-        want = ", ".join(
-            f"{k} {v}"
+        want = " ".join(
+            f"--{k} {v} ({v:#x})" if isinstance(v, int) else f"device_type {v}"
             for k, v in (("type", device_type), ("product", product), ("revision", revision))
             if v is not None
         )
-        raise EsiError(f"{path}: no device with {want}")
+        raise EsiError(f"{path}: no device matches {want}; it has: {'; '.join(found)}")
     if len(chosen) > 1:
         ids = ", ".join(f"{(t.text or '').strip()} {pc:#x}/{rv:#x}" for _d, t, pc, rv in chosen)
         raise EsiError(f"{path}: {len(chosen)} devices ({ids}): {hint}")

@@ -11,6 +11,8 @@ import os
 import tempfile
 from pathlib import Path
 
+from ecatsim.errors import UserError
+
 
 def current_umask() -> int:
     """The process umask (read by setting it and setting it back)."""
@@ -50,3 +52,21 @@ def atomic_write(path: Path, data: bytes) -> None:
         os.fsync(dfd)
     finally:
         os.close(dfd)
+
+
+def write_output(path: Path, data: bytes, option: str = "-o") -> None:
+    """Write a command's output file atomically; a path that cannot be written is one
+    line naming the option, the path and the fix (no traceback, no partial file)."""
+    path = Path(path)
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        what = "is not a directory" if parent.exists() else "does not exist"
+        raise UserError(
+            f"{option} {path}: the directory {parent} {what}: create it first or write elsewhere"
+        )
+    if path.is_dir():
+        raise UserError(f"{option} {path}: is a directory: give a file name")
+    try:
+        atomic_write(path, data)
+    except OSError as exc:
+        raise UserError(f"{option} {path}: cannot write ({exc.strerror or exc})") from exc

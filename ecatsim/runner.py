@@ -13,7 +13,7 @@ from ecatsim import compiled, realtime
 from ecatsim.build import build_segment
 from ecatsim.clock import MonotonicClock
 from ecatsim.config import SegmentConfig, default_segment, load_segment, repeat_default
-from ecatsim.ctl import ControlSocket, default_path
+from ecatsim.ctl import ControlSocket, default_path, run_dir
 from ecatsim.daemon import Daemon
 from ecatsim.device.drive import Drive
 from ecatsim.errors import UserError
@@ -24,6 +24,7 @@ from ecatsim.link.base import Link
 from ecatsim.link.errors import LinkError
 from ecatsim.link.follow import CpuFollower
 from ecatsim.link.raw import RawLink, iface_ipv4_addresses
+from ecatsim.linklock import LinkLock, lock_link
 from ecatsim.mfcio import trace as mfcio_trace
 from ecatsim.mfcio.block import MfcioBlock
 from ecatsim.privileges import drop_privileges
@@ -79,6 +80,24 @@ def segment_config(opts: RunOptions) -> SegmentConfig:
     return default_segment()
 
 
+def udp_address(udp: str) -> tuple[str, int]:
+    """``--udp HOST:PORT`` as (host, port); one line with the fix if it is not that."""
+    host, sep, port = udp.rpartition(":")
+    if not sep or not port.isdigit():
+        raise UserError(f"--udp {udp}: expected HOST:PORT, e.g. 127.0.0.1:34980")
+    return host or "0.0.0.0", int(port)
+
+
+def take_link(opts: RunOptions) -> LinkLock | None:
+    """The lock of the one link this daemon will serve (decision O1): refused with the
+    PID of the daemon serving it already."""
+    chosen = [x for x in (opts.iface, opts.tap, opts.udp) if x]
+    if len(chosen) != 1:
+        raise UserError("give exactly one of --iface IFACE, --tap NAME or --udp HOST:PORT")
+    port = udp_address(opts.udp)[1] if opts.udp else None
+    return lock_link(run_dir(), opts.iface, opts.tap, port)
+
+
 def open_link(opts: RunOptions) -> Link:
     """Open exactly one of --iface, --tap, --udp. Errors are one line with the fix."""
     chosen = [x for x in (opts.iface, opts.tap, opts.udp) if x]
@@ -99,10 +118,8 @@ def open_link(opts: RunOptions) -> Link:
             return TapLink(opts.tap)
         from ecatsim.link.udp import UdpLink
 
-        host, sep, port = (opts.udp or "").rpartition(":")
-        if not sep or not port.isdigit():
-            raise UserError(f"--udp {opts.udp}: expected HOST:PORT, e.g. 127.0.0.1:34980")
-        return UdpLink(host or "0.0.0.0", int(port))
+        host, port = udp_address(opts.udp or "")
+        return UdpLink(host, port)
     except LinkError as exc:
         raise UserError(str(exc)) from exc
 
@@ -142,6 +159,16 @@ def follow_master(opts: RunOptions, link: Link) -> CpuFollower | None:
 
 
 def run_daemon(opts: RunOptions) -> None:
+    """Take the link's lock (before anything is written: EEPROM, trace), then serve."""
+    link_lock = take_link(opts)
+    try:
+        serve(opts)
+    finally:
+        if link_lock is not None:
+            link_lock.close()
+
+
+def serve(opts: RunOptions) -> None:
     """Build everything, log ``ready``, serve until SIGINT/SIGTERM."""
     cfg = segment_config(opts)
     priority = realtime.choose_priority(opts.rt_priority, opts.no_rt, opts.busy_poll, opts.cpu)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import csv
 from pathlib import Path
-from typing import IO
+from typing import IO, Any
 
 from ecatsim.errors import UserError
 
@@ -49,22 +49,40 @@ class TraceWriter:
         self._f.close()
 
 
-def read_trace(csv_path: Path, slave: int) -> list[dict[str, str]]:
-    """The rows of one slave of a ``--trace`` CSV; anything else is one line saying why."""
+def trace_columns(csv_path: Path) -> tuple[str, ...]:
+    """The header of a CSV file (empty where it cannot be read: :func:`read_trace` says
+    why)."""
+    try:
+        with open(csv_path, newline="", encoding="utf-8") as f:
+            return tuple(next(csv.reader(f), ()))
+    except (OSError, UnicodeDecodeError, csv.Error):
+        return ()
+
+
+def read_trace(
+    csv_path: Path, slave: int | None, columns: tuple[str, ...] = COLUMNS
+) -> list[dict[str, str]]:
+    """The rows of one slave (None: the first in the file) of a ``--trace`` CSV with
+    ``columns``; anything else is one line saying why."""
     hint = "write one with 'ecatsim run --trace FILE.csv'"
     try:
         with open(csv_path, newline="", encoding="utf-8") as f:
             reader = csv.DictReader(f)
             header = tuple(reader.fieldnames or ())
-            if header[: len(COLUMNS)] != COLUMNS:
-                missing = [c for c in COLUMNS if c not in header]
+            if header[: len(columns)] != columns:
+                missing = [c for c in columns if c not in header]
                 what = (
                     f"columns {', '.join(missing[:3])} missing"
                     if missing
                     else "columns out of order"
                 )
                 raise UserError(f"{csv_path}: not an ecatsim trace ({what}); {hint}")
-            rows = [r for r in reader if int(r["slave"]) == slave]
+            rows = []
+            for r in reader:
+                if slave is None:
+                    slave = int(r["slave"])
+                if int(r["slave"]) == slave:
+                    rows.append(r)
     except OSError as exc:
         raise UserError(f"{csv_path}: cannot read ({exc.strerror})") from exc
     except UnicodeDecodeError:
@@ -74,7 +92,8 @@ def read_trace(csv_path: Path, slave: int) -> list[dict[str, str]]:
     except (ValueError, csv.Error) as exc:
         raise UserError(f"{csv_path}: not an ecatsim trace (bad row: {exc}); {hint}") from exc
     if not rows:
-        raise UserError(f"{csv_path}: no rows for slave {slave} (use --slave N)")
+        which = "" if slave is None else f" for slave {slave}"
+        raise UserError(f"{csv_path}: no rows{which} (use --slave N)")
     return rows
 
 
@@ -92,6 +111,23 @@ STATE_ABBREV = {
 
 #: names of the modes of operation (6061h). Ref: CiA 402-2 Table 35.
 MODE_NAMES = {1: "pp", 3: "pv", 4: "tq", 6: "hm", 7: "ip", 8: "csp", 9: "csv", 10: "cst"}
+
+
+#: what the short names stand for, for the plot's key
+STATE_LONG = {short: long.lower().replace("_", " ") for long, short in STATE_ABBREV.items()}
+
+
+def state_key(labels: list[str]) -> str:
+    """The key to the state names the marks use (CiA 402 PDS states), in the order of
+    first use: ``SOD switch on disabled, RTSO ready to switch on, ...``."""
+    seen: list[str] = []
+    for label in labels:
+        for name in label.split("→"):
+            if name in STATE_LONG and name not in seen:
+                seen.append(name)
+    if not seen:
+        return ""
+    return "CiA 402 states: " + ", ".join(f"{n} {STATE_LONG[n]}" for n in seen)
 
 
 def state_marks(t: list[float], rows: list[dict[str, str]]) -> list[tuple[float, str]]:
@@ -125,7 +161,23 @@ def mode_spans(t: list[float], rows: list[dict[str, str]]) -> list[tuple[float, 
     return spans
 
 
-def plot(csv_path: Path, out: Path, slave: int = 0) -> None:
+def save_figure(fig: Any, out: Path, dpi: int = 110, option: str = "-o") -> None:
+    """Render ``fig`` in the format its suffix names, then write it atomically: a bad
+    path or format is one line, and no partial file is left."""
+    import io
+
+    from ecatsim.files import write_output
+
+    buf = io.BytesIO()
+    fmt = out.suffix[1:].lower() or "png"
+    try:
+        fig.savefig(buf, dpi=dpi, format=fmt)
+    except ValueError as exc:
+        raise UserError(f"{option} {out}: {exc} (use .png, .svg or .pdf)") from None
+    write_output(out, buf.getvalue(), option)
+
+
+def plot(csv_path: Path, out: Path, slave: int | None = None) -> None:
     """Position, velocity and torque against time: the set point dashed over the actual
     value, the modes of operation shaded and named, state changes marked. Needs the
     ``plot`` extra (matplotlib)."""
@@ -137,6 +189,7 @@ def plot(csv_path: Path, out: Path, slave: int = 0) -> None:
     except ImportError as exc:
         raise UserError("ecatsim plot needs matplotlib: pip install 'ecatsim[plot]'") from exc
     rows = read_trace(csv_path, slave)
+    slave = int(rows[0]["slave"])
     t = [float(r["time_s"]) for r in rows]
     fig, axes = plt.subplots(3, 1, sharex=True, figsize=(9, 7))
     spans = mode_spans(t, rows)
@@ -172,6 +225,9 @@ def plot(csv_path: Path, out: Path, slave: int = 0) -> None:
     top.legend(loc="upper left")
     axes[-1].set_xlabel("time [s]")
     fig.suptitle(f"{csv_path.name}: slave {slave}", y=0.995)
-    fig.tight_layout()
-    fig.savefig(out, dpi=110)
+    key = state_key([text for _t, text in marks])
+    if key:
+        fig.text(0.01, 0.005, key, fontsize=7, color="dimgrey", ha="left", va="bottom")
+    fig.tight_layout(rect=(0, 0.02 if key else 0, 1, 1))
+    save_figure(fig, out)
     plt.close(fig)

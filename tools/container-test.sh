@@ -2,11 +2,14 @@
 # Build the ecatsim image from the Dockerfile and bring its slave to OP with a real master.
 #
 #   sudo tools/container-test.sh
+#   sudo tools/container-test.sh --base-only   # step 1 only: the base image the Dockerfile
+#                                              # uses by default, then exit
 #
 # 1. Base image: docker.io/library/python:3.11-slim only if ECATSIM_TRY_REGISTRY=1 and the
 #    pull works; otherwise a local Debian bookworm image, localhost/ecatsim-base:bookworm,
 #    made with debootstrap (mirror: DEBIAN_MIRROR) and kept for the next run.
-# 2. The project image, localhost/ecatsim:test, built with the same Dockerfile.
+# 2. The project image, localhost/ecatsim:test, built with the same Dockerfile; it prints
+#    the core the image runs (`ecatsim --version`: core: compiled) and the image's size.
 # 3. Two private network namespaces joined by a veth pair; the container runs
 #    `ecatsim run --iface <slave end>` in the slave namespace (podman --network ns:PATH)
 #    and tools/container_master.py (pysoem, the project's .venv) drives it to OP from the
@@ -18,6 +21,15 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 REPO=$(pwd)
+BASE_ONLY=0
+case "${1:-}" in
+--base-only) BASE_ONLY=1 ;;
+"") ;;
+*)
+    echo "usage: $0 [--base-only]" >&2
+    exit 2
+    ;;
+esac
 
 REGISTRY_BASE=docker.io/library/python:3.11-slim
 LOCAL_BASE=localhost/ecatsim-base:bookworm
@@ -53,7 +65,7 @@ if [ -z "$CT" ]; then
     echo "container-test: skipped: neither podman nor docker works here" >&2
     exit 77
 fi
-[ -x "$PY" ] || die "no project venv at $PY: python3 -m venv .venv && .venv/bin/pip install -r requirements-test.lock && .venv/bin/pip install --no-deps -e ."
+[ -x "$PY" ] || [ "$BASE_ONLY" = 1 ] || die "no project venv at $PY: python3 -m venv .venv && .venv/bin/pip install -r requirements-test.lock && .venv/bin/pip install --no-deps -e ."
 
 # Engine options for hosts that are containers themselves (e.g. CI sandboxes):
 # - crun refuses to run anything when cgroup v1 and v2 are mixed ("hybrid") and v2 has a
@@ -157,6 +169,9 @@ image_exists() {
     fi
 }
 
+# the CA bundle the host's pip trusts
+HOST_CA=${PIP_CERT:-${REQUESTS_CA_BUNDLE:-${SSL_CERT_FILE:-/etc/ssl/certs/ca-certificates.crt}}}
+
 T0=$(now)
 
 # --- 1. base image
@@ -178,7 +193,7 @@ if [ -z "$BASE" ]; then
         command -v debootstrap >/dev/null 2>&1 || die "debootstrap not found: apt-get install debootstrap"
         ROOTFS=$(mktemp -d /var/tmp/ecatsim-rootfs.XXXXXX)
         say "base: debootstrap bookworm from $MIRROR into $ROOTFS"
-        bg_run debootstrap --variant=minbase --include=python3,python3-venv,python3-pip,iproute2 \
+        bg_run debootstrap --variant=minbase --include=python3,python3-venv,iproute2 \
             bookworm "$ROOTFS" "$MIRROR" >"$ROOTFS.log" 2>&1 || {
             tail -n 30 "$ROOTFS.log" >&2
             rm -f "$ROOTFS.log"
@@ -186,7 +201,15 @@ if [ -z "$BASE" ]; then
         }
         rm -f "$ROOTFS.log"
         rm -rf "$ROOTFS"/var/cache/apt/archives/*.deb "$ROOTFS"/var/lib/apt/lists/*
-        tar -C "$ROOTFS" -c . | "$CT" import \
+        # pip in the image builds trusts what the host trusts (a TLS-intercepting proxy's
+        # CA, say): the host's CA bundle, where it has one, is the base's
+        CA_ENV=()
+        if [ -f "$HOST_CA" ] && [ -r "$HOST_CA" ]; then
+            mkdir -p "$ROOTFS/etc/ssl/certs"
+            cp "$(readlink -f "$HOST_CA")" "$ROOTFS/etc/ssl/certs/ca-certificates.crt"
+            CA_ENV=(--change 'ENV PIP_CERT=/etc/ssl/certs/ca-certificates.crt')
+        fi
+        tar -C "$ROOTFS" -c . | "$CT" import "${CA_ENV[@]}" \
             --change 'ENV PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin' \
             --change 'ENV LANG=C.UTF-8' \
             --change 'CMD ["/bin/bash"]' \
@@ -197,13 +220,16 @@ if [ -z "$BASE" ]; then
     fi
 fi
 T_BASE=$(since "$T")
+if [ "$BASE_ONLY" = 1 ]; then
+    say "base image $BASE ready (${T_BASE} s)"
+    exit 0
+fi
 
 # --- 2. project image (pip needs PyPI: host network for the build)
 T=$(now)
 BUILD_OPTS=(--network host --build-arg "BASE=$BASE")
 # pip in the build trusts what the host's pip trusts (a TLS-intercepting proxy's CA, say):
 # the bundle is mounted for the RUN steps only and does not end up in the image
-HOST_CA=${PIP_CERT:-${REQUESTS_CA_BUNDLE:-${SSL_CERT_FILE:-/etc/ssl/certs/ca-certificates.crt}}}
 if [ -f "$HOST_CA" ] && [ -r "$HOST_CA" ]; then
     BUILD_OPTS+=(-v "$(readlink -f "$HOST_CA"):/run/ecatsim-build-ca.pem:ro"
         --build-arg PIP_CA_BUNDLE=/run/ecatsim-build-ca.pem)
@@ -218,6 +244,11 @@ if [ -n "$OLD_IMAGE" ] && [ "$OLD_IMAGE" != "$("$CT" image inspect -f '{{.Id}}' 
     "$CT" rmi "$OLD_IMAGE" >/dev/null 2>&1 || true # the previous run's image, now untagged
 fi
 T_BUILD=$(since "$T")
+# what the image is: the core it runs (a build stage compiles it) and its size
+CORE=$(ct run --rm "${LIMITS[@]}" "$IMAGE" --version | grep '^core: ') ||
+    die "ecatsim --version failed in the image"
+say "image $CORE"
+say "image size $("$CT" image inspect -f '{{.Size}}' "$IMAGE") bytes"
 
 # --- 3. run: container in the slave namespace, pysoem master in the master namespace
 T=$(now)

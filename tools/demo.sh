@@ -4,7 +4,8 @@
 # as a user with sudo (it asks for it).
 #   tools/demo.sh                 # one TMC8670 drive
 #   tools/demo.sh --slaves 4
-#   tools/demo.sh --mfcio         # a TMC8460 MFCIO slave beside the drive (demo_mfcio.py)
+#   tools/demo.sh --mfcio         # a TMC8460 MFCIO slave beside the drive (demo_mfcio.py);
+#                                 # the plot shows its stepper: steps, position, encoder
 #   ECATSIM_KEEP_LINKS=1 tools/demo.sh   # leave the veth pair up afterwards
 # A veth pair the demo creates is removed on exit; one that existed before is left as it was
 # found (the master's promiscuous mode switched off again).
@@ -49,10 +50,12 @@ cleanup() {
 trap cleanup EXIT
 
 MASTER=tools/demo_master.py
+PLOT_FROM=trace.csv # the drive's trace; --mfcio: the stepper's (FILE.mfcio.csv)
 if [ "${1:-}" = "--mfcio" ]; then
     shift
     set -- --config config/tmc8460-beside-tmc8670.yaml "$@"
     MASTER=tools/demo_mfcio.py
+    PLOT_FROM=trace.mfcio.csv
 fi
 
 OUT=${ECATSIM_DEMO_OUT:-demo-out}
@@ -71,4 +74,4 @@ echo "daemon on $SLAVE_IF (log: $LOG); demo master on $MASTER_IF"
 kill "$DAEMON"
 wait "$DAEMON" 2>/dev/null || true
 DAEMON=
-.venv/bin/ecatsim plot "$OUT/trace.csv" -o "$OUT/plot.png"
+.venv/bin/ecatsim plot "$OUT/$PLOT_FROM" -o "$OUT/plot.png"

@@ -94,7 +94,6 @@ def run(master: Any) -> int:
         print("no TMC8460 MFCIO slave (product 8460) in the segment", file=sys.stderr)
         return 1
     io = mfcio[0]
-    print(f"MFCIO configuration (0x0580): {io._fprd(0x0580, 44).hex()}")
     master.config_map()
     bus = Bus(master, io)
     if not bus.state(pysoem.SAFEOP_STATE) or not bus.state(pysoem.OP_STATE):
@@ -124,10 +123,7 @@ def run(master: Any) -> int:
         PWM_BBM_H=20,
         PWM_BBM_L=20,
     )
-    print(
-        "PWM: 25 kHz centred, channel 0 at 30 %, complementary with 200 ns BBM "
-        "(see ecatsim ctl mfcio 1 pins / status)"
-    )
+    print("PWM: 25 kHz centred, channel 0 at 30 %, complementary with 200 ns BBM")
     ok = bus.state(pysoem.SAFEOP_STATE)
     bus.cycle(5, SD_CFG=0, SD_ST=1000)
     after = bus.cycle(300, SD_CFG=0x01)

@@ -23,11 +23,27 @@ from pathlib import Path
 
 
 def connect(where: str):  # type: ignore[no-untyped-def]
+    """The pytrinamic interface to ``where``; None (and one line saying how to start the
+    emulated module) where nothing answers there."""
     from pytrinamic.connections import SerialTmclInterface, SocketTmclInterface
 
-    if re.match(r"^\d+\.\d+\.\d+\.\d+:\d+$", where):
-        return SocketTmclInterface(where)
-    return SerialTmclInterface(where, timeout_s=2)
+    tcp = re.match(r"^\d+\.\d+\.\d+\.\d+:\d+$", where) is not None
+    try:
+        if tcp:
+            return SocketTmclInterface(where)
+        return SerialTmclInterface(where, timeout_s=2)
+    except OSError as exc:  # serial.SerialException is an OSError too
+        cause: BaseException | None = exc  # pytrinamic wraps the socket's error
+        while cause is not None and not getattr(cause, "strerror", None):
+            cause = cause.__cause__ or cause.__context__
+        why = getattr(cause, "strerror", None) or str(exc)
+        line = f"tcp://{where}" if tcp else f"pty:{where}"
+        print(
+            f"tmcl_demo: no TMCL module at {where} ({why}): start one first with "
+            f"'.venv/bin/ecatsim tmcl --listen {line}'",
+            file=sys.stderr,
+        )
+        return None
 
 
 def main() -> int:
@@ -40,6 +56,8 @@ def main() -> int:
     from pytrinamic.modules import TMCM1311
 
     iface = connect(args.connect)
+    if iface is None:
+        return 1
     module = TMCM1311(iface)
     motor = module.motors[0]
     AP = motor.AP
@@ -80,15 +98,17 @@ def main() -> int:
         print("# matplotlib not installed: no plot", file=sys.stderr)
         return 0
     ts = [s[0] for s in samples]
-    fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(9, 6))
+    fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(9, 6.5))
     ax1.plot(ts, [s[3] for s in samples], "--", color="grey", label="target position (AP 0)")
     ax1.plot(ts, [s[1] for s in samples], label="actual position (AP 1)")
     ax1.set_ylabel("microsteps")
-    ax1.legend(loc="upper right")
     ax2.plot(ts, [s[2] for s in samples], color="tab:orange", label="actual speed (AP 3)")
     ax2.set_ylabel("microsteps/s")
     ax2.set_xlabel("s")
-    ax2.legend(loc="upper right")
+    for ax in (ax1, ax2):  # below each plot: the phase names along the top stay readable
+        ax.legend(loc="upper right", bbox_to_anchor=(1, -0.08), ncol=2, fontsize=8, frameon=False)
+    lo, hi = ax1.get_ylim()
+    ax1.set_ylim(lo, hi + 0.12 * (hi - lo))  # room above the curves for the phase names
     last = None
     for t, *_, phase in samples:
         if phase != last:
@@ -106,7 +126,11 @@ def main() -> int:
             last = phase
     fig.suptitle("TMCM-1311 (ecatsim tmcl) driven by pytrinamic")
     fig.tight_layout()
-    fig.savefig(args.output)
+    try:
+        fig.savefig(args.output)
+    except OSError as exc:
+        print(f"tmcl_demo: -o {args.output}: cannot write ({exc.strerror})", file=sys.stderr)
+        return 1
     print(f"# {args.output}: written", file=sys.stderr)
     return 0
 

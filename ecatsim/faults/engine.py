@@ -26,13 +26,23 @@ from ecatsim.esc import regs
 from ecatsim.faults.spec import Family, FaultSpec, FaultSpecError
 from ecatsim.faults.wire import patch
 from ecatsim.segment import Segment
-from ecatsim.slave.al import AlState
+from ecatsim.slave.al import RANK, AlState
 from ecatsim.slave.firmware import Firmware
 from ecatsim.wire.mailbox import MbxError
 
 log = structlog.get_logger("ecatsim.faults")
 
 NS = 1_000_000_000
+
+
+def fall_target(state: AlState) -> AlState:
+    """Where an ``al_fall`` leaves a slave in ``state``: the lower of ``state`` and SAFEOP
+    (a local error never raises the state; INIT, PREOP and BOOT keep theirs).
+
+    Ref: ETG.1000.6 §6.4.1.4 (local error: the slave goes to a lower state and sets the
+    error indication).
+    """
+    return state if RANK[state] <= RANK[AlState.SAFEOP] else AlState.SAFEOP
 
 
 @dataclass(slots=True)
@@ -274,8 +284,8 @@ class FaultEngine:
             self._power_off(pos, now_ns, now_ns + s.value * 1_000_000)
         elif s.kind == "al_refuse":  # the slave has ecatsim's firmware (_check_applies)
             fw.refuse_next = s.code
-        elif s.kind == "al_fall":
-            fw.fail(AlState.SAFEOP, s.code, now_ns)
+        elif s.kind == "al_fall":  # a fall goes down, never up (decision O2)
+            fw.fail(fall_target(fw.state), s.code, now_ns)
         else:
             mbx = getattr(fw, "mbx", None)
             if mbx is None:

@@ -62,10 +62,8 @@ class LinDoor:
     def status(self) -> dict[str, Any]:
         now = self.clock.now_ns()
         p = self.bus.parser
-        nodes = ", ".join(
-            f"{s['name']}@0x{s['address']:02X} {s['state']} {s['actpos']}"
-            for s in (n.status(now) for n in self.bus.nodes)
-        )
+        keys = ("name", "address", "state", "actpos", "tagpos", "current_ma", "flags")
+        nodes = [{k: s[k] for k in keys} for s in (n.status(now) for n in self.bus.nodes)]
         errors = " ".join(f"{k.lower()} {v}" for k, v in p.errors.items())
         return {
             "pty": str(self.pty.link),

@@ -8,7 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ecatsim.files import atomic_write
-from ecatsim.sii.image import SiiError
+from ecatsim.sii.image import SiiError, parse_image
 
 
 class EepromStore:
@@ -16,16 +16,20 @@ class EepromStore:
 
     @staticmethod
     def load(path: Path) -> bytearray:
-        """Read an image; SiiError (one line naming the file) if unusable."""
+        """Read an image; SiiError (one line naming the file and what is wrong) where
+        ``ecatsim eeprom show`` would reject it: too short for the header, an odd size,
+        categories that run past the end or no end marker."""
         try:
             data = Path(path).read_bytes()
         except OSError as exc:
             raise SiiError(f"{path}: cannot read the EEPROM image ({exc.strerror})") from exc
-        if len(data) < 16 or len(data) % 2:
+        try:
+            parse_image(data)  # what 'ecatsim eeprom show' accepts (decision O3)
+        except SiiError as exc:
             raise SiiError(
-                f"{path}: {len(data)} bytes is not an SII image (need an even size >= 16); "
-                "rebuild it with 'ecatsim eeprom build'"
-            )
+                f"{path}: not an SII EEPROM image: {exc}; rebuild it with "
+                "'ecatsim eeprom build', or remove it and a new one is made"
+            ) from None
         return bytearray(data)
 
     @staticmethod

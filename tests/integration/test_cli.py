@@ -175,7 +175,18 @@ def test_default_control_socket_under_the_run_directory(
         1,
         "ecatsim: error: ctl od: 0x06020000 object does not exist\n",
     )
-    line = one_error_line(ecatsim("run", "--iface", d.pair.slave_if, ns=d.pair.slave_ns))
-    assert "another daemon serves this control socket" in line
+    # a second daemon on the link is refused, with its own control socket too (decision O1)
+    assert d.proc is not None
+    for extra in ([], ["--ctl", str(tmp_path / "second.sock")]):
+        r = ecatsim("run", "--iface", d.pair.slave_if, *extra, ns=d.pair.slave_ns)
+        line = one_error_line(r)
+        assert line == (
+            f"ecatsim: error: --iface {d.pair.slave_if}: ecatsim PID {d.proc.pid} serves this "
+            "link already; two daemons on one link would both answer every frame: stop that "
+            f"one first (kill {d.proc.pid})"
+        )
+        assert r.stdout == ""
+    assert not (tmp_path / "second.sock").exists()
+    assert d.alive()
     d.stop()
     assert not sock.exists()

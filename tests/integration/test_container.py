@@ -1,6 +1,7 @@
 """The Dockerfile's image, built and run for real: tools/container-test.sh builds it (on a
 local debootstrap base unless ECATSIM_TRY_REGISTRY=1), runs it in a private network
-namespace and brings its slave to OP with pysoem from another.
+namespace and brings its slave to OP with pysoem from another. The image must run the
+compiled core and stay below 254 MB.
 
 Skipped where neither podman nor docker is installed (or none works), unless
 ECATSIM_REQUIRE_CONTAINER=1: then podman missing, or no working engine, is a failure.
@@ -22,6 +23,9 @@ SCRIPT = ROOT / "tools" / "container-test.sh"
 TIMEOUT_S = 1500
 SKIPPED = 77  # the script's status when no container engine works
 OP_LINE = re.compile(r"^container: slave \S+ reached OP, wkc \d+$", re.MULTILINE)
+SIZE_LINE = re.compile(r"^container-test: image size (\d+) bytes$", re.MULTILINE)
+#: the image before the build stage (pure-Python core and host-built .so files): 254 MB
+MAX_IMAGE_BYTES = 254_000_000
 
 
 def _required() -> bool:
@@ -76,3 +80,9 @@ def test_container_image_reaches_op() -> None:
     if rc != 0:
         pytest.fail(f"{SCRIPT.name} exited with {rc}\n{out}", pytrace=False)
     assert OP_LINE.search(stdout), f"no 'reached OP' line\n{out}"
+    # the image runs the compiled core (built in the Dockerfile's build stage), and the
+    # build stage's compiler and the host's build output stay out of it
+    assert "container-test: image core: compiled\n" in stdout, out
+    size = SIZE_LINE.search(stdout)
+    assert size is not None, out
+    assert int(size.group(1)) < MAX_IMAGE_BYTES, out

@@ -72,9 +72,9 @@ def test_fprd_identity_registers(daemon_factory: Any, master_factory: Any) -> No
 
 @pytest.mark.parametrize("n", [1, 3])
 def test_op_and_1000_cycles_of_process_data(
-    daemon_factory: Any, master_factory: Any, n: int
+    daemon_factory: Any, master_factory: Any, n: int, tmp_path: Path
 ) -> None:
-    daemon_factory("--config", str(_echo_config(n)))
+    daemon_factory("--config", str(_echo_config(n, tmp_path)))
     master = master_factory()
     assert master.config_init() == n
     to_op(master)
@@ -104,10 +104,8 @@ def test_op_and_1000_cycles_of_process_data(
     assert lag_ok == 998 * n
 
 
-def _echo_config(n: int) -> Path:
-    import tempfile
-
-    d = Path(tempfile.mkdtemp(prefix="ecatsim-cfg-"))
+def _echo_config(n: int, d: Path) -> Path:
+    """A segment of ``n`` echo slaves in the test's own directory (removed by pytest)."""
     p = d / "segment.yaml"
     p.write_text(f"slaves:\n  - device: echo\n    count: {n}\n")
     return p

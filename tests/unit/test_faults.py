@@ -332,3 +332,31 @@ def test_drive_fault_is_held_until_cleared() -> None:
 
 def test_segment_type() -> None:
     assert isinstance(LoopMaster().seg, Segment)
+
+
+@pytest.mark.parametrize(
+    ("state", "want"),
+    [("init", 0x11), ("preop", 0x12)],
+)
+def test_al_fall_never_raises_the_state(state: str, want: int) -> None:
+    """A fall in INIT or PREOP stays there with the error bit and the code: never up to
+    SAFEOP (decision O2)."""
+    m = LoopMaster(1, "tmc8670")
+    if state == "preop":
+        preop(m)
+    m.inject(kind="al_fall", code=0x001B)
+    m.aprd(0, 0x0130, 2)  # the frame on which the fault fires
+    assert al(m) == (want, 0x001B)
+
+
+def test_al_fall_target_is_the_lower_of_the_state_and_safeop() -> None:
+    from ecatsim.faults.engine import fall_target
+    from ecatsim.slave.al import AlState
+
+    assert [fall_target(s) for s in AlState] == [
+        AlState.INIT,
+        AlState.PREOP,
+        AlState.BOOT,
+        AlState.SAFEOP,
+        AlState.SAFEOP,
+    ]

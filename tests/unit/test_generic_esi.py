@@ -236,7 +236,10 @@ def test_esi_check_over_a_folder_one_line_per_device(tmp_path: Path) -> None:
         ({"device": "tmc8670", "signals": []}, r"slaves\[0\]\.signals: for a generic slave only"),
         ({"device": "generic"}, r"slaves\[0\]\.device: a generic slave needs esi: FILE"),
         ({"esi": "acme-io.xml", "product": "x"}, r"slaves\[0\]\.product: expected an integer"),
-        ({"esi": "acme-io.xml", "device_type": "NOPE"}, r"acme-io.xml: no device with type NOPE"),
+        (
+            {"esi": "acme-io.xml", "device_type": "NOPE"},
+            r"acme-io.xml: no device matches device_type NOPE; it has: ",
+        ),
     ],
 )
 def test_generic_slave_entry_errors_are_one_line(slave: dict[str, object], msg: str) -> None:
