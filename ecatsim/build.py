@@ -17,6 +17,7 @@ from ecatsim.description import (
     DeviceDescription,
     default_description,
     load_description,
+    with_protocol,
 )
 from ecatsim.device.drive import Drive
 from ecatsim.device.echo import EchoDevice
@@ -36,11 +37,13 @@ from ecatsim.slave.al import AlState
 from ecatsim.slave.app import Application
 from ecatsim.slave.coe import CoeProtocol
 from ecatsim.slave.emcy import Emergency
-from ecatsim.slave.firmware import Firmware, MailboxLayout
+from ecatsim.slave.eoe import EoeService
+from ecatsim.slave.firmware import EV_SM1, Firmware, MailboxLayout
 from ecatsim.slave.foe import FoeServer
 from ecatsim.slave.mailbox import MailboxEngine
 from ecatsim.slave.od_build import build_od
 from ecatsim.slave.pdo import PdoImage
+from ecatsim.wire.eoe import IpParams
 from ecatsim.wire.mailbox import MbxType
 
 log = structlog.get_logger("ecatsim.build")
@@ -74,6 +77,16 @@ def _accept_for(fw: Firmware) -> Callable[[int], bool]:
         return fw.state != AlState.BOOT or mtype == MbxType.FOE
 
     return accept
+
+
+def add_eoe(fw: Firmware, mbx: MailboxEngine, sc: SlaveConfig) -> EoeService:
+    """The EoE service beside CoE/FoE; frames from the slave's network wake the firmware's
+    mailbox service as an SM1 event would. Ref: ETG.1000.6 §5.7."""
+    eoe = sc.eoe
+    assert eoe is not None
+    service = EoeService(mbx, IpParams(mac=eoe.mac, ip=eoe.ip, subnet=eoe.mask))
+    service.kick = lambda: fw.service_mailbox(EV_SM1, 0)
+    return service
 
 
 class _Persist:
@@ -117,6 +130,8 @@ def _image(sc: SlaveConfig, desc: DeviceDescription) -> bytearray:
             desc = read_esi(sc.esi)
         except EsiError as exc:
             raise UserError(str(exc)) from exc
+    if sc.eoe is not None:
+        desc = with_protocol(desc, "eoe")  # SII word 0x1C declares EoE (ETG.2010 Table 2)
     if sc.eeprom is not None and sc.eeprom.exists():
         try:
             return EepromStore.load(sc.eeprom)
@@ -193,6 +208,8 @@ def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
             if foe:
                 server = FoeServer(coe_fw.al_state_code, mbx.max_body, sc.foe_dir, sc.foe_password)
                 mbx.register(MbxType.FOE, server.handle)
+            if sc.eoe is not None:
+                add_eoe(coe_fw, mbx, sc)
             mbx.accept = _accept_for(coe_fw)
         else:
             fw = Firmware(pdi, make_device(sc.device, desc), layout)

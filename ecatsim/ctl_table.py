@@ -37,6 +37,17 @@ def _errors(s: dict[str, Any]) -> str:
     return f"rx {rx} fwd {fwd} pu {s['pu_errors']} pdi {s['pdi_errors']} lost {lost}"
 
 
+def eoe_text(position: int, e: dict[str, Any]) -> str:
+    """One slave's EoE counters: frames/fragments/drops each way. Ref: ETG.1000.6 §5.7."""
+    return (
+        f"slave {position} EoE ip {e['ip'] or '-'}: to slave {e['to_slave_frames']} frames "
+        f"({e['to_slave_fragments']} fragments, {e['to_slave_dropped']} dropped), to master "
+        f"{e['to_master_frames']} frames ({e['to_master_fragments']} fragments, "
+        f"{e['to_master_dropped']} dropped), {e['requests']} requests "
+        f"({e['refused']} refused)"
+    )
+
+
 def format_status(status: dict[str, Any]) -> str:
     """The daemon's ``status`` answer as aligned text, one slave per line."""
     header = ["slave", "station", "state", "AL status code", *(f"port {p}" for p in PORTS)]
@@ -60,6 +71,10 @@ def format_status(status: dict[str, Any]) -> str:
         )
     widths = [max(len(r[i]) for r in rows) for i in range(len(header))]
     lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip() for r in rows]
+    for s in status.get("slaves", []):
+        e = s.get("eoe")
+        if e is not None:
+            lines.append(eoe_text(s["position"], e))
     lines.append(f"frames {status.get('frames', 0)}, bad frames {status.get('bad_frames', 0)}")
     faults = status.get("faults", [])
     if faults:

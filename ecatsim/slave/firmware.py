@@ -205,7 +205,7 @@ class Firmware:
                 mbx.receive()
             if ev & EV_SM1:
                 mbx.flush()
-            if mbx.out:
+            if mbx.pending():
                 want |= EV_SM1
         if self.pd_masked:
             want &= ~PD_EVENTS
