@@ -117,6 +117,10 @@ class MailboxEngine:
         raw = self.pdi.sm_read(SM_OUT)
         if raw is None:
             return
+        self.dispatch(raw)
+
+    def dispatch(self, raw: bytes) -> None:
+        """Serve one mailbox as read from SM0 (the header and the rest of the buffer)."""
         try:
             req = self._parse(raw)
             if req is None:
