@@ -352,9 +352,7 @@ def esi() -> None:
 @click.option(
     "--description", type=click.Path(path_type=Path), help="Or: a device description YAML."
 )
-@click.option(
-    "--eoe", is_flag=True, help="Declare EoE, as for a slave configured with 'eoe:'."
-)
+@click.option("--eoe", is_flag=True, help="Declare EoE, as for a slave configured with 'eoe:'.")
 def esi_export(output: Path, device: str, description: Path | None, eoe: bool) -> None:
     """Write the ESI XML of an emulated device (written atomically); a TMC8460 MFCIO
     configuration (SII category 1) is decoded register by register in comments."""

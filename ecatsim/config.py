@@ -157,14 +157,20 @@ def parse_eoe(src: str, key: str, v: object) -> EoeConfig:
         raise _err(src, f"{key}.{bad[0]}", f"unknown key (allowed: {', '.join(_EOE_KEYS)})")
     tap = v.get("tap")
     if not isinstance(tap, str) or not 1 <= len(tap) <= 15 or "/" in tap or " " in tap:
-        raise _err(src, f"{key}.tap", f"expected an interface name of 1..15 characters, got {tap!r}")
+        raise _err(
+            src, f"{key}.tap", f"expected an interface name of 1..15 characters, got {tap!r}"
+        )
     ip = mask = mac = None
     if "ip" in v:
         text = v["ip"]
         addr, _, plen = str(text).partition("/")
         ip = _ipv4(addr)
         if not isinstance(text, str) or ip is None or not plen.isdigit() or int(plen) > 32:
-            raise _err(src, f"{key}.ip", f"expected an address with its prefix like 10.77.0.2/24, got {text!r}")
+            raise _err(
+                src,
+                f"{key}.ip",
+                f"expected an address with its prefix like 10.77.0.2/24, got {text!r}",
+            )
         bits = (0xFFFFFFFF << (32 - int(plen))) & 0xFFFFFFFF
         mask = bits.to_bytes(4, "big")
     if "mac" in v:
@@ -174,8 +180,16 @@ def parse_eoe(src: str, key: str, v: object) -> EoeConfig:
             mac = bytes(int(o, 16) for o in octets)
         except ValueError:
             mac = None
-        if not isinstance(text, str) or mac is None or len(mac) != 6 or any(len(o) != 2 for o in octets) or mac[0] & 1:
-            raise _err(src, f"{key}.mac", f"expected a unicast MAC like 02:00:00:00:00:02, got {text!r}")
+        if (
+            not isinstance(text, str)
+            or mac is None
+            or len(mac) != 6
+            or any(len(o) != 2 for o in octets)
+            or mac[0] & 1
+        ):
+            raise _err(
+                src, f"{key}.mac", f"expected a unicast MAC like 02:00:00:00:00:02, got {text!r}"
+            )
     return EoeConfig(tap, ip, mask, mac)
 
 
@@ -297,7 +311,9 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
     taps = [sc.eoe.tap for sc in out if sc.eoe is not None]
     for i, sc in enumerate(out):
         if sc.eoe is not None and taps.count(sc.eoe.tap) > 1:
-            raise _err(src, f"slaves[{i}].eoe.tap", f"{sc.eoe.tap} is named twice: one TAP per slave")
+            raise _err(
+                src, f"slaves[{i}].eoe.tap", f"{sc.eoe.tap} is named twice: one TAP per slave"
+            )
     faults = data.get("faults") or []
     if not isinstance(faults, list):
         raise _err(src, "faults", "expected a list of faults like {kind: drop, after_frames: 100}")

@@ -176,11 +176,11 @@ def export_esi(desc: DeviceDescription, od: ObjectDictionary | None) -> bytes:
     mb = desc.mailbox
     if mb.protocols:
         mbx = _sub(dev, "Mailbox", DataLinkLayer="true")
+        if "eoe" in mb.protocols:  # the schema's order: AoE, EoE, CoE, FoE (ETG.2000)
+            _sub(mbx, "EoE", IP="true", MAC="true")
         if "coe" in mb.protocols:
             attrs = {a: "true" for k, a in COE_ATTRS.items() if k in mb.coe_details}
             _sub(mbx, "CoE", **attrs)
-        if "eoe" in mb.protocols:
-            _sub(mbx, "EoE", IP="true", MAC="true")  # Ref: ETG.2000 (EoE element)
         if "foe" in mb.protocols or mb.foe:
             _sub(mbx, "FoE")
     if desc.dc:

@@ -120,7 +120,9 @@ class EoeService:
             return EoeResult.UNSPECIFIED_ERROR
         new = IpParams(
             *(
-                getattr(p, f.name) if getattr(p, f.name) is not None else getattr(self.params, f.name)
+                getattr(p, f.name)
+                if getattr(p, f.name) is not None
+                else getattr(self.params, f.name)
                 for f in fields(IpParams)
             )
         )

@@ -217,7 +217,9 @@ class MailboxEngine:
                 return
             mtype, body = item
             if MBX_HEADER_LEN + len(body) > size:
-                self.log.warning("mailbox_reply_too_large", size=MBX_HEADER_LEN + len(body), sm=size)
+                self.log.warning(
+                    "mailbox_reply_too_large", size=MBX_HEADER_LEN + len(body), sm=size
+                )
                 continue
             self.held = self._frame(mtype, body)
         if self.pdi.sm_write(SM_IN, self.held):

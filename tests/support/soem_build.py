@@ -94,7 +94,10 @@ def soem_tree() -> Path:
 #: pysoem's SOEM adds two fields (DCtO, DCl) to the master context but not to the
 #: positional initializer of the global context the classic ``ec_*`` API (EC_VER1, which
 #: SOEM's samples use) relies on; the build copy gets their zero values
-_CONTEXT_FIX = ("    &EcatError,         // .ecaterror     =\n", "    0, 0,               // .DCtO, .DCl\n")
+_CONTEXT_FIX = (
+    "    &EcatError,         // .ecaterror     =\n",
+    "    0, 0,               // .DCtO, .DCl\n",
+)
 
 
 def _library(tree: Path, into: Path) -> list[Path]:
@@ -104,7 +107,10 @@ def _library(tree: Path, into: Path) -> list[Path]:
         (into / d).mkdir(parents=True, exist_ok=True)
         for src in sorted((tree / d).glob("*.c")):
             text = src.read_text(errors="replace")
-            if src.name == "ethercatmain.c" and "DCtO" in (tree / "soem" / "ethercatmain.h").read_text():
+            if (
+                src.name == "ethercatmain.c"
+                and "DCtO" in (tree / "soem" / "ethercatmain.h").read_text()
+            ):
                 anchor, extra = _CONTEXT_FIX
                 if anchor in text and extra not in text:
                     text = text.replace(anchor, anchor + extra, 1)

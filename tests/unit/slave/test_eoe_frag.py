@@ -11,8 +11,12 @@ from ecatsim.slave.eoe_frag import Fragmenter, Reassembler
 from ecatsim.wire.eoe import decode_header, fragment_header
 
 
-def frag(number: int, offset: int, frame: int, last: bool, data: bytes, time: bool = False) -> tuple[object, bytes]:
-    hdr = fragment_header(fragment=number, offset=offset, frame=frame, last=last, time_appended=time)
+def frag(
+    number: int, offset: int, frame: int, last: bool, data: bytes, time: bool = False
+) -> tuple[object, bytes]:
+    hdr = fragment_header(
+        fragment=number, offset=offset, frame=frame, last=last, time_appended=time
+    )
     return decode_header(hdr), data
 
 
@@ -28,7 +32,14 @@ def test_header_words_exact() -> None:
     hdr = fragment_header(fragment=2, offset=6, frame=9, last=True, time_appended=True)
     assert hdr == struct.pack("<HH", 0x0300, 2 | (6 << 6) | (9 << 12))
     h = decode_header(hdr)
-    assert (h.ftype, h.fragment, h.offset, h.frame, h.last, h.time_appended) == (0, 2, 6, 9, True, True)
+    assert (h.ftype, h.fragment, h.offset, h.frame, h.last, h.time_appended) == (
+        0,
+        2,
+        6,
+        9,
+        True,
+        True,
+    )
 
 
 def test_fragmenter_for_a_128_byte_sm1() -> None:
@@ -136,7 +147,10 @@ def test_data_beyond_the_announced_size_drops_the_frame() -> None:
 
 def test_continuation_without_a_start_counts_once() -> None:
     r = Reassembler()
-    assert feed(r, frag(1, 1, 1, False, FRAME[:32]), frag(2, 2, 1, True, FRAME[:32])) == [None, None]
+    assert feed(r, frag(1, 1, 1, False, FRAME[:32]), frag(2, 2, 1, True, FRAME[:32])) == [
+        None,
+        None,
+    ]
     assert r.counters.dropped == 1
 
 

@@ -82,7 +82,7 @@ def test_set_ip_answers_type_3_result_0_and_applies_the_address() -> None:
 
 
 def test_get_ip_answers_type_7_with_octet_reversed_addresses() -> None:
-    m, _, svc, _ = setup()
+    m, _, _svc, _ = setup()
     send(m, struct.pack("<HH", 0x0106, 0), 1)
     r = reply(m)
     assert r[:10] == bytes.fromhex("1000 0000 0012 0701 0000".replace(" ", ""))
@@ -165,7 +165,7 @@ def test_repeat_request_gives_the_last_fragment_again() -> None:
 
 
 def test_queue_overflow_counts_drops_and_mailbox_start_clears() -> None:
-    m, fw, svc, _ = setup()
+    m, _fw, svc, _ = setup()
     for _ in range(40):
         svc.push(bytes(60))
     st = svc.status()
