@@ -24,7 +24,7 @@ from ecatsim.device.echo import EchoDevice
 from ecatsim.device.factory import make_coe_device
 from ecatsim.errors import UserError
 from ecatsim.esc.core import Esc, FrameContext
-from ecatsim.esc.pdi import Pdi
+from ecatsim.esc.pdi import EV_SM0, Pdi
 from ecatsim.esi import EsiError, read_esi
 from ecatsim.mfcio.block import MfcioBlock
 from ecatsim.mfcio.parts import parse_wiring
@@ -38,9 +38,9 @@ from ecatsim.slave.app import Application
 from ecatsim.slave.coe import CoeProtocol
 from ecatsim.slave.emcy import Emergency
 from ecatsim.slave.eoe import EoeService
-from ecatsim.slave.firmware import EV_SM1, Firmware, MailboxLayout
+from ecatsim.slave.firmware import Firmware, MailboxLayout
 from ecatsim.slave.foe import FoeServer
-from ecatsim.slave.mailbox import MailboxEngine
+from ecatsim.slave.mailbox import SM_IN, MailboxEngine
 from ecatsim.slave.od_build import build_od
 from ecatsim.slave.pdo import PdoImage
 from ecatsim.wire.eoe import IpParams
@@ -85,7 +85,8 @@ def add_eoe(fw: Firmware, mbx: MailboxEngine, sc: SlaveConfig) -> EoeService:
     eoe = sc.eoe
     assert eoe is not None
     service = EoeService(mbx, IpParams(mac=eoe.mac, ip=eoe.ip, subnet=eoe.mask))
-    service.kick = lambda: fw.service_mailbox(EV_SM1, 0)
+    ev_sm1 = EV_SM0 << SM_IN  # the event of SM1 (mailbox in) read by the master
+    service.kick = lambda: fw.service_mailbox(ev_sm1, 0)
     return service
 
 
