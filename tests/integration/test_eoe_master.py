@@ -13,10 +13,7 @@ import json
 import select
 import subprocess
 import time
-from collections.abc import Iterator
 from pathlib import Path
-
-import pytest
 
 from ecatsim.ctl import request
 from tests.integration.conftest import DaemonFactory
@@ -81,15 +78,6 @@ class Bridge:
                 self.proc.wait(5)
 
 
-@pytest.fixture
-def bridge(netns_pair: NetnsPair) -> Iterator[Bridge]:
-    b = Bridge(netns_pair)
-    try:
-        yield b
-    finally:
-        b.close()
-
-
 def run(*args: str) -> str:
     return subprocess.run(args, capture_output=True, text=True, timeout=10, check=True).stdout
 
@@ -116,7 +104,7 @@ def test_soem_bridges_pings_to_the_second_drive_and_sets_its_ip(
         ready = b.line(60)
         assert ready.startswith("ready ") and "slaves=2" in ready, ready
         expected = int(ready.split("expected=")[1].split()[0])
-        assert expected == 6  # LRD/LWR... two drives: outputs x2 + inputs, one LRW
+        assert expected == 6  # SOEM's rule for an LRW: 2 x two drives' outputs + inputs
         run("ip", "-n", ns_m, "addr", "add", "10.77.0.1/24", "dev", MASTER_TAP)
         run("ip", "-n", ns_m, "link", "set", MASTER_TAP, "up")
         with in_netns(ns_m):
@@ -150,4 +138,36 @@ def test_soem_bridges_pings_to_the_second_drive_and_sets_its_ip(
         assert eoe["to_slave_dropped"] == 0 and eoe["requests"] == 2 and eoe["refused"] == 0
     finally:
         b.close()
-    time.sleep(0.1)
+
+
+def _caps(pid: int) -> dict[str, str]:
+    out = {}
+    with open(f"/proc/{pid}/status") as f:
+        for line in f:
+            k, _, v = line.partition(":")
+            out[k] = v.strip()
+    return out
+
+
+def test_eoe_daemon_keeps_cap_net_admin_and_sets_the_ip_as_another_user(
+    netns_pair: NetnsPair, daemon_factory: DaemonFactory, tmp_path: Path
+) -> None:
+    """With an EoE slave the daemon keeps CAP_NET_ADMIN beside CAP_NET_RAW, and nothing
+    else, so Set IP Parameter still reaches the TAP device after it switched user."""
+    eoe_bridge()
+    cfg = tmp_path / "segment.yaml"
+    cfg.write_text(SEGMENT)
+    d = daemon_factory("--config", str(cfg), "--user", "nobody", "--ctl", str(tmp_path / "c"))
+    time.sleep(0.2)  # the daemon drops privileges right after "ready"
+    assert d.pid is not None
+    st = _caps(d.pid)
+    assert st["Uid"].split()[0] == "65534"
+    for k in ("CapEff", "CapPrm", "CapBnd"):
+        assert int(st[k], 16) == (1 << 12) | (1 << 13), (k, st[k])  # NET_ADMIN + NET_RAW
+    b = Bridge(netns_pair)
+    try:
+        assert b.line(60).startswith("ready ")
+        assert b.ask("setip 10.77.0.7/16") == "setip 1"
+        assert tap_addresses(netns_pair.slave_ns, SLAVE_TAP) == ["10.77.0.7/16"]
+    finally:
+        b.close()
