@@ -86,7 +86,15 @@ def add_eoe(fw: Firmware, mbx: MailboxEngine, sc: SlaveConfig) -> EoeService:
     assert eoe is not None
     service = EoeService(mbx, IpParams(mac=eoe.mac, ip=eoe.ip, subnet=eoe.mask))
     ev_sm1 = EV_SM0 << SM_IN  # the event of SM1 (mailbox in) read by the master
-    service.kick = lambda: fw.service_mailbox(ev_sm1, 0)
+    pdi = fw.pdi
+
+    def kick() -> None:
+        # with an event of its own pending the firmware serves the mailbox itself next
+        # (after its SM activation handling, which must see the SM registers first)
+        if not pdi.al_event() & fw.event_mask:
+            fw.service_mailbox(ev_sm1, 0)
+
+    service.kick = kick
     return service
 
 

@@ -18,7 +18,7 @@ import structlog
 
 from ecatsim.config import SegmentConfig
 from ecatsim.doors import DoorHost, FrontDoor, serve_doors
-from ecatsim.link.eoe_tap import EoeTap
+from ecatsim.eoe_tap import EoeTap
 from ecatsim.mfcio.block import MfcioBlock
 from ecatsim.pdi_spi.external import ExternalFirmware
 from ecatsim.pdi_spi.mfc import MfcSpi

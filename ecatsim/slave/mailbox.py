@@ -210,6 +210,8 @@ class MailboxEngine:
 
     def flush(self) -> None:
         """Write the next reply into SM1 if it is empty."""
+        if self.held is None and not self.pending():
+            return  # nothing to send: leave the SM registers (and their events) alone
         size = self.pdi.sm_settings(SM_IN).length
         while self.held is None:
             item = self._next()
