@@ -115,7 +115,16 @@ static void run_command(char *line, char *out, size_t n)
       EOE_IP4_ADDR_TO_U32(&p.ip, a, b, c, d);
       EOE_IP4_ADDR_TO_U32(&p.subnet, mask >> 24, mask >> 16, mask >> 8, mask);
       wkc = ecx_EOEsetIp(&ecx_context, eoe_slave, 0, &p, EC_TIMEOUTRXM);
-      snprintf(out, n, "setip %d\n", wkc);
+      if (wkc == 1)
+         snprintf(out, n, "setip %d\n", wkc);
+      else /* what the mailbox looked like afterwards, for the test's message */
+      {
+         uint8 sm0 = 0, sm1 = 0;
+         uint16 adr = ec_slave[eoe_slave].configadr;
+         ecx_FPRD(ecx_context.port, adr, ECT_REG_SM0STAT, 1, &sm0, EC_TIMEOUTRET3);
+         ecx_FPRD(ecx_context.port, adr, ECT_REG_SM1STAT, 1, &sm1, EC_TIMEOUTRET3);
+         snprintf(out, n, "setip %d sm0=0x%02x sm1=0x%02x\n", wkc, sm0, sm1);
+      }
    }
    else if (strncmp(line, "getip", 5) == 0)
    {
