@@ -19,13 +19,14 @@ from ecatsim.description import (
     DeviceDescription,
     default_description,
     load_description,
+    with_protocol,
 )
 from ecatsim.device.drive import Drive
 from ecatsim.device.echo import EchoDevice
 from ecatsim.device.factory import make_coe_device
 from ecatsim.errors import UserError
 from ecatsim.esc.core import Esc, FrameContext
-from ecatsim.esc.pdi import Pdi
+from ecatsim.esc.pdi import EV_SM0, Pdi
 from ecatsim.esi import EsiError, read_esi
 from ecatsim.generic.device import GenericDevice, signals_of
 from ecatsim.generic.model import GenericModel, from_esi
@@ -42,12 +43,14 @@ from ecatsim.slave.al import AlState
 from ecatsim.slave.app import Application
 from ecatsim.slave.coe import CoeProtocol
 from ecatsim.slave.emcy import Emergency
+from ecatsim.slave.eoe import EoeService
 from ecatsim.slave.firmware import Firmware, MailboxLayout
 from ecatsim.slave.foe import FoeServer
-from ecatsim.slave.mailbox import MailboxEngine
+from ecatsim.slave.mailbox import SM_IN, MailboxEngine
 from ecatsim.slave.od import ObjectDictionary
 from ecatsim.slave.od_build import build_od
 from ecatsim.slave.pdo import CoeDevice, PdoImage, PdoRules
+from ecatsim.wire.eoe import IpParams
 from ecatsim.wire.mailbox import MbxType
 
 log = structlog.get_logger("ecatsim.build")
@@ -81,6 +84,25 @@ def _accept_for(fw: Firmware) -> Callable[[int], bool]:
         return fw.state != AlState.BOOT or mtype == MbxType.FOE
 
     return accept
+
+
+def add_eoe(fw: Firmware, mbx: MailboxEngine, sc: SlaveConfig) -> EoeService:
+    """The EoE service beside CoE/FoE; frames from the slave's network wake the firmware's
+    mailbox service as an SM1 event would. Ref: ETG.1000.6 §5.7."""
+    eoe = sc.eoe
+    assert eoe is not None
+    service = EoeService(mbx, IpParams(mac=eoe.mac, ip=eoe.ip, subnet=eoe.mask))
+    ev_sm1 = EV_SM0 << SM_IN  # the event of SM1 (mailbox in) read by the master
+    pdi = fw.pdi
+
+    def kick() -> None:
+        # with an event of its own pending the firmware serves the mailbox itself next
+        # (after its SM activation handling, which must see the SM registers first)
+        if not pdi.al_event() & fw.event_mask:
+            fw.service_mailbox(ev_sm1, 0)
+
+    service.kick = kick
+    return service
 
 
 class _Persist:
@@ -159,6 +181,8 @@ def _image(sc: SlaveConfig, desc: DeviceDescription, generic: bool = False) -> b
         except EsiError as exc:
             raise UserError(str(exc)) from exc
         from_esi_file = True
+    if sc.eoe is not None:
+        desc = with_protocol(desc, "eoe")  # SII word 0x1C declares EoE (ETG.2010 Table 2)
     if sc.eeprom is not None and sc.eeprom.exists():
         try:
             return EepromStore.load(sc.eeprom)
@@ -306,6 +330,8 @@ def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
             if foe:
                 server = FoeServer(coe_fw.al_state_code, mbx.max_body, sc.foe_dir, sc.foe_password)
                 mbx.register(MbxType.FOE, server.handle)
+            if sc.eoe is not None:
+                add_eoe(coe_fw, mbx, sc)
             mbx.accept = _accept_for(coe_fw)
         else:
             fw = Firmware(pdi, make_device(sc.device, desc), layout)

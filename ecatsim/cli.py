@@ -395,10 +395,16 @@ def esi() -> None:
 @click.option(
     "--description", type=click.Path(path_type=Path), help="Or: a device description YAML."
 )
-def esi_export(output: Path, device: str, description: Path | None) -> None:
+@click.option("--eoe", is_flag=True, help="Declare EoE, as for a slave configured with 'eoe:'.")
+def esi_export(output: Path, device: str, description: Path | None, eoe: bool) -> None:
     """Write the ESI XML of an emulated device (written atomically); a TMC8460 MFCIO
     configuration (SII category 1) is decoded register by register in comments."""
-    from ecatsim.description import DescriptionError, default_description, load_description
+    from ecatsim.description import (
+        DescriptionError,
+        default_description,
+        load_description,
+        with_protocol,
+    )
     from ecatsim.esi import export_esi
     from ecatsim.files import write_output
     from ecatsim.slave.od_build import build_od
@@ -418,6 +424,8 @@ def esi_export(output: Path, device: str, description: Path | None) -> None:
         )
     except DescriptionError as exc:
         raise UserError(str(exc)) from exc
+    if eoe:
+        desc = with_protocol(desc, "eoe")
     write_output(output, export_esi(desc, od))
     click.echo(f"{output}: ESI of {desc.name}")
 

@@ -17,6 +17,10 @@ slaves:
                              # EEPROM is loaded)
     mfcio: {...}             # tmc8460 only: parts on the MFCIO pins (ecatsim/mfcio/parts.py)
     mfc_socket: /run/mfc.sock  # tmc8460 only: the MFC CTRL SPI on a socket (TMC8460 §3.6)
+    eoe:                     # tmc8670 only, optional: Ethernet over EtherCAT (ETG.1000.6
+      tap: eoe0              # §5.7): the slave's network, a TAP device the daemon creates
+      ip: 10.77.0.2/24       # ... optional address of it (EoE Set IP Parameter changes it)
+      mac: 02:00:00:00:00:02 # ... optional MAC address of it
   - esi: vendor.xml          # no device: a generic slave, everything from the ESI
     device_type: EL1234      # which device of the file: its <Type> text, or ...
     product: 0x04d23052      # ... its ProductCode / RevisionNo
@@ -68,9 +72,22 @@ _SLAVE_KEYS = {
     "product",
     "revision",
     "signals",
+    "eoe",
 }
+_EOE_KEYS = ("tap", "ip", "mac")
 #: who runs the slave firmware behind the PDI: ecatsim, or a program on the PDI socket
 FIRMWARE_KINDS = ("ecatsim", "external")
+
+
+@dataclass(frozen=True, slots=True)
+class EoeConfig:
+    """A slave's EoE endpoint: its TAP device and the addresses it starts with."""
+
+    tap: str
+    #: IPv4 address and mask, network order; None: none until the master sets one
+    ip: bytes | None = None
+    mask: bytes | None = None
+    mac: bytes | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -105,6 +122,8 @@ class SlaveConfig:
     signals: tuple[object, ...] | None = None
     #: device generic from an ENI: the model made for it (ecatsim/eni.py)
     model: object | None = None
+    #: Ethernet over EtherCAT (ETG.1000.6 §5.7): the slave's TAP device and addresses
+    eoe: EoeConfig | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -138,6 +157,58 @@ def _path(src: str, base: Path | None, key: str, v: object) -> Path:
     if not p.is_absolute() and base is not None:
         p = base / p
     return p
+
+
+def _ipv4(text: str) -> bytes | None:
+    parts = text.split(".")
+    if len(parts) != 4 or not all(p.isdigit() and int(p) <= 255 for p in parts):
+        return None
+    return bytes(int(p) for p in parts)
+
+
+def parse_eoe(src: str, key: str, v: object) -> EoeConfig:
+    """``eoe: {tap: NAME, ip: A.B.C.D/LEN, mac: 02:00:00:00:00:01}``."""
+    if not isinstance(v, dict):
+        raise _err(src, key, "expected a mapping like {tap: eoe0, ip: 10.77.0.2/24}")
+    bad = sorted(set(v) - set(_EOE_KEYS))
+    if bad:
+        raise _err(src, f"{key}.{bad[0]}", f"unknown key (allowed: {', '.join(_EOE_KEYS)})")
+    tap = v.get("tap")
+    if not isinstance(tap, str) or not 1 <= len(tap) <= 15 or "/" in tap or " " in tap:
+        raise _err(
+            src, f"{key}.tap", f"expected an interface name of 1..15 characters, got {tap!r}"
+        )
+    ip = mask = mac = None
+    if "ip" in v:
+        text = v["ip"]
+        addr, _, plen = str(text).partition("/")
+        ip = _ipv4(addr)
+        if not isinstance(text, str) or ip is None or not plen.isdigit() or int(plen) > 32:
+            raise _err(
+                src,
+                f"{key}.ip",
+                f"expected an address with its prefix like 10.77.0.2/24, got {text!r}",
+            )
+        bits = (0xFFFFFFFF << (32 - int(plen))) & 0xFFFFFFFF
+        mask = bits.to_bytes(4, "big")
+    if "mac" in v:
+        text = v["mac"]
+        octets = str(text).split(":")
+        try:
+            mac = bytes(int(o, 16) for o in octets)
+        except ValueError:
+            mac = None
+        if (
+            not isinstance(text, str)
+            or mac is None
+            or len(mac) != 6
+            or any(len(o) != 2 for o in octets)
+            or mac[0] & 1
+        ):
+            raise _err(
+                src, f"{key}.mac", f"expected a unicast MAC like 02:00:00:00:00:02, got {text!r}"
+            )
+    return EoeConfig(tap, ip, mask, mac)
 
 
 def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentConfig:
@@ -253,6 +324,13 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
         signals = s.get("signals")
         if signals is not None and not isinstance(signals, list):
             raise _err(src, f"{key}.signals", "expected a list like [{input: ENTRY, counter: {}}]")
+        eoe = parse_eoe(src, f"{key}.eoe", s["eoe"]) if "eoe" in s else None
+        if eoe is not None and (count > 1 or dev != "tmc8670" or firmware != "ecatsim"):
+            raise _err(
+                src,
+                f"{key}.eoe",
+                "one TAP device serves one slave: a tmc8670 with count 1 and ecatsim's firmware",
+            )
         for j in range(count):
             out.append(
                 SlaveConfig(
@@ -277,10 +355,17 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
                     product=product,
                     revision=revision,
                     signals=tuple(signals) if signals is not None else None,
+                    eoe=eoe,
                 )
             )
     if len(out) > MAX_SLAVES:
         raise _err(src, "slaves", f"at most {MAX_SLAVES} slaves")
+    taps = [sc.eoe.tap for sc in out if sc.eoe is not None]
+    for i, sc in enumerate(out):
+        if sc.eoe is not None and taps.count(sc.eoe.tap) > 1:
+            raise _err(
+                src, f"slaves[{i}].eoe.tap", f"{sc.eoe.tap} is named twice: one TAP per slave"
+            )
     faults = data.get("faults") or []
     if not isinstance(faults, list):
         raise _err(src, "faults", "expected a list of faults like {kind: drop, after_frames: 100}")

@@ -23,6 +23,7 @@ from ecatsim.esc import regs
 from ecatsim.faults.engine import FaultEngine
 from ecatsim.faults.spec import parse_fault
 from ecatsim.segment import Segment
+from ecatsim.slave.eoe import find_eoe
 from ecatsim.slave.od import SdoAbort, abort_text
 
 log = structlog.get_logger("ecatsim.ctl")
@@ -152,6 +153,7 @@ class ControlSocket:
         out = []
         for esc in self.segment.escs:
             m = esc.mem
+            eoe = find_eoe(getattr(self.segment.firmware[esc.position], "mbx", None))
             al = struct.unpack_from("<HxxH", m, regs.AL_STATUS)
             out.append(
                 {
@@ -167,6 +169,7 @@ class ControlSocket:
                     "lost_link": list(m[0x0310:0x0312]),
                     "wd_pd_status": m[regs.WD_STATUS_PD] & 1,
                     "wd_expired": m[0x0442],
+                    **({"eoe": eoe.status()} if eoe is not None else {}),
                 }
             )
         seg = self.segment

@@ -83,6 +83,17 @@ def _is_rows(v: Any) -> bool:
     return isinstance(v, list) and bool(v) and all(isinstance(x, dict) for x in v)
 
 
+def eoe_text(position: int, e: dict[str, Any]) -> str:
+    """One slave's EoE counters: frames/fragments/drops each way. Ref: ETG.1000.6 §5.7."""
+    return (
+        f"slave {position} EoE ip {e['ip'] or '-'}: to slave {e['to_slave_frames']} frames "
+        f"({e['to_slave_fragments']} fragments, {e['to_slave_dropped']} dropped), to master "
+        f"{e['to_master_frames']} frames ({e['to_master_fragments']} fragments, "
+        f"{e['to_master_dropped']} dropped), {e['requests']} requests "
+        f"({e['refused']} refused)"
+    )
+
+
 def format_status(status: dict[str, Any]) -> str:
     """The daemon's ``status`` answer as aligned text: the EtherCAT slaves, one per line
     (left out for a daemon that serves front doors only), then each front door."""
@@ -109,6 +120,10 @@ def format_status(status: dict[str, Any]) -> str:
             ]
         )
     lines = _table(rows)
+    for s in status.get("slaves", []):
+        e = s.get("eoe")
+        if e is not None:
+            lines.append(eoe_text(s["position"], e))
     lines.append(f"frames {status.get('frames', 0)}, bad frames {status.get('bad_frames', 0)}")
     faults = status.get("faults", [])
     if faults:

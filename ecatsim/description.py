@@ -7,7 +7,7 @@ Ref: ETG.2010 (SII content), ETG.2000 (ESI), TMC8670 datasheet (identity and PDO
 from __future__ import annotations
 
 import importlib.resources
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -490,3 +490,12 @@ def default_description(name: str = "tmc8670.yaml") -> DeviceDescription:
     """A packaged description: config/tmc8670.yaml (the default) or config/tmc8460.yaml."""
     text = importlib.resources.files("ecatsim.defaults").joinpath(name).read_text()
     return parse_description(yaml.safe_load(text), name)
+
+
+def with_protocol(desc: DeviceDescription, name: str) -> DeviceDescription:
+    """``desc`` declaring mailbox protocol ``name`` too (SII word 0x1C, the ESI's
+    ``<Mailbox>``), e.g. EoE for a slave configured with ``eoe:``. Ref: ETG.2010 Table 2."""
+    mb = desc.mailbox
+    if name in mb.protocols:
+        return desc
+    return replace(desc, mailbox=replace(mb, protocols=(*mb.protocols, name)))

@@ -177,6 +177,8 @@ def export_esi(desc: DeviceDescription, od: ObjectDictionary | None) -> bytes:
     mb = desc.mailbox
     if mb.protocols:
         mbx = _sub(dev, "Mailbox", DataLinkLayer="true")
+        if "eoe" in mb.protocols:  # the schema's order: AoE, EoE, CoE, FoE (ETG.2000)
+            _sub(mbx, "EoE", IP="true", MAC="true")
         if "coe" in mb.protocols:
             attrs = {a: "true" for k, a in COE_ATTRS.items() if k in mb.coe_details}
             _sub(mbx, "CoE", **attrs)

@@ -18,10 +18,12 @@ import structlog
 
 from ecatsim.config import SegmentConfig
 from ecatsim.doors import DoorHost, FrontDoor, serve_doors
+from ecatsim.eoe_tap import EoeTap
 from ecatsim.mfcio.block import MfcioBlock
 from ecatsim.pdi_spi.external import ExternalFirmware
 from ecatsim.pdi_spi.mfc import MfcSpi
 from ecatsim.segment import Segment
+from ecatsim.slave.eoe import find_eoe
 
 DoorFactory = Callable[[dict[str, object], str, Path | None], FrontDoor]
 
@@ -39,8 +41,9 @@ def _factory(key: str) -> DoorFactory:
 
 def build_doors(cfg: SegmentConfig, segment: Segment | None = None) -> DoorHost | None:
     """The segment file's doors, the PDI sockets of its slaves with external firmware
-    (``pdi<position>``) and the MFC CTRL sockets of its TMC8460s (``mfc<position>``),
-    behind one :class:`DoorHost`; None if there are none."""
+    (``pdi<position>``), the MFC CTRL sockets of its TMC8460s (``mfc<position>``) and the
+    TAP devices of its EoE slaves (``eoe<position>``), behind one :class:`DoorHost`; None
+    if there are none."""
     built: dict[str, FrontDoor] = {}
     try:
         if segment is not None:
@@ -53,6 +56,11 @@ def build_doors(cfg: SegmentConfig, segment: Segment | None = None) -> DoorHost 
                 if sock is not None and isinstance(fw, MfcioBlock):
                     what = f"{cfg.source}: slaves[{pos}].mfc_socket"
                     built[f"mfc{pos}"] = MfcSpi(fw, sock, segment.clock, what)
+                eoe = cfg.slaves[pos].eoe if pos < len(cfg.slaves) else None
+                service = find_eoe(getattr(fw, "mbx", None))
+                if eoe is not None and service is not None:
+                    what = f"{cfg.source}: slaves[{pos}].eoe.tap"
+                    built[f"eoe{pos}"] = EoeTap(eoe.tap, service, pos, what)
         if not cfg.doors and not built:
             return None
         for key, data in cfg.doors:

@@ -1,4 +1,6 @@
-"""Drop privileges once the sockets are open: keep only CAP_NET_RAW; optionally switch user.
+"""Drop privileges once the sockets are open: keep only CAP_NET_RAW (and CAP_NET_ADMIN
+where a slave has EoE: the master may set its TAP device's address at any time);
+optionally switch user.
 
 Ref: capabilities(7), prctl(2) (PR_CAPBSET_DROP, PR_SET_KEEPCAPS), capset(2).
 """
@@ -13,6 +15,7 @@ import struct
 
 from ecatsim.errors import UserError
 
+CAP_NET_ADMIN = 12
 CAP_NET_RAW = 13
 CAP_LAST = 63
 PR_CAPBSET_DROP = 24
@@ -34,8 +37,10 @@ def _capset(keep: int) -> None:
         raise OSError(err, os.strerror(err))
 
 
-def drop_privileges(user: str | None) -> None:
+def drop_privileges(user: str | None, net_admin: bool = False) -> None:
     """Keep CAP_NET_RAW only (bounding, permitted, effective); switch to ``user`` if given.
+    ``net_admin``: keep CAP_NET_ADMIN too (a slave has EoE: EoE Set IP Parameter sets
+    the address of its TAP device). Ref: ETG.1000.6 §5.7.
 
     Without root there is nothing to drop (the daemon then already runs with what it was
     given, e.g. a file capability on the interpreter).
@@ -45,8 +50,9 @@ def drop_privileges(user: str | None) -> None:
             raise UserError("--user needs the daemon to be started as root")
         return
     libc = _libc()
+    keep = {CAP_NET_RAW, CAP_NET_ADMIN} if net_admin else {CAP_NET_RAW}
     for cap in range(CAP_LAST + 1):
-        if cap != CAP_NET_RAW:
+        if cap not in keep:
             libc.prctl(PR_CAPBSET_DROP, cap, 0, 0, 0)  # EINVAL for unknown caps: ignored
     if user is not None:
         try:
@@ -57,4 +63,4 @@ def drop_privileges(user: str | None) -> None:
         os.setgroups([])
         os.setgid(pw.pw_gid)
         os.setuid(pw.pw_uid)
-    _capset(1 << CAP_NET_RAW)
+    _capset(sum(1 << c for c in keep))

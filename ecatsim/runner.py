@@ -203,7 +203,8 @@ def serve(opts: RunOptions) -> None:
     if realtime.apply(priority, explicit=opts.rt_priority is not None):
         daemon.follower = follow_master(opts, link)
     compiled.say_if_pure()  # one warning line where the pure-Python core serves
-    drop_privileges(opts.user)  # sockets and files are open: keep CAP_NET_RAW only
+    # sockets and files are open: keep CAP_NET_RAW only (and CAP_NET_ADMIN for EoE)
+    drop_privileges(opts.user, net_admin=any(sc.eoe is not None for sc in cfg.slaves))
     daemon.install_signal_handlers()
     log.info(
         "ready",

@@ -219,9 +219,9 @@ class Firmware:
         else:
             if ev & (EV_SM0 << SM_MBX_OUT):
                 mbx.receive()
-            if ev & EV_SM1:
-                mbx.flush()
-            if mbx.out:
+            if ev & EV_SM1 or mbx.pending():
+                mbx.flush()  # SM1 read, or replies (EoE frames) waiting for it
+            if mbx.pending():
                 want |= EV_SM1
         if self.pd_masked:
             want &= ~PD_EVENTS

@@ -1,7 +1,10 @@
 """The mailbox engine: SM0 in, SM1 out, counters, repeat requests and error replies.
 
-Protocol handlers (CoE now, FoE later) get the mailbox data and return reply bodies;
-mailbox-level problems become an error reply (type 0) in one place.
+Protocol handlers (CoE, FoE, EoE) get the mailbox data and return reply bodies;
+mailbox-level problems become an error reply (type 0) in one place. A protocol with its
+own traffic (EoE frames from the slave's network) is a *source*: asked for its next reply
+only when SM1 is free, taking turns with the queued replies. Counters are given as a
+reply goes into SM1.
 Ref: ETG.1000.4 §5.6 (mailbox header, counter, error reply Table 30), §6.7.4 (repeat);
 TMC8460 §5.49 Tables 90/91 (repeat request/ack).
 """
@@ -11,6 +14,7 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Protocol
 
 import structlog
 
@@ -47,6 +51,16 @@ class MailboxError(Exception):
 Handler = Callable[[Request], list[tuple[int, bytes]]]
 
 
+class Source(Protocol):
+    """A protocol with replies of its own, handed out one at a time as SM1 frees up."""
+
+    def pending(self) -> bool: ...
+
+    def next_reply(self, max_body: int) -> tuple[int, bytes] | None: ...
+
+    def reset(self) -> None: ...
+
+
 class MailboxEngine:
     """Serves SM0/SM1 for one slave through its PDI."""
 
@@ -55,7 +69,13 @@ class MailboxEngine:
         self.handlers: dict[int, Handler] = {}
         #: which mailbox types are served now (BOOT serves FoE only)
         self.accept: Callable[[int], bool] = lambda mtype: True
-        self.out: deque[bytes] = deque()
+        #: queued replies (type, data), framed when they go into SM1
+        self.out: deque[tuple[int, bytes]] = deque()
+        #: protocols with their own traffic, served in turn with ``out``
+        self.sources: list[Source] = []
+        self._turn = 0
+        #: the framed reply waiting for SM1 to be free
+        self.held: bytes | None = None
         self.last_sent = b""
         self.counter = 0
         self.last_in_counter = 0
@@ -71,6 +91,9 @@ class MailboxEngine:
     def reset(self) -> None:
         """Mailbox start (IP/IB): queues and counters cleared. Ref: ETG.1000.4 §5.6."""
         self.out.clear()
+        self.held = None
+        for src in self.sources:
+            src.reset()
         self.last_sent = b""
         self.counter = 0
         self.last_in_counter = 0
@@ -80,6 +103,13 @@ class MailboxEngine:
     def register(self, mtype: MbxType, handler: Handler) -> None:
         self.handlers[int(mtype)] = handler
 
+    def add_source(self, src: Source) -> None:
+        self.sources.append(src)
+
+    def pending(self) -> bool:
+        """Replies wait for SM1 (the firmware then wants the SM1 event)."""
+        return bool(self.out) or self.held is not None or any(s.pending() for s in self.sources)
+
     # ----------------------------------------------------------------- receive
 
     def receive(self) -> None:
@@ -87,6 +117,10 @@ class MailboxEngine:
         raw = self.pdi.sm_read(SM_OUT)
         if raw is None:
             return
+        self.dispatch(raw)
+
+    def dispatch(self, raw: bytes) -> None:
+        """Serve one mailbox as read from SM0 (the header and the rest of the buffer)."""
         try:
             req = self._parse(raw)
             if req is None:
@@ -147,26 +181,52 @@ class MailboxEngine:
             body = (0x0001).to_bytes(2, "little") + int(MbxError.NO_MORE_MEMORY).to_bytes(
                 2, "little"
             )
+        self.out.append((mtype, body))
+        self.flush()
+
+    def _frame(self, mtype: int, body: bytes) -> bytes:
+        """Header and data, with the next counter. Ref: ETG.1000.4 §5.6 Table 28."""
         if self.stale_counter_next and self.counter:
             self.stale_counter_next -= 1  # injected: the previous counter again
         else:
             self.counter = self.counter % 7 + 1
-        self.out.append(mbx_header(len(body), mtype, self.counter) + body)
-        self.flush()
+        return mbx_header(len(body), mtype, self.counter) + body
+
+    def _next(self) -> tuple[int, bytes] | None:
+        """The next reply: the queue and each source in turn, so none starves another."""
+        n = 1 + len(self.sources)
+        for k in range(n):
+            i = (self._turn + k) % n
+            item: tuple[int, bytes] | None = None
+            if i == 0:
+                if self.out:
+                    item = self.out.popleft()
+            elif self.sources[i - 1].pending():
+                item = self.sources[i - 1].next_reply(self.max_body())
+            if item is not None:
+                self._turn = (i + 1) % n
+                return item
+        return None
 
     def flush(self) -> None:
-        """Write the next queued reply into SM1 if it is empty."""
-        if not self.out:
-            return
+        """Write the next reply into SM1 if it is empty."""
+        if self.held is None and not self.pending():
+            return  # nothing to send: leave the SM registers (and their events) alone
         size = self.pdi.sm_settings(SM_IN).length
-        frame = self.out[0]
-        if len(frame) > size:
-            self.out.popleft()
-            self.log.warning("mailbox_reply_too_large", size=len(frame), sm=size)
-            return
-        if self.pdi.sm_write(SM_IN, frame):
-            self.last_sent = frame
-            self.out.popleft()
+        while self.held is None:
+            item = self._next()
+            if item is None:
+                return
+            mtype, body = item
+            if MBX_HEADER_LEN + len(body) > size:
+                self.log.warning(
+                    "mailbox_reply_too_large", size=MBX_HEADER_LEN + len(body), sm=size
+                )
+                continue
+            self.held = self._frame(mtype, body)
+        if self.pdi.sm_write(SM_IN, self.held):
+            self.last_sent = self.held
+            self.held = None
 
     def max_body(self) -> int:
         """Largest reply body that fits SM1 as the master configured it."""
