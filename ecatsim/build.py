@@ -276,6 +276,11 @@ def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
             paths.append(sc.eeprom)
             continue
         fw: Serviceable
+        if model is not None and sc.eoe is not None and "coe" not in desc.mailbox.protocols:
+            raise UserError(
+                f"{cfg.source}: slaves[{i}].eoe: EoE shares the mailbox of a CoE slave, and "
+                f"{sc.esi} gives this device none: remove eoe: or pick a device with CoE"
+            )
         if sc.firmware == "external" and sc.pdi_socket is not None:
             what = f"{cfg.source}: slaves[{i}].pdi_socket"
             fw = ExternalFirmware(pdi, sc.pdi_socket, clock, SpiTiming(), what)
@@ -332,6 +337,9 @@ def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
                 mbx.register(MbxType.FOE, server.handle)
             if sc.eoe is not None:
                 add_eoe(coe_fw, mbx, sc)
+            elif model is not None and "eoe" in desc.mailbox.protocols:
+                log.warning("eoe_not_served", slave=i, esi=str(sc.esi),
+                            fix="give the slave eoe: {tap: NAME} to serve its EoE")  # fmt: skip
             mbx.accept = _accept_for(coe_fw)
         else:
             fw = Firmware(pdi, make_device(sc.device, desc), layout)

@@ -17,7 +17,7 @@ slaves:
                              # EEPROM is loaded)
     mfcio: {...}             # tmc8460 only: parts on the MFCIO pins (ecatsim/mfcio/parts.py)
     mfc_socket: /run/mfc.sock  # tmc8460 only: the MFC CTRL SPI on a socket (TMC8460 §3.6)
-    eoe:                     # tmc8670 only, optional: Ethernet over EtherCAT (ETG.1000.6
+    eoe:                     # tmc8670 or ESI slave, optional: Ethernet over EtherCAT (ETG.1000.6
       tap: eoe0              # §5.7): the slave's network, a TAP device the daemon creates
       ip: 10.77.0.2/24       # ... optional address of it (EoE Set IP Parameter changes it)
       mac: 02:00:00:00:00:02 # ... optional MAC address of it
@@ -325,11 +325,14 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
         if signals is not None and not isinstance(signals, list):
             raise _err(src, f"{key}.signals", "expected a list like [{input: ENTRY, counter: {}}]")
         eoe = parse_eoe(src, f"{key}.eoe", s["eoe"]) if "eoe" in s else None
-        if eoe is not None and (count > 1 or dev != "tmc8670" or firmware != "ecatsim"):
+        if eoe is not None and (
+            count > 1 or dev not in ("tmc8670", "generic") or firmware != "ecatsim"
+        ):
             raise _err(
                 src,
                 f"{key}.eoe",
-                "one TAP device serves one slave: a tmc8670 with count 1 and ecatsim's firmware",
+                "one TAP device serves one slave: a tmc8670 or an ESI slave with count 1 and "
+                "ecatsim's firmware",
             )
         for j in range(count):
             out.append(

@@ -39,7 +39,6 @@ MAX_BITS = 0xFFFF * 8
 UNMODELLED = (
     "Slots",
     "Modules",
-    "Mailbox/EoE",
     "Mailbox/SoE",
     "Mailbox/AoE",
     "Mailbox/VoE",

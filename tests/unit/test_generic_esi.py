@@ -346,3 +346,21 @@ def test_bit_string_types_keep_their_codes() -> None:
 
     e = Entry(1, "Mode", "BIT3", access="rw", default=5)
     assert (e.type_code, e.bits, e.encode()) == (0x0032, 3, b"\x05")
+
+
+def test_an_esi_slave_with_eoe_serves_it_beside_coe() -> None:
+    """``eoe:`` on an ESI slave: the SII declares EoE beside CoE, and the mailbox serves it.
+    Ref: ETG.1000.6 §5.7; ETG.2010 Table 2 (word 0x1C: CoE 0x04, EoE 0x02)."""
+    from ecatsim.wire.mailbox import MbxType
+
+    seg, _ = segment({"esi": "acme-io.xml", "device_type": "ACME-IO8", "eoe": {"tap": "e0"}})
+    sii = parse_image(bytes(seg.escs[0].eeprom.image))
+    assert sii.protocols & 0x06 == 0x06
+    fw = seg.firmware[0]
+    assert isinstance(fw, Firmware) and fw.mbx is not None
+    assert int(MbxType.EOE) in fw.mbx.handlers and fw.mbx.sources
+
+
+def test_eoe_on_an_esi_slave_without_coe_is_one_line() -> None:
+    with pytest.raises(UserError, match=r"slaves\[0\]\.eoe: EoE shares the mailbox of a CoE"):
+        segment({"esi": "acme-io.xml", "device_type": "ACME-DI4", "eoe": {"tap": "e0"}})
