@@ -279,6 +279,10 @@ class Daemon:
 
     def _run_select(self, buf: bytearray) -> None:
         follow_fd = self.follower.fileno() if self.follower is not None else -1
+        link_fd = self._fd
+        if link_fd >= 0 and not self.busy_poll:
+            # the work after a reply stops for a frame that came meanwhile (decision P19)
+            self.segment.frame_waiting = lambda: bool(select.select((link_fd,), (), (), 0)[0])
         watch = [f for f in (self._fd, *self._watch, follow_fd) if f >= 0]
         clock = self.segment.clock
         while not self._stop:
@@ -309,6 +313,9 @@ class Daemon:
         segment's timers itself and comes back for the deadlines and descriptors that
         Python serves."""
         clock = self.segment.clock
+        srv = self._make_responder()
+        # the work after a reply stops for a frame that came meanwhile (decision P19)
+        self.segment.frame_waiting = srv.frame_waiting
         while not self._stop:
             fast = self._fast_ok()
             now = clock.now_ns()
@@ -329,11 +336,7 @@ class Daemon:
         Returns the responder's code (``responder.REPLIED`` ...) for the last thing done."""
         mod = responder
         assert mod is not None
-        srv = self._responder
-        if srv is None:
-            srv = self._responder = mod.Responder(
-                self._fd, self._watch, self.recorder, self.busy_poll
-            )
+        srv = self._make_responder()
         follower = self.follower
         if follower is not None:
             srv.set_follow(self._follow, follower.fileno(), follower.look_ns)
@@ -364,6 +367,17 @@ class Daemon:
                 self._serve_others(ready)
             self._service_timers()
         return int(code)
+
+    def _make_responder(self) -> ResponderType:
+        """The compiled responder serving the link, made on first use."""
+        mod = responder
+        assert mod is not None
+        srv = self._responder
+        if srv is None:
+            srv = self._responder = mod.Responder(
+                self._fd, self._watch, self.recorder, self.busy_poll
+            )
+        return srv
 
     def _fast_ok(self) -> bool:
         """The compiled responder may serve frames whole: nothing that watches or alters
