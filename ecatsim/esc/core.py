@@ -63,10 +63,13 @@ from ecatsim.esc.regs import (
     EV_SYNC0,
     EV_SYNC1,
     EV_WATCHDOG_PD,
+    FMMU_BASE,
+    FMMU_STRIDE,
     LOST_LINK_COUNTER,
     MII_ECAT_ACCESS,
     MII_PDI_ACCESS,
     MII_PHY_ADDRESS,
+    N_FMMU,
     N_SM,
     PDI_ERROR_CODE,
     PDI_ERROR_COUNTER,
@@ -116,6 +119,33 @@ PASSIVE_SIDE_EFFECTS = frozenset(
         "user_ram",  # plain RAM (§5.52)
     }
 )
+
+#: ECAT-written side effects that act only on a change of their register's value: a write
+#: of the bytes already there runs no hook, so a broadcast that clears what is already
+#: clear costs a copy per slave (decision P20). The others act on every write: AL control,
+#: the EEPROM and MII commands, clear-on-write counters, the DC time loop and latches, the
+#: reset sequence, the start time (auto-activation).
+CHANGE_ONLY_SIDE_EFFECTS = frozenset(
+    {
+        "fmmu",  # recompiles the FMMU maps from memory (§5.48)
+        "sm_config",  # restores the old value while the SM is enabled (§5.49)
+        "sm_activate",  # acts on changed bits only (§5.49 Table 90)
+        "station_address",  # the address map is rebuilt from memory (§5.9)
+        "dl_control",  # DL status is recomputed from memory and links (§5.17)
+        "ecat_event_mask",  # the IRQ field is recomputed (§5.29)
+        "wd_divider",  # the watchdog's times are recomputed (§5.39)
+        "wd_time_pd",  # (§5.41)
+        "wd_time_pdi",  # no action (§5.40)
+        "dc_system_time_offset",  # the SYNC deadlines are recomputed (Table 96)
+        "dc_system_time_delay",  # no action (Table 97)
+        "dc_cyclic_unit_control",  # no action (Table 104)
+        "dc_cycle_time",  # restores the old value for a non-owner (Tables 112, 113)
+        "dc_latch_control",  # restores the old value for a non-owner (Tables 114, 115)
+        "dc_activation",  # acts on a changed value only (Table 105)
+    }
+)
+#: the six FMMUs' registers, one block for the hook: it recompiles them all at once
+_FMMU_BLOCK = N_FMMU * FMMU_STRIDE
 
 #: the logical commands as plain ints (compiled: C constants)
 _LRD = int(Cmd.LRD)
@@ -191,6 +221,7 @@ class _Tables:
     ecat_wmask: bytes
     pdi_wmask: bytes
     ecat_w_hooked: bytes
+    ecat_w_change: bytes
     ecat_r_hooked: bytes
     pdi_w_hooked: bytes
     pdi_r_hooked: bytes
@@ -219,6 +250,7 @@ def tables() -> _Tables:
         k: [None] * REGISTER_END for k in ("_ew_", "_er_", "_pw_", "_pr_")
     }
     bits = {k: bytearray(REGISTER_END) for k in maps}
+    change = bytearray(REGISTER_END)
     for r in rows:
         if r.side_effect is None or not r.available:
             continue
@@ -226,13 +258,18 @@ def tables() -> _Tables:
             fn = getattr(Esc, prefix + r.side_effect, None)
             if fn is None:
                 continue
+            # the FMMU hook recompiles all six: one call per write of the block (P20)
+            ra, rs = (FMMU_BASE, _FMMU_BLOCK) if r.side_effect == "fmmu" else (r.addr, r.size)
             for a in range(r.addr, r.addr + r.size):
-                lst[a] = (fn, r.addr, r.size)
+                lst[a] = (fn, ra, rs)
                 bits[prefix][a] = 1
+                if prefix == "_ew_" and r.side_effect in CHANGE_ONLY_SIDE_EFFECTS:
+                    change[a] = 1
     return _Tables(
         ecat_wmask=_mask_bytes(rows, "ecat_wmask"),
         pdi_wmask=_mask_bytes(rows, "pdi_wmask"),
         ecat_w_hooked=bytes(bits["_ew_"]),
+        ecat_w_change=bytes(change),
         ecat_r_hooked=bytes(bits["_er_"]),
         pdi_w_hooked=bytes(bits["_pw_"]),
         pdi_r_hooked=bytes(bits["_pr_"]),
@@ -260,12 +297,14 @@ class Esc(SmHost):
     #: fixed attributes (compiled: the typed fields of core.pxd)
     __slots__ = (
         "_scratch",
+        "_scratch_view",
         "al_control_locked",
         "ctx",
         "dc",
         "ecat_irq",
         "ecat_r_hooked",
         "ecat_r_hooks",
+        "ecat_w_change",
         "ecat_w_hooked",
         "ecat_w_hooks",
         "ecat_wmask",
@@ -320,6 +359,7 @@ class Esc(SmHost):
         self.ecat_wmask = t.ecat_wmask
         self.pdi_wmask = t.pdi_wmask
         self.ecat_w_hooked = t.ecat_w_hooked
+        self.ecat_w_change = t.ecat_w_change
         self.pdi_w_hooked = t.pdi_w_hooked
         self.ecat_r_hooked = t.ecat_r_hooked
         self.pdi_r_hooked = t.pdi_r_hooked
@@ -352,6 +392,7 @@ class Esc(SmHost):
         self.wr_s = 0
         self.wr_e = 0
         self._scratch = bytearray(2048)
+        self._scratch_view = memoryview(self._scratch)
         #: called after a hardware reset ('RES' sequence or power cycle); set by the slave
         self.on_reset: Callable[[], None] | None = None
         self.power_on()
@@ -587,12 +628,11 @@ class Esc(SmHost):
     def ecat_read_or(self, ado: int, data: memoryview) -> int:
         """Broadcast read: the read data is ORed into the datagram. Ref: ETG.1000.4 §5.4.3."""
         n = len(data)
-        tmp = memoryview(self._scratch)[:n]
+        tmp = self._scratch_view[:n]
         if not self.ecat_read(ado, tmp):
             return 0
-        data[:] = (int.from_bytes(data, "little") | int.from_bytes(tmp, "little")).to_bytes(
-            n, "little"
-        )
+        for k in range(n):  # compiled: a C loop
+            data[k] |= tmp[k]
         return 1
 
     def ecat_write(self, ado: int, data: memoryview | bytes) -> int:
@@ -826,13 +866,26 @@ class Esc(SmHost):
         if i < 0:
             return
         hooks = self.pdi_w_hooks if pdi else self.ecat_w_hooks
+        change = self.ecat_w_change
         while i >= 0:
             entry = hooks[i]
             if entry is None:  # pragma: no cover - bitmap and list are built together
                 break
             fn, ra, rs = entry
-            fn(self, ra, rs, self.old_reg(ra, rs, old, s))
+            if pdi or not change[i] or self._changed(ra, rs, old, s):
+                fn(self, ra, rs, self.old_reg(ra, rs, old, s))
             i = _first(hooked, ra + rs, e) if ra + rs < e else -1
+
+    def _changed(self, ra: int, rs: int, old: bytes, s: int) -> bool:
+        """The write starting at ``s`` (the bytes before it: ``old``) changed a byte of the
+        register [ra, ra + rs) (decision P20)."""
+        mem = self.mem
+        lo = max(ra, s)
+        hi = min(ra + rs, s + len(old))
+        for a in range(lo, hi):  # noqa: SIM110 - compiled: a C loop (any() is a generator)
+            if mem[a] != old[a - s]:
+                return True
+        return False
 
     def reg_read_hooks(self, s: int, e: int, pdi: bool) -> None:
         """The read side effects of the registers in [s, e) for the ECAT (``pdi`` False)
