@@ -17,6 +17,10 @@ slaves:
                              # EEPROM is loaded)
     mfcio: {...}             # tmc8460 only: parts on the MFCIO pins (ecatsim/mfcio/parts.py)
     mfc_socket: /run/mfc.sock  # tmc8460 only: the MFC CTRL SPI on a socket (TMC8460 §3.6)
+    port3: [{device: echo}]  # optional: a junction's sub-chain on port 3 (processed first)
+    port2: [{device: echo}]  # optional: ... and on port 2 (processed after port 1's line)
+out_iface: eth1              # optional: port 1 of the last slave leaves on this interface
+                             # (the next daemon, more slaves, the master's second NIC)
 faults:                      # optional: faults injected while running (ecatsim/faults/spec.py)
   - {kind: wkc, value: -1, count: 3, on_state: op}
   - {kind: drop, probability: 0.001, seed: 7}
@@ -33,6 +37,7 @@ from pathlib import Path
 
 import yaml
 
+from ecatsim import topology
 from ecatsim.errors import UserError
 from ecatsim.faults.spec import FaultSpec, FaultSpecError, parse_fault
 
@@ -58,6 +63,8 @@ _SLAVE_KEYS = {
     "pdi_emulation",
     "mfcio",
     "mfc_socket",
+    "port2",
+    "port3",
 }
 #: who runs the slave firmware behind the PDI: ecatsim, or a program on the PDI socket
 FIRMWARE_KINDS = ("ecatsim", "external")
@@ -101,6 +108,13 @@ class SegmentConfig:
     doors: tuple[tuple[str, dict[str, object]], ...] = ()
     #: the directory relative paths in the file are taken from
     base: Path | None = None
+    #: per slave (in processing order) its ports' cables (ecatsim/topology.py); empty: a
+    #: line, port 1 of each slave to port 0 of the next
+    wiring: tuple[tuple[int, ...], ...] = ()
+    #: per slave the ports it has (bit p); empty: ports 0 and 1 everywhere
+    ports: tuple[int, ...] = ()
+    #: port 1 of the last slave leaves on this interface (None: it is closed)
+    out_iface: str | None = None
 
 
 def _err(src: str, key: str, msg: str) -> UserError:
@@ -126,10 +140,11 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
     """Validate a loaded YAML document into a SegmentConfig."""
     if not isinstance(data, dict):
         raise UserError(f"{src}: expected a mapping with a 'slaves:' list at the top level")
-    unknown = set(data) - {"slaves", "faults", *DOOR_KEYS}
+    top = ("slaves", "faults", "out_iface", *DOOR_KEYS)
+    unknown = set(data) - set(top)
     if unknown:
         k = sorted(unknown)[0]
-        raise _err(src, k, f"unknown key (allowed: {', '.join(('slaves', 'faults', *DOOR_KEYS))})")
+        raise _err(src, k, f"unknown key (allowed: {', '.join(top)})")
     doors: list[tuple[str, dict[str, object]]] = []
     for k in DOOR_KEYS:
         if k in data:
@@ -137,11 +152,109 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
                 raise _err(src, k, f"expected a mapping (see 'ecatsim {k} --help')")
             doors.append((k, data[k]))
     raw = data.get("slaves")
-    if not isinstance(raw, list) or not raw:
-        raise _err(src, "slaves", "expected a non-empty list of slaves")
     out: list[SlaveConfig] = []
+    wiring: list[list[int]] = []
+    ports: list[int] = []
+    _chain(src, base, raw, "slaves", out, wiring, ports, topology.MAIN)
+    out_iface = data.get("out_iface")
+    if out_iface is not None:
+        if not isinstance(out_iface, str) or not out_iface:
+            raise _err(src, "out_iface", f"expected an interface name, got {out_iface!r}")
+        wiring[0 if not wiring else _last_of_line(wiring)][1] = topology.OUT
+    if len(out) > MAX_SLAVES:
+        raise _err(src, "slaves", f"at most {MAX_SLAVES} slaves")
+    faults = data.get("faults") or []
+    if not isinstance(faults, list):
+        raise _err(src, "faults", "expected a list of faults like {kind: drop, after_frames: 100}")
+    specs: list[FaultSpec] = []
+    for i, f in enumerate(faults):
+        try:
+            specs.append(parse_fault(f))
+        except FaultSpecError as exc:
+            raise _err(src, f"faults[{i}]", str(exc)) from None
+    linear = all(p == 0x3 for p in ports)
+    return SegmentConfig(
+        tuple(out),
+        src,
+        tuple(specs),
+        tuple(doors),
+        base,
+        wiring=() if linear and out_iface is None else tuple(tuple(w) for w in wiring),
+        ports=() if linear else tuple(ports),
+        out_iface=out_iface,
+    )
+
+
+def load_segment(path: Path) -> SegmentConfig:
+    """Read and validate a segment YAML file."""
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise UserError(
+            f"{path}: cannot read the segment file ({exc.strerror}); check the path"
+        ) from exc
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" line {mark.line + 1}" if mark is not None else ""
+        raise UserError(f"{path}:{where}: not valid YAML ({getattr(exc, 'problem', exc)})") from exc
+    return parse_segment(data, str(path), path.parent)
+
+
+def default_segment() -> SegmentConfig:
+    """The embedded default segment (config/segment.yaml): one TMC8670 drive."""
+    text = importlib.resources.files("ecatsim.defaults").joinpath("segment.yaml").read_text()
+    return parse_segment(yaml.safe_load(text), "segment.yaml (embedded default)")
+
+
+def repeat_default(n: int) -> SegmentConfig:
+    """``--slaves N``: the default device N times with distinct serial numbers."""
+    if not 1 <= n <= MAX_SLAVES:
+        raise UserError(f"--slaves: expected 1..{MAX_SLAVES}, got {n}")
+    base = default_segment().slaves[0]
+    first = base.serial if base.serial is not None else 1
+    slaves = tuple(
+        SlaveConfig(
+            device=base.device,
+            description=base.description,
+            alias=base.alias,
+            serial=first + i,
+            dc_drift_ppm=base.dc_drift_ppm,
+        )
+        for i in range(n)
+    )
+    return SegmentConfig(slaves, f"--slaves {n}")
+
+
+def _last_of_line(wiring: list[list[int]]) -> int:
+    """The last slave of the main line (from slave 0 along port 1)."""
+    i = 0
+    while wiring[i][1] >= 0:
+        i = wiring[i][1] // 4
+    return i
+
+
+def _chain(
+    src: str,
+    base: Path | None,
+    raw: object,
+    where: str,
+    out: list[SlaveConfig],
+    wiring: list[list[int]],
+    ports: list[int],
+    up: int,
+) -> None:
+    """Parse a line of slaves (``where``: its key), cabled port 1 to port 0, the first's
+    port 0 to ``up``; a junction's ``port3``/``port2`` lines are parsed where a frame
+    reaches them, so a slave's index is its position with every link up
+    (ecatsim/topology.py: 0 -> 3 -> 1 -> 2)."""
+    if not isinstance(raw, list) or not raw:
+        raise _err(src, where, "expected a non-empty list of slaves")
+    prev = -1
+    branches: list[tuple[int, str, object]] = []
     for i, s in enumerate(raw):
-        key = f"slaves[{i}]"
+        key = f"{where}[{i}]"
         if not isinstance(s, dict):
             raise _err(src, key, "expected a mapping like {device: tmc8670}")
         bad = set(s) - _SLAVE_KEYS
@@ -227,57 +340,26 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
                     mfc_socket=mfc_socket,
                 )
             )
-    if len(out) > MAX_SLAVES:
-        raise _err(src, "slaves", f"at most {MAX_SLAVES} slaves")
-    faults = data.get("faults") or []
-    if not isinstance(faults, list):
-        raise _err(src, "faults", "expected a list of faults like {kind: drop, after_frames: 100}")
-    specs: list[FaultSpec] = []
-    for i, f in enumerate(faults):
-        try:
-            specs.append(parse_fault(f))
-        except FaultSpecError as exc:
-            raise _err(src, f"faults[{i}]", str(exc)) from None
-    return SegmentConfig(tuple(out), src, tuple(specs), tuple(doors), base)
+        junction = "port2" in s or "port3" in s
+        if junction and count > 1:
+            raise _err(src, f"{key}.count", "a junction (port2/port3) cannot repeat")
+        for j in range(count):
+            k = len(out) - count + j
+            _cable(wiring, k, up if prev < 0 else 4 * prev + 1)
+            ports.append(0xF if junction else 0x3)
+            prev = k
+        if "port3" in s:
+            _chain(src, base, s["port3"], f"{key}.port3", out, wiring, ports, 4 * prev + 3)
+        if "port2" in s:
+            branches.append((prev, f"{key}.port2", s["port2"]))
+    for k, bkey, sub in reversed(branches):
+        _chain(src, base, sub, bkey, out, wiring, ports, 4 * k + 2)
 
 
-def load_segment(path: Path) -> SegmentConfig:
-    """Read and validate a segment YAML file."""
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise UserError(
-            f"{path}: cannot read the segment file ({exc.strerror}); check the path"
-        ) from exc
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" line {mark.line + 1}" if mark is not None else ""
-        raise UserError(f"{path}:{where}: not valid YAML ({getattr(exc, 'problem', exc)})") from exc
-    return parse_segment(data, str(path), path.parent)
-
-
-def default_segment() -> SegmentConfig:
-    """The embedded default segment (config/segment.yaml): one TMC8670 drive."""
-    text = importlib.resources.files("ecatsim.defaults").joinpath("segment.yaml").read_text()
-    return parse_segment(yaml.safe_load(text), "segment.yaml (embedded default)")
-
-
-def repeat_default(n: int) -> SegmentConfig:
-    """``--slaves N``: the default device N times with distinct serial numbers."""
-    if not 1 <= n <= MAX_SLAVES:
-        raise UserError(f"--slaves: expected 1..{MAX_SLAVES}, got {n}")
-    base = default_segment().slaves[0]
-    first = base.serial if base.serial is not None else 1
-    slaves = tuple(
-        SlaveConfig(
-            device=base.device,
-            description=base.description,
-            alias=base.alias,
-            serial=first + i,
-            dc_drift_ppm=base.dc_drift_ppm,
-        )
-        for i in range(n)
-    )
-    return SegmentConfig(slaves, f"--slaves {n}")
+def _cable(wiring: list[list[int]], k: int, up: int) -> None:
+    """Slave ``k``'s port 0 to ``up`` (an ESC port, or topology.MAIN), both ends."""
+    while len(wiring) <= k:
+        wiring.append([topology.NONE] * 4)
+    wiring[k][0] = up
+    if up >= 0:
+        wiring[up // 4][up % 4] = 4 * k

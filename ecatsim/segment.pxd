@@ -37,11 +37,14 @@ cdef class Segment:
     cdef public long long sync0_late_ns, sync0_ticks
     cdef public object frame_waiting
     cdef public long long yielded, probe_ns
+    cdef public long long _cur, _cur_exit, exit
+    cdef public bint processed, out_up
+    cdef public list chain, routes, wiring
 
     @cython.locals(ctx=FrameContext, hdr="long long", end="long long", p="long long",
                    lf="long long", q="long long")
     cpdef bint process(self, bytearray buf, long long off, long long n,
-                       long long t_ns=*) except -1
+                       long long t_ns=*, long long entry=*) except -1
     @cython.locals(reader="long long", n="long long", inc="long long", esc=Esc,
                    before="unsigned char[:]", after="unsigned char[:]")
     cpdef long long _frmw_system_time(self, unsigned char[:] data, long long first,

@@ -1,8 +1,10 @@
-"""A segment: N ESCs in wire order. Walks each datagram through them in place.
+"""A segment: N ESCs cabled port to port. Walks each datagram through them in place.
 
-The frame enters port 0 of the first slave and returns from the first slave whose
-port 1 is closed. Each slave the frame passes increments ADP for auto-increment and
-broadcast commands and adds its working-counter increment.
+A frame enters at the daemon's interface (port 0 of the first slave) or at the out
+interface (``--out-iface``) and goes through the processing units of the ESCs on its
+route (ecatsim/topology.py), computed when the cabling, a link or a loop setting
+changes. Each slave whose processing unit the frame passes increments ADP for
+auto-increment and broadcast commands and adds its working-counter increment.
 Ref: ETG.1000.4 §5.3-5.4 (frame and datagram), Table 11 (commands), §5.4.3 (WKC);
 TMC8460 §5.35 (processing unit error counter).
 """
@@ -13,6 +15,7 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Protocol
 
+from ecatsim import topology
 from ecatsim.clock import Clock
 from ecatsim.esc import regs
 from ecatsim.esc.core import Esc, FrameContext
@@ -49,6 +52,8 @@ class Segment:
 
     #: fixed attributes (the compiled core declares them in segment.pxd)
     __slots__ = (
+        "_cur",
+        "_cur_exit",
         "_dc_after",
         "_dc_before",
         "_dc_pending",
@@ -65,22 +70,28 @@ class Segment:
         "addr_map",
         "awake",
         "bad_frames",
+        "chain",
         "clock",
         "compiled",
         "ctx",
         "escs",
+        "exit",
         "firmware",
         "frame_waiting",
         "frames",
         "irq",
         "logical",
+        "out_up",
         "persist",
         "port0_closed",
         "probe_ns",
+        "processed",
         "reach",
         "reply_first",
+        "routes",
         "sync0_late_ns",
         "sync0_ticks",
+        "wiring",
         "yielded",
     )
 
@@ -91,7 +102,11 @@ class Segment:
         clock: Clock,
         firmware: Sequence[Serviceable] = (),
         persist: Callable[[int], None] | None = None,
+        wiring: Sequence[Sequence[int]] | None = None,
+        ports: Sequence[int] = (),
     ) -> None:
+        """``wiring``: per ESC its ports' cables (ecatsim/topology.py; None: a line);
+        ``ports``: per ESC the ports it has (bit p; default ports 0 and 1)."""
         self.escs = list(escs)
         self.ctx = ctx
         self.clock = clock
@@ -149,8 +164,27 @@ class Segment:
         #: host time of the earliest SYNC0/SYNC1 pulse (NO_DEADLINE: none)
         self._next_sync = 0
         n = len(self.escs)
+        #: per ESC the cables of its ports 0-3 (ecatsim/topology.py)
+        self.wiring = [list(w) for w in wiring] if wiring is not None else topology.linear(n)
+        topology.check(self.wiring)
+        #: the out interface has carrier (a link at the port cabled to it)
+        self.out_up = False
+        #: the routes of a frame entering at the daemon's interface (0) and at the out
+        #: interface (1, None without one), computed when the topology changes
+        self.routes: list[topology.Route | None] = [None, None]
+        #: the route whose ESCs the walk serves (chain, reach, addr_map ...): 0 or 1
+        self._cur = 0
+        self._cur_exit = topology.EXIT_MAIN
+        #: the ESCs of that route in processing order (auto-increment positions)
+        self.chain: list[Esc] = []
+        #: where the last frame leaves (topology.EXIT_MAIN, EXIT_OUT), and whether a
+        #: processing unit saw it (only then is its source address marked)
+        self.exit = topology.EXIT_MAIN
+        self.processed = False
         for i, esc in enumerate(self.escs):
-            esc.set_topology(n - 1 - i)
+            esc.set_wired(
+                topology.wired_mask(self.wiring[i], False), ports[i] if i < len(ports) else 0x3
+            )
         self._refresh()
 
     # ----------------------------------------------------------------- bookkeeping
@@ -159,24 +193,12 @@ class Segment:
         ctx = self.ctx
         if ctx.topology_dirty:
             ctx.topology_dirty = False
-            reach = len(self.escs)
-            for i, esc in enumerate(self.escs):
-                if not esc.port0_open:
-                    reach = i  # the frame cannot enter this slave: it and those behind are lost
-                    break
-                if esc.port1_closed:
-                    reach = i + 1
-                    break
-            self.reach = reach
-            self.port0_closed = any(
-                (e.mem[regs.DL_CONTROL + 1] & 0x03) == 0x03 for e in self.escs[:reach]
-            )
-            ctx.addr_dirty = ctx.logical_dirty = ctx.irq_dirty = True
+            self._compile()
         if ctx.addr_dirty:
             ctx.addr_dirty = False
             amap: dict[int, list[int]] = {}
             for i in range(self.reach):
-                m = self.escs[i].mem
+                m = self.chain[i].mem
                 amap.setdefault(m[regs.STATION_ADDRESS] | (m[regs.STATION_ADDRESS + 1] << 8), [])
                 amap[m[regs.STATION_ADDRESS] | (m[regs.STATION_ADDRESS + 1] << 8)].append(i)
                 if m[regs.DL_CONTROL + 3] & 0x01:  # 0x0100 bit 24: alias enabled
@@ -188,13 +210,79 @@ class Segment:
             self._frmw_adp = -1
         if ctx.logical_dirty:
             ctx.logical_dirty = False
-            self.logical = [e for e in self.escs[: self.reach] if e.fmmus]
+            self.logical = [e for e in self.chain if e.fmmus]
         if ctx.irq_dirty:
             ctx.irq_dirty = False
             irq = 0
-            for e in self.escs[: self.reach]:
+            for e in self.chain:
                 irq |= e.ecat_irq
             self.irq = irq
+
+    def _compile(self) -> None:
+        """The routes from both interfaces, after a change of cabling, link or loop."""
+        escs = self.escs
+        main = topology.trace(escs, self.wiring, 0, 0) if escs else topology.Route()
+        self.routes[0] = main
+        out = topology.out_port(self.wiring)
+        self.routes[1] = topology.trace(escs, self.wiring, *out) if out is not None else None
+        self._use(self._cur if self.routes[self._cur] is not None else 0)
+
+    def _use(self, k: int) -> None:
+        """Serve route ``k``: its ESCs in order, and their DC arrival times."""
+        route = self.routes[k]
+        assert route is not None
+        self._cur = k
+        self._cur_exit = route.exit
+        escs = self.escs
+        self.chain = [escs[i] for i in route.order]
+        self.reach = len(self.chain) if route.exit != topology.EXIT_LOST else 0
+        if not self.reach:
+            self.chain = []
+        self.port0_closed = route.circulating
+        for i in route.order:
+            dc = escs[i].dc
+            dc.arrive_ns = route.unit_ns[i]
+            dc.port_ns = route.port_ns[i]
+        ctx = self.ctx
+        ctx.addr_dirty = ctx.logical_dirty = ctx.irq_dirty = True
+
+    def set_out_link(self, up: bool) -> None:
+        """The out interface gained or lost carrier: the port cabled to it has a link or
+        not (DL status, loop, lost-link counter follow). Ref: TMC8460 §5.19, §5.38."""
+        if up == self.out_up:
+            return
+        self.out_up = up
+        at = topology.out_port(self.wiring)
+        if at is None:
+            return
+        esc = self.escs[at[0]]
+        was = esc.ports_link & (1 << at[1])
+        esc.wired = topology.wired_mask(self.wiring[at[0]], up)
+        m = esc.mem
+        loop = (m[regs.DL_CONTROL + 1] >> (2 * at[1])) & 0x03
+        a = regs.LOST_LINK_COUNTER + at[1]
+        if was and not up and loop == 0 and m[a] < 0xFF:
+            m[a] += 1
+        esc.update_dl_status()
+        self.ctx.topology_dirty = True
+
+    def peer(self, i: int, port: int) -> tuple[int, int] | None:
+        """The ESC and port at the other end of ESC ``i``'s ``port`` (None: not a slave)."""
+        w = self.wiring[i][port]
+        return divmod(w, 4) if w >= 0 else None
+
+    def _stamp(self, route: topology.Route, t_ns: int) -> None:
+        """Ports waiting for the frame that now comes in there latch its receive time."""
+        escs = self.escs
+        waiting = False
+        for i, p, off in route.stamps:
+            dc = escs[i].dc
+            if dc.latch_wait & (1 << p):
+                dc.stamp_port(p, t_ns + off)
+        for e in escs:
+            if e.dc.latch_wait:
+                waiting = True
+        self.ctx.latch_wait = waiting
 
     def _count_error(self) -> None:
         """A malformed frame: the first ESC counts it in 0x030C, the ones behind it see a
@@ -202,19 +290,21 @@ class Segment:
         Ref: TMC8460 §5.34, §5.35."""
         self.bad_frames += 1
         for i in range(self.reach):
-            m = self.escs[i].mem
+            m = self.chain[i].mem
             a = regs.ECAT_PU_ERROR_COUNTER if i == 0 else regs.FWD_RX_ERROR_COUNTER
             if m[a] < 0xFF:
                 m[a] += 1
 
     # ----------------------------------------------------------------- frame path
 
-    def process(self, buf: bytearray, off: int, n: int, t_ns: int = 0) -> bool:
+    def process(self, buf: bytearray, off: int, n: int, t_ns: int = 0, entry: int = 0) -> bool:
         """Process the EtherCAT frame at ``buf[off:n]`` in place; it arrived at ``t_ns``
-        (host monotonic ns; 0: now).
+        (host monotonic ns; 0: now) at the daemon's interface (``entry`` 0) or the out
+        interface (1).
 
-        Returns True if the frame is to be sent back (it may be unmodified), False if it
-        is destroyed (malformed: the master sees it as lost).
+        Returns True if the frame is to be sent on (it may be unmodified; ``exit`` says
+        on which interface), False if it is destroyed (malformed, or no route: the
+        master sees it as lost).
         Ref: ETG.1000.4 §5.3 (EtherCAT header: length, type), §5.4.
         """
         if self._dc_pending:
@@ -249,8 +339,26 @@ class Segment:
             p = q
         if ctx.topology_dirty:
             self._refresh()
+        if entry != self._cur:
+            route = self.routes[entry]
+            if route is None or route.exit == topology.EXIT_LOST:
+                return False
+            if ctx.latch_wait:
+                self._stamp(route, ctx.t_ns)
+            if not route.order:  # it passes through unprocessed (back to the master)
+                self.exit = route.exit
+                self.processed = False
+                return True
+            self._use(entry)
+            self._refresh()
+        elif ctx.latch_wait and entry:
+            route = self.routes[entry]
+            if route is not None:
+                self._stamp(route, ctx.t_ns)
         if self.reach == 0:
             return False  # no link at the first slave: the frame is lost
+        self.exit = self._cur_exit
+        self.processed = True
         if self.port0_closed and not self._circulate(buf, off + 2):
             return False
         self._walk(buf, off + 2)
@@ -272,7 +380,7 @@ class Segment:
             before[:n] = data
         inc = 0
         if reader < reach:
-            esc = self.escs[reader]
+            esc = self.chain[reader]
             inc += esc.ecat_read_system_time(data)
         if reader + 1 < reach:
             after = self._dc_after
@@ -290,7 +398,7 @@ class Segment:
         self._dc_pending = 0
         reader = self._dc_reader
         reach = self._dc_reach
-        escs = self.escs
+        escs = self.chain
         if reader > 0:  # the writers before the reference (all of them, if none reads)
             before = bytes(self._dc_before[:n])
             for i in range(min(reader, reach)):
@@ -322,7 +430,7 @@ class Segment:
             self._frame = buf
         mv = self._frame_view
         ctx = self.ctx
-        escs = self.escs
+        escs = self.chain
         while True:
             if ctx.topology_dirty or ctx.addr_dirty or ctx.logical_dirty or ctx.irq_dirty:
                 self._refresh()

@@ -43,6 +43,7 @@ cdef class FrameContext:
     cdef public long long frame_no
     cdef public long long t_ns, pdi_ns
     cdef public bint irq_dirty, addr_dirty, logical_dirty, topology_dirty, timers_dirty
+    cdef public bint latch_wait
     cdef public set pending, flush
 
 
@@ -65,8 +66,8 @@ cdef class Esc(SmHost):
     cdef public tuple fmmus
     cdef public tuple sm_windows
     cdef public bint pdram_ok
-    cdef public long long slaves_behind
-    cdef public bint port1_closed, port0_open
+    cdef public long long ports, wired, ports_link, ports_open
+    cdef public bint port1_closed, port0_open, port0_closed
     cdef public list link_down
     cdef public bint al_control_locked
     cdef public long long reset_progress_frame

@@ -191,6 +191,7 @@ class FrameContext:
         "flush",
         "frame_no",
         "irq_dirty",
+        "latch_wait",
         "logical_dirty",
         "pdi_ns",
         "pending",
@@ -209,6 +210,9 @@ class FrameContext:
         self.addr_dirty = True
         self.logical_dirty = True
         self.topology_dirty = True
+        #: an ESC waits for a frame entering at a port that leads out of the process, to
+        #: latch its receive time (DcUnit.latch_wait)
+        self.latch_wait = False
         self.timers_dirty = True
         #: positions of ESCs whose PDI interrupt line (AL event & mask) is raised
         self.pending: set[int] = set()
@@ -323,15 +327,19 @@ class Esc(SmHost):
         "pdi_w_hooks",
         "pdi_wmask",
         "pdram_ok",
+        "port0_closed",
         "port0_open",
         "port1_closed",
+        "ports",
+        "ports_link",
+        "ports_open",
         "position",
         "reset_progress_frame",
-        "slaves_behind",
         "sm",
         "sm_windows",
         "t",
         "wd",
+        "wired",
         "wr_e",
         "wr_s",
     )
@@ -377,11 +385,20 @@ class Esc(SmHost):
         self.fmmus: tuple[FmmuMap, ...] = ()
         self.sm_windows: tuple[tuple[int, int, SyncManager], ...] = ()
         self.pdram_ok = False
-        self.slaves_behind = 0
+        #: the ports that exist (bit p): 0 and 1 on the TMC8460; a junction has 2 and 3 too
+        self.ports = 0x3
+        #: the ports with a cable to a slave or an interface (bit p), set by the segment
+        self.wired = 0x1
+        #: the ports with a link (bit p) and the open ones (loop control and link), kept by
+        #: update_dl_status for the segment's routes (ecatsim/topology.py)
+        self.ports_link = 0x1
+        self.ports_open = 0x1
+        #: port 0 closed by its loop setting or a lost link (the circulating-frame check)
+        self.port0_closed = False
         self.port1_closed = True
         self.port0_open = True
-        #: injected link faults per port (0, 1)
-        self.link_down = [False, False]
+        #: injected link faults per port (0-3)
+        self.link_down = [False, False, False, False]
         self.al_control_locked = False
         self.reset_progress_frame = -1
         self.ecat_irq = 0
@@ -436,41 +453,53 @@ class Esc(SmHost):
 
     # ================================================================ topology
 
-    def set_topology(self, slaves_behind: int) -> None:
-        """Record how many slaves are connected behind port 1 (0: port 1 has no link)."""
-        self.slaves_behind = slaves_behind
+    def set_wired(self, wired: int, ports: int = 0x3) -> None:
+        """Record which ports (bit p) have a cable (to a slave or an interface with
+        carrier) and which ports exist."""
+        self.wired = wired
+        self.ports = ports | 0x3
         self.update_dl_status()
 
     def update_dl_status(self) -> None:
         """Compute 0x0110:0x0111 from links and the loop settings in 0x0100.
 
-        Port 0 faces the master and has a link unless a fault took it down; port 1 has a
-        link if a slave is behind it and the cable is up; ports 2 and 3 are not implemented
-        (closed, no link). Ref: TMC8460 §5.19 Tables 30, 31; §5.17 Table 28 bits 8-15.
+        A port has a link if it exists, has a cable and no fault took the link down. Loop
+        setting per port (2 bits of 0x0101): 0 auto and 1 auto-close (closed without a
+        link), 2 always open, 3 always closed. Ports that do not exist (2 and 3 on the
+        TMC8460) are closed with no communication.
+        Ref: TMC8460 §5.19 Tables 30, 31; §5.17 Table 28 bits 8-15.
         """
         m = self.mem
         loop = m[DL_CONTROL + 1]
-        link0 = not self.link_down[0]
-        link1 = self.slaves_behind > 0 and not self.link_down[1]
         lo = m[DL_STATUS] & 0x07
-        lo |= (0x10 if link0 else 0) | (0x20 if link1 else 0)
-        hi = 0x50  # ports 2 and 3: closed, no communication
-        # port 0
-        p0 = loop & 0x03
-        closed0 = p0 == 0x03 or not link0
-        self.port0_open = link0  # a forced-closed port 0 is the circulating-frame case
-        hi |= 0x01 if closed0 else 0x02
-        p1 = (loop >> 2) & 0x03
-        closed1 = p1 == 0x03 or (p1 in (0, 1) and not link1)
-        if p1 == 0x02 and not link1:
-            closed1 = False
-        hi |= 0x04 if closed1 else (0x08 if link1 else 0x00)
+        hi = 0
+        links = 0
+        opened = 0
+        for p in range(4):
+            bit = 1 << p
+            link = bool(self.ports & bit and self.wired & bit) and not self.link_down[p]
+            setting = (loop >> (2 * p)) & 0x03
+            absent = not self.ports & bit
+            closed = absent or setting == 0x03 or (setting != 0x02 and not link)
+            if link:
+                links |= bit
+                lo |= 0x10 << p
+            if closed:
+                hi |= 0x01 << (2 * p)
+            else:
+                opened |= bit
+                if link:
+                    hi |= 0x02 << (2 * p)
+        self.ports_link = links
+        self.ports_open = opened
+        self.port0_open = bool(links & 0x1)  # no link: no frame enters at port 0
+        self.port0_closed = not opened & 0x1
+        self.port1_closed = not opened & 0x2
         old = m[DL_STATUS] | (m[DL_STATUS + 1] << 8)
         m[DL_STATUS] = lo
         m[DL_STATUS + 1] = hi
-        self.port1_closed = closed1
-        self.mii.set_link(0, link0)
-        self.mii.set_link(1, link1)
+        self.mii.set_link(0, bool(links & 0x1))
+        self.mii.set_link(1, bool(links & 0x2))
         if old != (lo | (hi << 8)):
             self._set_ecat_event(ECAT_EV_DL_STATUS)
             self.ctx.topology_dirty = True
@@ -500,8 +529,8 @@ class Esc(SmHost):
         m[PDI_ERROR_CODE] = code & 0xFF
 
     def set_link(self, port: int, up: bool) -> None:
-        """A link fault on port 0 or 1: DL status changes; a lost link at an open port in
-        Auto loop mode counts in 0x0310+port. Ref: TMC8460 §5.19, §5.38 Table 52."""
+        """A link fault on a port (0-3): DL status changes; a lost link at an open port
+        in Auto loop mode counts in 0x0310+port. Ref: TMC8460 §5.19, §5.38 Table 52."""
         if self.link_down[port] == (not up):
             return
         self.link_down[port] = not up
@@ -1242,7 +1271,9 @@ class Esc(SmHost):
     def _ew_dc_receive_time(self, ra: int, rs: int, old: bytes) -> None:
         """A write to 0x0900 latches the receive times. Ref: TMC8460 §5.50.1 Table 92."""
         if ra == DC_RECV_TIME_P0:
-            self.dc.latch_receive_times(self.ctx.t_ns, self.slaves_behind)
+            self.dc.latch_receive_times(self.ctx.t_ns)
+            if self.dc.latch_wait:
+                self.ctx.latch_wait = True
         else:
             self.mem[ra : ra + rs] = old
 
