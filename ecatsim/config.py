@@ -140,7 +140,7 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
     """Validate a loaded YAML document into a SegmentConfig."""
     if not isinstance(data, dict):
         raise UserError(f"{src}: expected a mapping with a 'slaves:' list at the top level")
-    top = ("slaves", "faults", "out_iface", *DOOR_KEYS)
+    top = ("slaves", "faults", *DOOR_KEYS, "out_iface")
     unknown = set(data) - set(top)
     if unknown:
         k = sorted(unknown)[0]

@@ -225,7 +225,8 @@ class Segment:
         self.routes[0] = main
         out = topology.out_port(self.wiring)
         self.routes[1] = topology.trace(escs, self.wiring, *out) if out is not None else None
-        self._use(self._cur if self.routes[self._cur] is not None else 0)
+        cur = self.routes[self._cur]
+        self._use(self._cur if cur is not None and cur.order else 0)
 
     def _use(self, k: int) -> None:
         """Serve route ``k``: its ESCs in order, and their DC arrival times."""

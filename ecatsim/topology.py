@@ -124,9 +124,13 @@ def trace(escs: Sequence[PortEsc], wiring: Sequence[Sequence[int]], i: int, p: i
         return r  # no link: the frame is lost at the door
     t = 0
     turned = False  # the frame left the processing unit and no other port yet
+    #: the ports the frame went out of downstream and has not come back in at yet
+    away: list[tuple[int, int]] = []
     for _ in range(8 * len(escs) + 8):
         esc = escs[i]
         r.stamps.append((i, p, t))
+        if away and away[-1] == (i, p):
+            away.pop()
         if p and i in r.port_ns:
             r.port_ns[i][p] = t
         if p == 0:
@@ -153,11 +157,15 @@ def trace(escs: Sequence[PortEsc], wiring: Sequence[Sequence[int]], i: int, p: i
         w = wiring[i][q]
         if w in (MAIN, OUT):
             r.exit = EXIT_MAIN if w == MAIN else EXIT_OUT
-            if w == OUT and i in r.port_ns:
-                r.port_ns[i][q] = LATER
+            if w == OUT:  # these ports see the frame again when it comes back in at OUT
+                for j, k in (*away, (i, q)):
+                    if j in r.port_ns:
+                        r.port_ns[j][k] = LATER
             return r
         if w < 0:
             return Route()
+        if q:
+            away.append((i, q))
         t += esc.dc.hop_ns
         i, p = divmod(w, 4)
     return Route()  # more hops than the cabling allows: a loop of cables
