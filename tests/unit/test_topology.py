@@ -275,3 +275,25 @@ def test_two_segments_chained_are_one_line() -> None:
     p0, p1 = struct.unpack_from("<II", a.escs[0].mem, 0x0900)
     assert p1 - p0 == 10_000 + HOP
     assert not a.ctx.latch_wait
+
+
+def test_ctl_status_table_shows_junction_ports_and_the_tree() -> None:
+    from ecatsim.ctl import ControlSocket
+    from ecatsim.ctl_table import format_status
+
+    _, seg = junction()
+    status = ControlSocket.status(_StatusOnly(seg))  # type: ignore[arg-type]
+    text = format_status(status)
+    assert "port 3" in text.splitlines()[0]
+    assert text.splitlines()[1].split()[6:10] == ["link/open"] * 4
+    assert "topology (port 0 -> 3 -> 1 -> 2):\n  master - 0 - 3 - 4\n  0.port3 - 1 - 2" in text
+    assert "lost 0+0+0+0" in text
+
+
+class _StatusOnly:
+    """What ControlSocket.status reads of itself."""
+
+    def __init__(self, seg: Segment) -> None:
+        self.segment = seg
+        self.faults = FaultEngine(seg)
+        self.doors = None
