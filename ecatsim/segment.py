@@ -185,6 +185,7 @@ class Segment:
             esc.set_wired(
                 topology.wired_mask(self.wiring[i], False), ports[i] if i < len(ports) else 0x3
             )
+        self.ctx.topology_dirty = True  # the ESCs may have served another segment object
         self._refresh()
 
     # ----------------------------------------------------------------- bookkeeping
