@@ -9,6 +9,7 @@ time delay); ETG.1000.4 §5.4; SOEM ecx_init_redundant / ecx_waitinframe_red.
 from __future__ import annotations
 
 import struct
+import subprocess
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -177,3 +178,48 @@ def test_junction_reaches_op_with_positions_in_processing_order(
     assert _all_op(m)
     status = request(sock, {"cmd": "status"})
     assert status["topology"] == ["master - 0 - 3", "0.port3 - 1 - 2", "0.port2 - 4"]
+
+
+def test_redundancy_ring_with_a_soem_c_master(
+    netns_pair: NetnsPair, tmp_path: Path, stop_daemons: list[Daemon]
+) -> None:
+    """The same ring under a C master against SOEM built from pysoem's source
+    distribution (tests/support/red_master.c): ec_init_redundant, OP, 500 cycles whole,
+    500 broken between slaves 1 and 2, 500 healed; every slave in OP throughout."""
+    from tests.support.soem_build import build_program
+
+    exe = build_program("red_master", [Path(__file__).parents[1] / "support" / "red_master.c"])
+    red_m, red_s = add_veth(netns_pair.master_ns, netns_pair.slave_ns)
+    sock = tmp_path / "ctl.sock"
+    d = Daemon(netns_pair, ["--slaves", "4", "--out-iface", red_s, "--ctl", str(sock)],
+               tmp_path / "d.log")  # fmt: skip
+    stop_daemons.append(d)
+    d.start()
+    time.sleep(0.2)  # the daemon sees NIC1's carrier
+    cmd = ["ip", "netns", "exec", netns_pair.master_ns, str(exe), netns_pair.master_if, red_m]
+    proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    assert proc.stdin is not None and proc.stdout is not None
+
+    def ask(line: str) -> str:
+        assert proc.stdin is not None and proc.stdout is not None
+        proc.stdin.write(line + "\n")
+        proc.stdin.flush()
+        return proc.stdout.readline().strip()
+
+    try:
+        ready = proc.stdout.readline().split()
+        assert ready[:2] == ["ready", "4"], ready
+        assert ask("cycles 500") == "cycles 500 bad 0 op 1"
+        assert request(sock, {"cmd": "link", "slave": 1, "port": 1, "up": False})["ok"]
+        assert ask("cycles 500") == "cycles 500 bad 0 op 1"
+        dl = [s["dl_status"] for s in request(sock, {"cmd": "status"})["slaves"]]
+        assert (dl[1] >> 5 & 1, dl[2] >> 4 & 1) == (0, 0)  # the break: no link either end
+        assert request(sock, {"cmd": "link", "slave": 1, "port": 1, "up": True})["ok"]
+        assert ask("cycles 500") == "cycles 500 bad 0 op 1"
+        proc.stdin.write("quit\n")
+        proc.stdin.flush()
+        assert proc.wait(10) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(5)
