@@ -237,9 +237,7 @@ class Segment:
         self._cur_exit = route.exit
         escs = self.escs
         self.chain = [escs[i] for i in route.order]
-        self.reach = len(self.chain) if route.exit != topology.EXIT_LOST else 0
-        if not self.reach:
-            self.chain = []
+        self.reach = len(self.chain)
         self.port0_closed = route.circulating
         for i in route.order:
             dc = escs[i].dc
@@ -343,7 +341,7 @@ class Segment:
             self._refresh()
         if entry != self._cur:
             route = self.routes[entry]
-            if route is None or route.exit == topology.EXIT_LOST:
+            if route is None or not (route.order or route.exit >= 0):
                 return False
             if ctx.latch_wait:
                 self._stamp(route, ctx.t_ns)
@@ -358,13 +356,13 @@ class Segment:
             if route is not None:
                 self._stamp(route, ctx.t_ns)
         if self.reach == 0:
-            return False  # no link at the first slave: the frame is lost
+            return False  # no link at the door: the frame is lost
         self.exit = self._cur_exit
         self.processed = True
         if self.port0_closed and not self._circulate(buf, off + 2):
             return False
         self._walk(buf, off + 2)
-        return True
+        return self._cur_exit >= 0  # EXIT_LOST: destroyed after the processing units
 
     def _frmw_system_time(self, data: memoryview, first: int, reach: int) -> int:
         """The DC time distribution (FRMW of 0x0910, the frame's last datagram) with the

@@ -65,7 +65,8 @@ class Route:
     def __init__(self) -> None:
         #: ESC indices whose processing unit the frame passes, in order
         self.order: list[int] = []
-        #: EXIT_MAIN, EXIT_OUT or EXIT_LOST
+        #: EXIT_MAIN, EXIT_OUT or EXIT_LOST (the frame is destroyed after the processing
+        #: units in ``order`` saw it, as on the wire)
         self.exit = EXIT_LOST
         #: an ESC with a closed port 0 processes the frame (ETG.1000.4 §5.4)
         self.circulating = False
@@ -135,7 +136,7 @@ def trace(escs: Sequence[PortEsc], wiring: Sequence[Sequence[int]], i: int, p: i
             r.port_ns[i][p] = t
         if p == 0:
             if i in r.unit_ns:
-                return Route()  # a second pass: the circulating frame is destroyed
+                return r  # a second pass: the circulating frame is destroyed (EXIT_LOST)
             r.order.append(i)
             r.unit_ns[i] = t
             r.port_ns[i] = [t, NO_STAMP, NO_STAMP, NO_STAMP]
@@ -153,7 +154,7 @@ def trace(escs: Sequence[PortEsc], wiring: Sequence[Sequence[int]], i: int, p: i
                 t += esc.dc.turnaround_ns  # it turns back at the end of a line
         turned = False
         if not esc.ports_link & (1 << q):
-            return Route()  # sent out of an open port without a link: lost
+            return r  # sent out of an open port without a link: lost after processing
         w = wiring[i][q]
         if w in (MAIN, OUT):
             r.exit = EXIT_MAIN if w == MAIN else EXIT_OUT
@@ -163,12 +164,12 @@ def trace(escs: Sequence[PortEsc], wiring: Sequence[Sequence[int]], i: int, p: i
                         r.port_ns[j][k] = LATER
             return r
         if w < 0:
-            return Route()
+            return r
         if q:
             away.append((i, q))
         t += esc.dc.hop_ns
         i, p = divmod(w, 4)
-    return Route()  # more hops than the cabling allows: a loop of cables
+    return r  # more hops than the cabling allows: a loop of cables (EXIT_LOST)
 
 
 def describe(wiring: Sequence[Sequence[int]], names: Sequence[str]) -> list[str]:

@@ -87,6 +87,9 @@ def test_forced_open_port_without_link_loses_the_frame() -> None:
     seg = line(2)
     send(seg, [dg.build(dg.Cmd.APWR, 0xFFFF, 0x0101, b"\x08")])  # slave 1: port 1 open
     assert send(seg, [dg.build(dg.Cmd.BRD, 0, 0, bytes(1))]) is None
+    # the slaves still process it on its way: a reset of the loop settings takes effect
+    assert send(seg, [dg.build(dg.Cmd.BWR, 0, 0x0101, b"\x00")]) is None
+    assert brd_wkc(seg) == (2, topology.EXIT_MAIN)
 
 
 # ----------------------------------------------------------------- junctions
