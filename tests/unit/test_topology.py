@@ -300,3 +300,37 @@ class _StatusOnly:
         self.segment = seg
         self.faults = FaultEngine(seg)
         self.doors = None
+
+
+def test_daemon_sends_each_frame_where_its_route_leaves() -> None:
+    """The daemon with an out link (loopback links in process): a frame from the master
+    leaves on the out link marked processed; the same frame coming back on the out link
+    leaves on the daemon's link unmarked again; no carrier closes the loop at home."""
+    from ecatsim.daemon import Daemon, OutPort
+    from ecatsim.link.loopback import LoopbackLink
+
+    seg = line(2, out=True)
+    seg.set_out_link(False)
+    main, far = LoopbackLink(), LoopbackLink()
+    carrier = [True]
+    d = Daemon(main, seg, out=OutPort(far, lambda: carrier[0]))
+    d._service_timers()  # the first look at the carrier
+    assert seg.out_up
+    buf = bytearray(2048)
+    frame = dg.ethernet_frame([dg.build(dg.Cmd.BRD, 0, 0, bytes(1))])
+    main.master_send(frame)
+    assert d.handle_one(buf)
+    went = far.master_recv()
+    assert went is not None and main.master_recv() is None
+    assert went[6] & 0x02 and decode(went, 14)[0].wkc == 2
+    far.master_send(went)  # the next daemon's reply comes back on the out link
+    assert d.handle_out(buf)
+    back = main.master_recv()
+    assert back == went and far.master_recv() is None
+    carrier[0] = False
+    d.out.look_ns = 0  # type: ignore[union-attr]
+    d._service_timers()
+    main.master_send(frame)
+    assert d.handle_one(buf)
+    home = main.master_recv()
+    assert home is not None and decode(home, 14)[0].wkc == 2
