@@ -12,6 +12,7 @@ from typing import Any
 
 import structlog
 
+from ecatsim import topology
 from ecatsim.clock import Clock
 from ecatsim.config import SegmentConfig, SlaveConfig
 from ecatsim.description import (
@@ -236,8 +237,22 @@ def _signals(sc: SlaveConfig, od: ObjectDictionary, src: str, i: int) -> list[An
         raise UserError(str(exc)) from exc
 
 
-def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
-    """Build the ESCs, firmware and devices of a segment."""
+def segment_wiring(cfg: SegmentConfig, out: bool) -> list[list[int]]:
+    """The cabling of the segment file, with port 1 of the main line's last slave to the
+    out interface if ``out`` (``--out-iface``) or the file says so."""
+    n = len(cfg.slaves)
+    wiring = [list(w) for w in cfg.wiring] if cfg.wiring else topology.linear(n)
+    if out and topology.out_port(wiring) is None:
+        i = 0
+        while wiring[i][1] >= 0:
+            i = wiring[i][1] // 4
+        wiring[i][1] = topology.OUT
+    return wiring
+
+
+def build_segment(cfg: SegmentConfig, clock: Clock, out: bool = False) -> Segment:
+    """Build the ESCs, firmware and devices of a segment (``out``: with an out
+    interface at port 1 of the main line's last slave)."""
     ctx = FrameContext()
     cache: dict[tuple[str, Path | None], DeviceDescription] = {}
     models: dict[tuple[object, ...], GenericModel] = {}
@@ -347,6 +362,14 @@ def build_segment(cfg: SegmentConfig, clock: Clock) -> Segment:
         escs.append(esc)
         firmware.append(fw)
         paths.append(sc.eeprom)
-    seg = Segment(escs, ctx, clock, firmware, _Persist(escs, paths))
+    seg = Segment(
+        escs,
+        ctx,
+        clock,
+        firmware,
+        _Persist(escs, paths),
+        wiring=segment_wiring(cfg, out),
+        ports=cfg.ports,
+    )
     seg.awake = frozenset(i for i, fw in enumerate(firmware) if isinstance(fw, MfcioBlock | PinIo))
     return seg

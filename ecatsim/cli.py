@@ -56,6 +56,12 @@ def cli(ctx: click.Context, debug: bool) -> None:
 
 @cli.command()
 @click.option("--iface", help="Serve a network interface through a raw AF_PACKET socket.")
+@click.option(
+    "--out-iface",
+    "out_iface",
+    help="Port 1 of the last slave leaves on this interface: the next daemon's --iface, "
+    "more slaves, or the master's second NIC (cable redundancy).",
+)
 @click.option("--tap", "tap", help="Create and serve a TAP device with this name.")
 @click.option("--udp", "udp", help="Serve EtherCAT over UDP on HOST:PORT (port 34980 = 0x88A4).")
 @click.option("--config", "config_path", type=click.Path(path_type=Path), help="Segment YAML.")
@@ -95,6 +101,7 @@ def cli(ctx: click.Context, debug: bool) -> None:
 def run(
     obj: _Ctx,
     iface: str | None,
+    out_iface: str | None,
     tap: str | None,
     udp: str | None,
     config_path: Path | None,
@@ -135,6 +142,7 @@ def run(
         user=user,
         eni=eni,
         esi_dir=esi_dir,
+        out_iface=out_iface,
     )
     run_daemon(opts)
 

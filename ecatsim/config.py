@@ -21,12 +21,16 @@ slaves:
       tap: eoe0              # §5.7): the slave's network, a TAP device the daemon creates
       ip: 10.77.0.2/24       # ... optional address of it (EoE Set IP Parameter changes it)
       mac: 02:00:00:00:00:02 # ... optional MAC address of it
+    port3: [{device: echo}]  # optional: a junction's sub-chain on port 3 (processed first)
+    port2: [{device: echo}]  # optional: ... and on port 2 (processed after port 1's line)
   - esi: vendor.xml          # no device: a generic slave, everything from the ESI
     device_type: EL1234      # which device of the file: its <Type> text, or ...
     product: 0x04d23052      # ... its ProductCode / RevisionNo
     revision: 0x00100000
     signals:                 # optional: inputs driven without a test (ecatsim/generic/signals.py)
       - {input: "0x6000:01", loopback: "0x7000:01"}
+out_iface: eth1              # optional: port 1 of the last slave leaves on this interface
+                             # (the next daemon, more slaves, the master's second NIC)
 faults:                      # optional: faults injected while running (ecatsim/faults/spec.py)
   - {kind: wkc, value: -1, count: 3, on_state: op}
   - {kind: drop, probability: 0.001, seed: 7}
@@ -43,6 +47,7 @@ from pathlib import Path
 
 import yaml
 
+from ecatsim import topology
 from ecatsim.errors import UserError
 from ecatsim.faults.spec import FaultSpec, FaultSpecError, parse_fault
 
@@ -73,6 +78,8 @@ _SLAVE_KEYS = {
     "revision",
     "signals",
     "eoe",
+    "port2",
+    "port3",
 }
 _EOE_KEYS = ("tap", "ip", "mac")
 #: who runs the slave firmware behind the PDI: ecatsim, or a program on the PDI socket
@@ -138,6 +145,13 @@ class SegmentConfig:
     doors: tuple[tuple[str, dict[str, object]], ...] = ()
     #: the directory relative paths in the file are taken from
     base: Path | None = None
+    #: per slave (in processing order) its ports' cables (ecatsim/topology.py); empty: a
+    #: line, port 1 of each slave to port 0 of the next
+    wiring: tuple[tuple[int, ...], ...] = ()
+    #: per slave the ports it has (bit p); empty: ports 0 and 1 everywhere
+    ports: tuple[int, ...] = ()
+    #: port 1 of the last slave leaves on this interface (None: it is closed)
+    out_iface: str | None = None
 
 
 def _err(src: str, key: str, msg: str) -> UserError:
@@ -215,7 +229,7 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
     """Validate a loaded YAML document into a SegmentConfig."""
     if not isinstance(data, dict):
         raise UserError(f"{src}: expected a mapping with a 'slaves:' list at the top level")
-    top = ("slaves", "faults", *DOOR_KEYS, "eni", "esi_dir")
+    top = ("slaves", "faults", *DOOR_KEYS, "eni", "esi_dir", "out_iface")
     unknown = set(data) - set(top)
     if unknown:
         k = sorted(unknown)[0]
@@ -235,15 +249,120 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
                 raise _err(src, k, f"expected a mapping (see 'ecatsim {k} --help')")
             doors.append((k, data[k]))
     raw = data.get("slaves")
-    if isinstance(raw, tuple):  # made from an ENI
-        out: list[SlaveConfig] = list(raw)
-        raw = []
-    elif not isinstance(raw, list) or not raw:
-        raise _err(src, "slaves", "expected a non-empty list of slaves")
+    out: list[SlaveConfig] = []
+    wiring: list[list[int]] = []
+    ports: list[int] = []
+    if isinstance(raw, tuple):  # made from an ENI: a line of slaves
+        out.extend(raw)
+        wiring = topology.linear(len(out))
+        ports = [0x3] * len(out)
     else:
-        out = []
+        _chain(src, base, raw, "slaves", out, wiring, ports, topology.MAIN)
+    out_iface = data.get("out_iface")
+    if out_iface is not None:
+        if not isinstance(out_iface, str) or not out_iface:
+            raise _err(src, "out_iface", f"expected an interface name, got {out_iface!r}")
+        wiring[0 if not wiring else _last_of_line(wiring)][1] = topology.OUT
+    if len(out) > MAX_SLAVES:
+        raise _err(src, "slaves", f"at most {MAX_SLAVES} slaves")
+    taps = [sc.eoe.tap for sc in out if sc.eoe is not None]
+    for i, sc in enumerate(out):
+        if sc.eoe is not None and taps.count(sc.eoe.tap) > 1:
+            raise _err(
+                src, f"slaves[{i}].eoe.tap", f"{sc.eoe.tap} is named twice: one TAP per slave"
+            )
+    faults = data.get("faults") or []
+    if not isinstance(faults, list):
+        raise _err(src, "faults", "expected a list of faults like {kind: drop, after_frames: 100}")
+    specs: list[FaultSpec] = []
+    for i, f in enumerate(faults):
+        try:
+            specs.append(parse_fault(f))
+        except FaultSpecError as exc:
+            raise _err(src, f"faults[{i}]", str(exc)) from None
+    linear = all(p == 0x3 for p in ports)
+    return SegmentConfig(
+        tuple(out),
+        src,
+        tuple(specs),
+        tuple(doors),
+        base,
+        wiring=() if linear and out_iface is None else tuple(tuple(w) for w in wiring),
+        ports=() if linear else tuple(ports),
+        out_iface=out_iface,
+    )
+
+
+def load_segment(path: Path) -> SegmentConfig:
+    """Read and validate a segment YAML file."""
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise UserError(
+            f"{path}: cannot read the segment file ({exc.strerror}); check the path"
+        ) from exc
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" line {mark.line + 1}" if mark is not None else ""
+        raise UserError(f"{path}:{where}: not valid YAML ({getattr(exc, 'problem', exc)})") from exc
+    return parse_segment(data, str(path), path.parent)
+
+
+def default_segment() -> SegmentConfig:
+    """The embedded default segment (config/segment.yaml): one TMC8670 drive."""
+    text = importlib.resources.files("ecatsim.defaults").joinpath("segment.yaml").read_text()
+    return parse_segment(yaml.safe_load(text), "segment.yaml (embedded default)")
+
+
+def repeat_default(n: int) -> SegmentConfig:
+    """``--slaves N``: the default device N times with distinct serial numbers."""
+    if not 1 <= n <= MAX_SLAVES:
+        raise UserError(f"--slaves: expected 1..{MAX_SLAVES}, got {n}")
+    base = default_segment().slaves[0]
+    first = base.serial if base.serial is not None else 1
+    slaves = tuple(
+        SlaveConfig(
+            device=base.device,
+            description=base.description,
+            alias=base.alias,
+            serial=first + i,
+            dc_drift_ppm=base.dc_drift_ppm,
+        )
+        for i in range(n)
+    )
+    return SegmentConfig(slaves, f"--slaves {n}")
+
+
+def _last_of_line(wiring: list[list[int]]) -> int:
+    """The last slave of the main line (from slave 0 along port 1)."""
+    i = 0
+    while wiring[i][1] >= 0:
+        i = wiring[i][1] // 4
+    return i
+
+
+def _chain(
+    src: str,
+    base: Path | None,
+    raw: object,
+    where: str,
+    out: list[SlaveConfig],
+    wiring: list[list[int]],
+    ports: list[int],
+    up: int,
+) -> None:
+    """Parse a line of slaves (``where``: its key), cabled port 1 to port 0, the first's
+    port 0 to ``up``; a junction's ``port3``/``port2`` lines are parsed where a frame
+    reaches them, so a slave's index is its position with every link up
+    (ecatsim/topology.py: 0 -> 3 -> 1 -> 2)."""
+    if not isinstance(raw, list) or not raw:
+        raise _err(src, where, "expected a non-empty list of slaves")
+    prev = -1
+    branches: list[tuple[int, str, object]] = []
     for i, s in enumerate(raw):
-        key = f"slaves[{i}]"
+        key = f"{where}[{i}]"
         if not isinstance(s, dict):
             raise _err(src, key, "expected a mapping like {device: tmc8670}")
         bad = set(s) - _SLAVE_KEYS
@@ -361,63 +480,26 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
                     eoe=eoe,
                 )
             )
-    if len(out) > MAX_SLAVES:
-        raise _err(src, "slaves", f"at most {MAX_SLAVES} slaves")
-    taps = [sc.eoe.tap for sc in out if sc.eoe is not None]
-    for i, sc in enumerate(out):
-        if sc.eoe is not None and taps.count(sc.eoe.tap) > 1:
-            raise _err(
-                src, f"slaves[{i}].eoe.tap", f"{sc.eoe.tap} is named twice: one TAP per slave"
-            )
-    faults = data.get("faults") or []
-    if not isinstance(faults, list):
-        raise _err(src, "faults", "expected a list of faults like {kind: drop, after_frames: 100}")
-    specs: list[FaultSpec] = []
-    for i, f in enumerate(faults):
-        try:
-            specs.append(parse_fault(f))
-        except FaultSpecError as exc:
-            raise _err(src, f"faults[{i}]", str(exc)) from None
-    return SegmentConfig(tuple(out), src, tuple(specs), tuple(doors), base)
+        junction = "port2" in s or "port3" in s
+        if junction and count > 1:
+            raise _err(src, f"{key}.count", "a junction (port2/port3) cannot repeat")
+        for j in range(count):
+            k = len(out) - count + j
+            _cable(wiring, k, up if prev < 0 else 4 * prev + 1)
+            ports.append(0xF if junction else 0x3)
+            prev = k
+        if "port3" in s:
+            _chain(src, base, s["port3"], f"{key}.port3", out, wiring, ports, 4 * prev + 3)
+        if "port2" in s:
+            branches.append((prev, f"{key}.port2", s["port2"]))
+    for k, bkey, sub in reversed(branches):
+        _chain(src, base, sub, bkey, out, wiring, ports, 4 * k + 2)
 
 
-def load_segment(path: Path) -> SegmentConfig:
-    """Read and validate a segment YAML file."""
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise UserError(
-            f"{path}: cannot read the segment file ({exc.strerror}); check the path"
-        ) from exc
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" line {mark.line + 1}" if mark is not None else ""
-        raise UserError(f"{path}:{where}: not valid YAML ({getattr(exc, 'problem', exc)})") from exc
-    return parse_segment(data, str(path), path.parent)
-
-
-def default_segment() -> SegmentConfig:
-    """The embedded default segment (config/segment.yaml): one TMC8670 drive."""
-    text = importlib.resources.files("ecatsim.defaults").joinpath("segment.yaml").read_text()
-    return parse_segment(yaml.safe_load(text), "segment.yaml (embedded default)")
-
-
-def repeat_default(n: int) -> SegmentConfig:
-    """``--slaves N``: the default device N times with distinct serial numbers."""
-    if not 1 <= n <= MAX_SLAVES:
-        raise UserError(f"--slaves: expected 1..{MAX_SLAVES}, got {n}")
-    base = default_segment().slaves[0]
-    first = base.serial if base.serial is not None else 1
-    slaves = tuple(
-        SlaveConfig(
-            device=base.device,
-            description=base.description,
-            alias=base.alias,
-            serial=first + i,
-            dc_drift_ppm=base.dc_drift_ppm,
-        )
-        for i in range(n)
-    )
-    return SegmentConfig(slaves, f"--slaves {n}")
+def _cable(wiring: list[list[int]], k: int, up: int) -> None:
+    """Slave ``k``'s port 0 to ``up`` (an ESC port, or topology.MAIN), both ends."""
+    while len(wiring) <= k:
+        wiring.append([topology.NONE] * 4)
+    wiring[k][0] = up
+    if up >= 0:
+        wiring[up // 4][up % 4] = 4 * k

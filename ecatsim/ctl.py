@@ -16,6 +16,7 @@ from typing import Any
 
 import structlog
 
+from ecatsim import topology
 from ecatsim.device.drive import Drive
 from ecatsim.doors import DoorHost
 from ecatsim.errors import UserError
@@ -166,7 +167,8 @@ class ControlSocket:
                     "fwd_rx_errors": list(m[0x0308:0x030A]),
                     "pu_errors": m[0x030C],
                     "pdi_errors": m[0x030D],
-                    "lost_link": list(m[0x0310:0x0312]),
+                    "lost_link": list(m[0x0310 : 0x0310 + (4 if esc.ports & 0xC else 2)]),
+                    "ports": esc.ports,
                     "wd_pd_status": m[regs.WD_STATUS_PD] & 1,
                     "wd_expired": m[0x0442],
                     **({"eoe": eoe.status()} if eoe is not None else {}),
@@ -178,6 +180,7 @@ class ControlSocket:
             "slaves": out,
             "frames": seg.frames,
             "bad_frames": seg.bad_frames,
+            "topology": topology.describe(seg.wiring, [str(e.position) for e in seg.escs]),
             "faults": self.faults.status(),
             "faults_fired": self.faults.fired_total,
             "doors": doors,

@@ -10,8 +10,10 @@ from typing import Any
 
 from ecatsim.slave.al import AL_ERROR, AL_STATE_MASK, AlState, status_code_text
 
-#: ports the TMC8460 has (§1: two MII ports); DL status bits of ports 2/3 stay 0
+#: ports the TMC8460 has (§1: two MII ports); a junction slave (ports 2 and 3 cabled in
+#: the segment file) adds its ports 2 and 3 to the table
 PORTS = (0, 1)
+ALL_PORTS = (0, 1, 2, 3)
 
 
 def al_state_text(al_status: int) -> str:
@@ -98,12 +100,14 @@ def format_status(status: dict[str, Any]) -> str:
     """The daemon's ``status`` answer as aligned text: the EtherCAT slaves, one per line
     (left out for a daemon that serves front doors only), then each front door."""
     doors = status.get("doors", {})
-    if not status.get("slaves") and doors:
+    slaves = status.get("slaves", [])
+    if not slaves and doors:
         return "\n".join(ln for name, door in doors.items() for ln in format_door(name, door))
-    header = ["slave", "station", "state", "AL status code", *(f"port {p}" for p in PORTS)]
+    ports = ALL_PORTS if any(s.get("ports", 0x3) & 0xC for s in slaves) else PORTS
+    header = ["slave", "station", "state", "AL status code", *(f"port {p}" for p in ports)]
     header += ["errors", "wd expiries"]
     rows = [header]
-    for s in status.get("slaves", []):
+    for s in slaves:
         # 0x0440 bit 0 reads 0 until the watchdog first runs: it means "expired" only
         # where process data should flow
         running = s["al_status"] & AL_STATE_MASK in (AlState.SAFEOP, AlState.OP)
@@ -114,7 +118,10 @@ def format_status(status: dict[str, Any]) -> str:
                 f"0x{s['station']:04X}",
                 al_state_text(s["al_status"]),
                 status_code_text(s["al_status_code"]),
-                *(port_text(s["dl_status"], p) for p in PORTS),
+                *(
+                    port_text(s["dl_status"], p) if s.get("ports", 0x3) >> p & 1 else "-"
+                    for p in ports
+                ),
                 _errors(s),
                 f"{s['wd_expired']}{wd}",
             ]
@@ -124,6 +131,10 @@ def format_status(status: dict[str, Any]) -> str:
         e = s.get("eoe")
         if e is not None:
             lines.append(eoe_text(s["position"], e))
+    tree = status.get("topology", [])
+    if len(tree) > 1 or any(" - out" in t for t in tree):
+        lines.append("topology (port 0 -> 3 -> 1 -> 2):")
+        lines += [f"  {t}" for t in tree]
     lines.append(f"frames {status.get('frames', 0)}, bad frames {status.get('bad_frames', 0)}")
     faults = status.get("faults", [])
     if faults:

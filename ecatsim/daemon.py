@@ -8,6 +8,8 @@ receives and answers each frame through the same segment calls as
 segment's timers, and returns here only for what Python serves (the control socket, the
 front doors, faults, delayed replies); it hands a frame to :meth:`handle_frame` where
 something watches or alters frames (trace, faults).
+With an out link (``--out-iface``: port 1 of the last slave leaves the process) the
+select(2) loop serves both links (:class:`OutPort`); the compiled responder serves one.
 A failure while processing a frame is counted and logged once with the last frames; the
 loop carries on.
 Ref: docs/architecture.md "Frame path".
@@ -19,6 +21,7 @@ import ctypes
 import os
 import select
 import signal
+from collections.abc import Callable
 from types import FrameType
 from typing import TYPE_CHECKING, Protocol
 
@@ -46,6 +49,8 @@ MAX_FRAME = 2048
 IDLE_TIMEOUT_NS = 200_000_000
 #: prctl(2) option: the slack the kernel may add to this thread's timer expiries
 PR_SET_TIMERSLACK = 29
+#: how often the out link's carrier is looked at (a cable plugged or pulled)
+CARRIER_POLL_NS = 50_000_000
 
 
 def fine_timer_slack() -> None:
@@ -66,8 +71,28 @@ class ControlServer(Protocol):
     def serve(self) -> None: ...
 
 
+class OutPort:
+    """The second link (``--out-iface``): frames leaving the segment's out port go out on
+    it, frames arriving on it enter there, and its carrier is the port's link (looked at
+    every CARRIER_POLL_NS). Kept apart from the loop's one-link path so that the loop can
+    change without it."""
+
+    def __init__(self, link: Link, carrier: Callable[[], bool] | None = None) -> None:
+        self.link = link
+        self.carrier = carrier
+        #: host time of the next look at the carrier
+        self.look_ns = 0
+
+    def poll_carrier(self, segment: Segment, now_ns: int) -> None:
+        """Give the segment the carrier's state, at most once per CARRIER_POLL_NS."""
+        if now_ns < self.look_ns:
+            return
+        self.look_ns = now_ns + CARRIER_POLL_NS
+        segment.set_out_link(self.carrier() if self.carrier is not None else True)
+
+
 class Daemon:
-    """Serve one link with one segment until stopped."""
+    """Serve one link (and an out link) with one segment until stopped."""
 
     def __init__(
         self,
@@ -79,8 +104,11 @@ class Daemon:
         ctl: ControlServer | None = None,
         faults: FaultEngine | None = None,
         doors: DoorHost | None = None,
+        out: OutPort | None = None,
     ) -> None:
         self.ctl = ctl
+        #: the out link (--out-iface), None: the segment ends in this process
+        self.out = out
         #: the TMCL and LIN front doors served in the same loop, between frames
         self.doors = doors
         self.link = link
@@ -143,9 +171,21 @@ class Daemon:
         self.handle_frame(buf, n, self.link.rx_ns)
         return True
 
-    def handle_frame(self, buf: bytearray, n: int, rx_ns: int) -> None:
+    def handle_out(self, buf: bytearray) -> bool:
+        """Receive and pass on one frame from the out link if one is waiting."""
+        out = self.out
+        if out is None:
+            return False
+        n = out.link.recv_into(buf)
+        if n <= 0:
+            return False
+        self.handle_frame(buf, n, out.link.rx_ns, 1)
+        return True
+
+    def handle_frame(self, buf: bytearray, n: int, rx_ns: int, entry: int = 0) -> None:
         """Answer the frame in ``buf[:n]``, received at host time ``rx_ns`` (0: unknown,
-        now): process it, send the reply, then the work after the reply."""
+        now) on the daemon's link (``entry`` 0) or the out link (1): process it, send it
+        on, then the work after the reply."""
         link = self.link
         off = ecat_offset(buf, n, link.ethernet)
         if off < 0:
@@ -157,7 +197,7 @@ class Daemon:
         t_rx = rx_ns or seg.clock.now_ns()
         try:
             seg.pulses_due(t_rx)  # pulses due before this frame arrived come first
-            reply = seg.process(buf, off, n, t_rx)
+            reply = seg.process(buf, off, n, t_rx, entry)
         except Exception as exc:  # the loop never dies on a frame
             self._failure("process", exc)
             return
@@ -166,9 +206,12 @@ class Daemon:
     def _answer(self, buf: bytearray, off: int, n: int, reply: bool, t_rx: int) -> None:
         """Send the processed frame (unless it is destroyed), then the work after it."""
         link = self.link
+        out = self.out
+        if out is not None and self.segment.exit:
+            link = out.link  # it leaves at the out port
         faults = self.faults
         if reply:
-            if link.ethernet:
+            if link.ethernet and (out is None or self.segment.processed):
                 mark_processed(buf)
             copies = 1
             if faults.wire_live:
@@ -272,6 +315,7 @@ class Daemon:
         monotonic clock the receive time stamps are converted to."""
         return (
             responder is not None
+            and self.out is None
             and self.compiled
             and getattr(self.link, "raw_socket", False)
             and isinstance(self.segment.clock, MonotonicClock)
@@ -279,11 +323,16 @@ class Daemon:
 
     def _run_select(self, buf: bytearray) -> None:
         follow_fd = self.follower.fileno() if self.follower is not None else -1
-        watch = [f for f in (self._fd, *self._watch, follow_fd) if f >= 0]
+        link_fd = self._fd
+        if link_fd >= 0 and not self.busy_poll:
+            # the work after a reply stops for a frame that came meanwhile (decision P19)
+            self.segment.frame_waiting = lambda: bool(select.select((link_fd,), (), (), 0)[0])
+        out_fd = self.out.link.fileno() if self.out is not None else -1
+        watch = [f for f in (self._fd, out_fd, *self._watch, follow_fd) if f >= 0]
         clock = self.segment.clock
         while not self._stop:
             if self.busy_poll:
-                if not self.handle_one(buf):
+                if not (self.handle_one(buf) or self.handle_out(buf)):
                     self._service_timers()
                 continue
             deadline = self._deadline()
@@ -298,7 +347,7 @@ class Daemon:
                 self._follow_due = True  # after the frame that came with it (_after)
             # frames first (one that came in since poll returned is older than "now"), then
             # the timers: every frame is served before the pulses that come after it
-            while self.handle_one(buf):
+            while self.handle_one(buf) or self.handle_out(buf):
                 pass
             if self._follow_due:  # no frame came with it
                 self._follow(clock.now_ns())
@@ -309,6 +358,9 @@ class Daemon:
         segment's timers itself and comes back for the deadlines and descriptors that
         Python serves."""
         clock = self.segment.clock
+        srv = self._make_responder()
+        # the work after a reply stops for a frame that came meanwhile (decision P19)
+        self.segment.frame_waiting = srv.frame_waiting
         while not self._stop:
             fast = self._fast_ok()
             now = clock.now_ns()
@@ -329,11 +381,7 @@ class Daemon:
         Returns the responder's code (``responder.REPLIED`` ...) for the last thing done."""
         mod = responder
         assert mod is not None
-        srv = self._responder
-        if srv is None:
-            srv = self._responder = mod.Responder(
-                self._fd, self._watch, self.recorder, self.busy_poll
-            )
+        srv = self._make_responder()
         follower = self.follower
         if follower is not None:
             srv.set_follow(self._follow, follower.fileno(), follower.look_ns)
@@ -364,6 +412,17 @@ class Daemon:
                 self._serve_others(ready)
             self._service_timers()
         return int(code)
+
+    def _make_responder(self) -> ResponderType:
+        """The compiled responder serving the link, made on first use."""
+        mod = responder
+        assert mod is not None
+        srv = self._responder
+        if srv is None:
+            srv = self._responder = mod.Responder(
+                self._fd, self._watch, self.recorder, self.busy_poll
+            )
+        return srv
 
     def _fast_ok(self) -> bool:
         """The compiled responder may serve frames whole: nothing that watches or alters
@@ -405,6 +464,8 @@ class Daemon:
         ]
         if self.delayed:
             ds.append(self.delayed[0][0])
+        if self.out is not None:
+            ds.append(self.out.look_ns)
         if self.doors is not None:
             d = self.doors.next_deadline()
             if d is not None:
@@ -416,6 +477,8 @@ class Daemon:
         left pending, delayed replies and time-triggered faults."""
         seg = self.segment
         ctx = seg.ctx
+        if self.out is not None:
+            self.out.poll_carrier(seg, seg.clock.now_ns())
         d = seg.next_deadline()
         if ctx.pending or ctx.flush or (d is not None and d <= seg.clock.now_ns()):
             self._service()
@@ -435,6 +498,8 @@ class Daemon:
 
     def close(self) -> None:
         self.link.close()
+        if self.out is not None:
+            self.out.link.close()
         if self.follower is not None:
             self.follower.close()
         if self._responder is not None:

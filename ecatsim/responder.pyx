@@ -388,6 +388,15 @@ cdef class Responder:
         self.follow_at = self.follow(t)
         return 0
 
+    def frame_waiting(self) -> bool:
+        """A frame waits on the link (poll(2) without waiting): the segment's work after a
+        reply stops for it (``Segment.frame_waiting``, decision P19)."""
+        cdef pollfd p
+        p.fd = self.fd
+        p.events = POLLIN
+        p.revents = 0
+        return poll(&p, 1, 0) > 0 and p.revents != 0
+
     def close(self) -> None:
         """Close the timer fd (the link's socket is the caller's)."""
         if self.tfd >= 0:

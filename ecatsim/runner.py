@@ -5,6 +5,7 @@ from __future__ import annotations
 import gc
 import os
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import structlog
@@ -14,7 +15,7 @@ from ecatsim.build import build_segment
 from ecatsim.clock import MonotonicClock
 from ecatsim.config import SegmentConfig, default_segment, load_segment, repeat_default
 from ecatsim.ctl import ControlSocket, default_path, run_dir
-from ecatsim.daemon import Daemon
+from ecatsim.daemon import Daemon, OutPort
 from ecatsim.device.drive import Drive
 from ecatsim.errors import UserError
 from ecatsim.faults.engine import FaultEngine
@@ -23,7 +24,7 @@ from ecatsim.frontdoors import build_doors
 from ecatsim.link.base import Link
 from ecatsim.link.errors import LinkError
 from ecatsim.link.follow import CpuFollower
-from ecatsim.link.raw import RawLink, iface_ipv4_addresses
+from ecatsim.link.raw import RawLink, has_carrier, iface_ipv4_addresses
 from ecatsim.linklock import LinkLock, lock_link
 from ecatsim.mfcio import trace as mfcio_trace
 from ecatsim.mfcio.block import MfcioBlock
@@ -56,6 +57,8 @@ class RunOptions:
     #: the segment from an ENI (ETG.2100), with ESIs from this folder
     eni: Path | None = None
     esi_dir: Path | None = None
+    #: port 1 of the last slave leaves on this interface (the segment file's out_iface)
+    out_iface: str | None = None
 
 
 def segment_config(opts: RunOptions) -> SegmentConfig:
@@ -124,6 +127,24 @@ def open_link(opts: RunOptions) -> Link:
         raise UserError(str(exc)) from exc
 
 
+def open_out(opts: RunOptions, cfg: SegmentConfig) -> OutPort | None:
+    """The out interface (``--out-iface`` or the segment file's ``out_iface:``), raw."""
+    name = opts.out_iface or cfg.out_iface
+    if name is None:
+        return None
+    if name in (opts.iface, opts.tap):
+        raise UserError(f"--out-iface {name}: must differ from the daemon's own interface")
+    try:
+        if iface_ipv4_addresses(name) and not opts.allow_ip_iface:
+            raise UserError(
+                f"interface {name} has IPv4 address: refusing to take over a configured NIC "
+                "for --out-iface; use a dedicated interface or pass --allow-ip-iface"
+            )
+        return OutPort(RawLink(name), partial(has_carrier, name))
+    except LinkError as exc:
+        raise UserError(f"--out-iface {name}: {exc}") from exc
+
+
 def attach_trace(segment: Segment, path: Path) -> TraceWriter:
     """Give every drive of the segment a tracer writing into one CSV."""
     writer = TraceWriter(path)
@@ -173,11 +194,13 @@ def serve(opts: RunOptions) -> None:
     cfg = segment_config(opts)
     priority = realtime.choose_priority(opts.rt_priority, opts.no_rt, opts.busy_poll, opts.cpu)
     clock = MonotonicClock()
-    segment = build_segment(cfg, clock)
+    out_name = opts.out_iface or cfg.out_iface
+    segment = build_segment(cfg, clock, out=out_name is not None)
     tracer = attach_trace(segment, opts.trace) if opts.trace is not None else None
     blocks = [(i, fw) for i, fw in enumerate(segment.firmware) if isinstance(fw, MfcioBlock)]
     mfcio_tracer = mfcio_trace.attach(blocks, opts.trace) if opts.trace is not None else None
     link = open_link(opts)
+    out = open_out(opts, cfg)
     if opts.cpu is not None:
         try:
             os.sched_setaffinity(0, {opts.cpu})
@@ -195,6 +218,7 @@ def serve(opts: RunOptions) -> None:
         ctl=ctl,
         faults=faults,
         doors=doors,
+        out=out,
     )
     # Everything built so far lives for the whole run: keep it out of the cyclic garbage
     # collector so a full collection cannot stall a reply by milliseconds.
@@ -209,6 +233,7 @@ def serve(opts: RunOptions) -> None:
     log.info(
         "ready",
         link=where,
+        out_link=out_name,
         slaves=len(segment.escs),
         config=cfg.source,
         mode="busy-poll" if opts.busy_poll else "blocking",

@@ -9,6 +9,7 @@ from ecatsim.esc.dc cimport DcUnit
 
 cdef long long NOP, APRD, APWR, APRW, FPRD, FPWR, FPRW, BRD, BWR, BRW, LRD, LWR, LRW, ARMW, FRMW
 cdef long long CIRCULATING, LEN_MASK, MORE_FOLLOWS, _DC_SYSTEM_TIME, NO_DEADLINE, MAX_SYNC0_CATCHUP
+cdef long long PROBE_NS
 
 
 cdef class Segment:
@@ -34,11 +35,16 @@ cdef class Segment:
     cdef public long long reach
     cdef public bint reply_first
     cdef public long long sync0_late_ns, sync0_ticks
+    cdef public object frame_waiting
+    cdef public long long yielded, probe_ns
+    cdef public long long _cur, _cur_exit, exit
+    cdef public bint processed, out_up
+    cdef public list chain, routes, wiring
 
     @cython.locals(ctx=FrameContext, hdr="long long", end="long long", p="long long",
                    lf="long long", q="long long")
     cpdef bint process(self, bytearray buf, long long off, long long n,
-                       long long t_ns=*) except -1
+                       long long t_ns=*, long long entry=*) except -1
     @cython.locals(reader="long long", n="long long", inc="long long", esc=Esc,
                    before="unsigned char[:]", after="unsigned char[:]")
     cpdef long long _frmw_system_time(self, unsigned char[:] data, long long first,
@@ -50,7 +56,7 @@ cdef class Segment:
                    adp="long long",
                    ado="long long", lad="long long", esc=Esc,
                    k="long long", i="long long", irq="long long", wkc="long long",
-                   readers=tuple)
+                   readers=tuple, src=bytes, incoming=bytes)
     cpdef void _walk(self, bytearray buf, long long p) except *
 
     @cython.locals(n="long long", reader="long long", reach="long long", i="long long",
@@ -60,7 +66,7 @@ cdef class Segment:
     cpdef tuple hot_lines(self)
     cpdef void pulses_due(self, long long t) except *
     cpdef void service(self, object now_ns=*) except *
-    @cython.locals(ctx=FrameContext, esc=Esc, d="long long")
+    @cython.locals(ctx=FrameContext, esc=Esc, d="long long", look="long long", pos="long long")
     cpdef void service_at(self, long long t) except *
     @cython.locals(best="long long")
     cpdef object next_deadline(self)

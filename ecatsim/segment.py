@@ -1,17 +1,21 @@
-"""A segment: N ESCs in wire order. Walks each datagram through them in place.
+"""A segment: N ESCs cabled port to port. Walks each datagram through them in place.
 
-The frame enters port 0 of the first slave and returns from the first slave whose
-port 1 is closed. Each slave the frame passes increments ADP for auto-increment and
-broadcast commands and adds its working-counter increment.
+A frame enters at the daemon's interface (port 0 of the first slave) or at the out
+interface (``--out-iface``) and goes through the processing units of the ESCs on its
+route (ecatsim/topology.py), computed when the cabling, a link or a loop setting
+changes. Each slave whose processing unit the frame passes increments ADP for
+auto-increment and broadcast commands and adds its working-counter increment.
 Ref: ETG.1000.4 §5.3-5.4 (frame and datagram), Table 11 (commands), §5.4.3 (WKC);
 TMC8460 §5.35 (processing unit error counter).
 """
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Sequence
 from typing import Protocol
 
+from ecatsim import topology
 from ecatsim.clock import Clock
 from ecatsim.esc import regs
 from ecatsim.esc.core import Esc, FrameContext
@@ -26,6 +30,10 @@ MAX_SYNC0_CATCHUP = 64
 PULSE_HINT_MARGIN_NS = 200_000
 #: "no deadline" in the comparisons of deadlines
 NO_DEADLINE = 1 << 62
+#: the work after a reply looks whether a frame is waiting (``Segment.frame_waiting``)
+#: once per this many ns of firmware work, and leaves the rest for after that frame
+#: (decision P19)
+PROBE_NS = 50_000
 
 # Command codes as plain ints for the hot path. Ref: ETG.1000.4 Table 11.
 NOP, APRD, APWR, APRW, FPRD, FPWR, FPRW, BRD, BWR, BRW, LRD, LWR, LRW, ARMW, FRMW = range(15)
@@ -44,6 +52,8 @@ class Segment:
 
     #: fixed attributes (the compiled core declares them in segment.pxd)
     __slots__ = (
+        "_cur",
+        "_cur_exit",
         "_dc_after",
         "_dc_before",
         "_dc_pending",
@@ -60,20 +70,29 @@ class Segment:
         "addr_map",
         "awake",
         "bad_frames",
+        "chain",
         "clock",
         "compiled",
         "ctx",
         "escs",
+        "exit",
         "firmware",
+        "frame_waiting",
         "frames",
         "irq",
         "logical",
+        "out_up",
         "persist",
         "port0_closed",
+        "probe_ns",
+        "processed",
         "reach",
         "reply_first",
+        "routes",
         "sync0_late_ns",
         "sync0_ticks",
+        "wiring",
+        "yielded",
     )
 
     def __init__(
@@ -83,11 +102,23 @@ class Segment:
         clock: Clock,
         firmware: Sequence[Serviceable] = (),
         persist: Callable[[int], None] | None = None,
+        wiring: Sequence[Sequence[int]] | None = None,
+        ports: Sequence[int] = (),
     ) -> None:
+        """``wiring``: per ESC its ports' cables (ecatsim/topology.py; None: a line);
+        ``ports``: per ESC the ports it has (bit p; default ports 0 and 1)."""
         self.escs = list(escs)
         self.ctx = ctx
         self.clock = clock
         self.firmware = list(firmware)
+        #: True when a frame waits to be received (the daemon's link): the firmware's work
+        #: after a reply stops for it and goes on after that frame's reply (decision P19);
+        #: None: the work runs to its end
+        self.frame_waiting: Callable[[], bool] | None = None
+        #: times the work after a reply stopped for a waiting frame
+        self.yielded = 0
+        #: how often (ns of work) the work after a reply looks for a waiting frame
+        self.probe_ns = PROBE_NS
         #: positions whose service runs after every frame, interrupt or not: the TMC8460
         #: MFCIO blocks, which watch the memory blocks and the frames continuously
         self.awake: frozenset[int] = frozenset()
@@ -133,8 +164,28 @@ class Segment:
         #: host time of the earliest SYNC0/SYNC1 pulse (NO_DEADLINE: none)
         self._next_sync = 0
         n = len(self.escs)
+        #: per ESC the cables of its ports 0-3 (ecatsim/topology.py)
+        self.wiring = [list(w) for w in wiring] if wiring is not None else topology.linear(n)
+        topology.check(self.wiring)
+        #: the out interface has carrier (a link at the port cabled to it)
+        self.out_up = False
+        #: the routes of a frame entering at the daemon's interface (0) and at the out
+        #: interface (1, None without one), computed when the topology changes
+        self.routes: list[topology.Route | None] = [None, None]
+        #: the route whose ESCs the walk serves (chain, reach, addr_map ...): 0 or 1
+        self._cur = 0
+        self._cur_exit = topology.EXIT_MAIN
+        #: the ESCs of that route in processing order (auto-increment positions)
+        self.chain: list[Esc] = []
+        #: where the last frame leaves (topology.EXIT_MAIN, EXIT_OUT), and whether a
+        #: processing unit saw it (only then is its source address marked)
+        self.exit = topology.EXIT_MAIN
+        self.processed = False
         for i, esc in enumerate(self.escs):
-            esc.set_topology(n - 1 - i)
+            esc.set_wired(
+                topology.wired_mask(self.wiring[i], False), ports[i] if i < len(ports) else 0x3
+            )
+        self.ctx.topology_dirty = True  # the ESCs may have served another segment object
         self._refresh()
 
     # ----------------------------------------------------------------- bookkeeping
@@ -143,24 +194,12 @@ class Segment:
         ctx = self.ctx
         if ctx.topology_dirty:
             ctx.topology_dirty = False
-            reach = len(self.escs)
-            for i, esc in enumerate(self.escs):
-                if not esc.port0_open:
-                    reach = i  # the frame cannot enter this slave: it and those behind are lost
-                    break
-                if esc.port1_closed:
-                    reach = i + 1
-                    break
-            self.reach = reach
-            self.port0_closed = any(
-                (e.mem[regs.DL_CONTROL + 1] & 0x03) == 0x03 for e in self.escs[:reach]
-            )
-            ctx.addr_dirty = ctx.logical_dirty = ctx.irq_dirty = True
+            self._compile()
         if ctx.addr_dirty:
             ctx.addr_dirty = False
             amap: dict[int, list[int]] = {}
             for i in range(self.reach):
-                m = self.escs[i].mem
+                m = self.chain[i].mem
                 amap.setdefault(m[regs.STATION_ADDRESS] | (m[regs.STATION_ADDRESS + 1] << 8), [])
                 amap[m[regs.STATION_ADDRESS] | (m[regs.STATION_ADDRESS + 1] << 8)].append(i)
                 if m[regs.DL_CONTROL + 3] & 0x01:  # 0x0100 bit 24: alias enabled
@@ -172,13 +211,78 @@ class Segment:
             self._frmw_adp = -1
         if ctx.logical_dirty:
             ctx.logical_dirty = False
-            self.logical = [e for e in self.escs[: self.reach] if e.fmmus]
+            self.logical = [e for e in self.chain if e.fmmus]
         if ctx.irq_dirty:
             ctx.irq_dirty = False
             irq = 0
-            for e in self.escs[: self.reach]:
+            for e in self.chain:
                 irq |= e.ecat_irq
             self.irq = irq
+
+    def _compile(self) -> None:
+        """The routes from both interfaces, after a change of cabling, link or loop."""
+        escs = self.escs
+        main = topology.trace(escs, self.wiring, 0, 0) if escs else topology.Route()
+        self.routes[0] = main
+        out = topology.out_port(self.wiring)
+        self.routes[1] = topology.trace(escs, self.wiring, *out) if out is not None else None
+        cur = self.routes[self._cur]
+        self._use(self._cur if cur is not None and cur.order else 0)
+
+    def _use(self, k: int) -> None:
+        """Serve route ``k``: its ESCs in order, and their DC arrival times."""
+        route = self.routes[k]
+        assert route is not None
+        self._cur = k
+        self._cur_exit = route.exit
+        escs = self.escs
+        self.chain = [escs[i] for i in route.order]
+        self.reach = len(self.chain)
+        self.port0_closed = route.circulating
+        for i in route.order:
+            dc = escs[i].dc
+            dc.arrive_ns = route.unit_ns[i]
+            dc.port_ns = route.port_ns[i]
+        ctx = self.ctx
+        ctx.addr_dirty = ctx.logical_dirty = ctx.irq_dirty = True
+
+    def set_out_link(self, up: bool) -> None:
+        """The out interface gained or lost carrier: the port cabled to it has a link or
+        not (DL status, loop, lost-link counter follow). Ref: TMC8460 §5.19, §5.38."""
+        if up == self.out_up:
+            return
+        self.out_up = up
+        at = topology.out_port(self.wiring)
+        if at is None:
+            return
+        esc = self.escs[at[0]]
+        was = esc.ports_link & (1 << at[1])
+        esc.wired = topology.wired_mask(self.wiring[at[0]], up)
+        m = esc.mem
+        loop = (m[regs.DL_CONTROL + 1] >> (2 * at[1])) & 0x03
+        a = regs.LOST_LINK_COUNTER + at[1]
+        if was and not up and loop == 0 and m[a] < 0xFF:
+            m[a] += 1
+        esc.update_dl_status()
+        self.ctx.topology_dirty = True
+
+    def peer(self, i: int, port: int) -> tuple[int, int] | None:
+        """The ESC and port at the other end of ESC ``i``'s ``port`` (None: not a slave)."""
+        w = self.wiring[i][port]
+        return divmod(w, 4) if w >= 0 else None
+
+    def _stamp(self, route: topology.Route, t_ns: int) -> None:
+        """Ports waiting for the frame that now comes in there latch its receive time."""
+        escs = self.escs
+        waiting = False
+        for i, p, off in route.stamps:
+            dc = escs[i].dc
+            if dc.latch_wait & (1 << p):
+                dc.stamp_port(p, t_ns + off)
+        for e in escs:
+            if e.dc.latch_wait:
+                waiting = True
+        self.ctx.latch_wait = waiting
 
     def _count_error(self) -> None:
         """A malformed frame: the first ESC counts it in 0x030C, the ones behind it see a
@@ -186,19 +290,21 @@ class Segment:
         Ref: TMC8460 §5.34, §5.35."""
         self.bad_frames += 1
         for i in range(self.reach):
-            m = self.escs[i].mem
+            m = self.chain[i].mem
             a = regs.ECAT_PU_ERROR_COUNTER if i == 0 else regs.FWD_RX_ERROR_COUNTER
             if m[a] < 0xFF:
                 m[a] += 1
 
     # ----------------------------------------------------------------- frame path
 
-    def process(self, buf: bytearray, off: int, n: int, t_ns: int = 0) -> bool:
+    def process(self, buf: bytearray, off: int, n: int, t_ns: int = 0, entry: int = 0) -> bool:
         """Process the EtherCAT frame at ``buf[off:n]`` in place; it arrived at ``t_ns``
-        (host monotonic ns; 0: now).
+        (host monotonic ns; 0: now) at the daemon's interface (``entry`` 0) or the out
+        interface (1).
 
-        Returns True if the frame is to be sent back (it may be unmodified), False if it
-        is destroyed (malformed: the master sees it as lost).
+        Returns True if the frame is to be sent on (it may be unmodified; ``exit`` says
+        on which interface), False if it is destroyed (malformed, or no route: the
+        master sees it as lost).
         Ref: ETG.1000.4 §5.3 (EtherCAT header: length, type), §5.4.
         """
         if self._dc_pending:
@@ -233,12 +339,30 @@ class Segment:
             p = q
         if ctx.topology_dirty:
             self._refresh()
+        if entry != self._cur:
+            route = self.routes[entry]
+            if route is None or not (route.order or route.exit >= 0):
+                return False
+            if ctx.latch_wait:
+                self._stamp(route, ctx.t_ns)
+            if not route.order:  # it passes through unprocessed (back to the master)
+                self.exit = route.exit
+                self.processed = False
+                return True
+            self._use(entry)
+            self._refresh()
+        elif ctx.latch_wait and entry:
+            route = self.routes[entry]
+            if route is not None:
+                self._stamp(route, ctx.t_ns)
         if self.reach == 0:
-            return False  # no link at the first slave: the frame is lost
+            return False  # no link at the door: the frame is lost
+        self.exit = self._cur_exit
+        self.processed = True
         if self.port0_closed and not self._circulate(buf, off + 2):
             return False
         self._walk(buf, off + 2)
-        return True
+        return self._cur_exit >= 0  # EXIT_LOST: destroyed after the processing units
 
     def _frmw_system_time(self, data: memoryview, first: int, reach: int) -> int:
         """The DC time distribution (FRMW of 0x0910, the frame's last datagram) with the
@@ -256,7 +380,7 @@ class Segment:
             before[:n] = data
         inc = 0
         if reader < reach:
-            esc = self.escs[reader]
+            esc = self.chain[reader]
             inc += esc.ecat_read_system_time(data)
         if reader + 1 < reach:
             after = self._dc_after
@@ -274,7 +398,7 @@ class Segment:
         self._dc_pending = 0
         reader = self._dc_reader
         reach = self._dc_reach
-        escs = self.escs
+        escs = self.chain
         if reader > 0:  # the writers before the reference (all of them, if none reads)
             before = bytes(self._dc_before[:n])
             for i in range(min(reader, reach)):
@@ -306,7 +430,7 @@ class Segment:
             self._frame = buf
         mv = self._frame_view
         ctx = self.ctx
-        escs = self.escs
+        escs = self.chain
         while True:
             if ctx.topology_dirty or ctx.addr_dirty or ctx.logical_dirty or ctx.irq_dirty:
                 self._refresh()
@@ -341,14 +465,15 @@ class Segment:
                 buf[p + 2] = adp & 0xFF
                 buf[p + 3] = adp >> 8
             elif cmd == BWR:
+                src = bytes(data)  # once per datagram: every slave writes the same bytes
                 for i in range(reach):
-                    inc += escs[i].ecat_write(ado, data)
+                    inc += escs[i].ecat_write(ado, src)
                 adp = (adp + reach) & 0xFFFF
                 buf[p + 2] = adp & 0xFF
                 buf[p + 3] = adp >> 8
             elif cmd == BRW:
                 for i in range(reach):
-                    incoming = memoryview(bytes(data))
+                    incoming = bytes(data)
                     inc += escs[i].ecat_read_or(ado, data)
                     inc += 2 * escs[i].ecat_write(ado, incoming)
                 adp = (adp + reach) & 0xFFFF
@@ -437,9 +562,18 @@ class Segment:
                 esc.check_timers(t)
         ctx = self.ctx
         if (ctx.pending or self.awake) and self.firmware:
-            ctx.pdi_ns = t
+            probe = self.frame_waiting
+            look = time.monotonic_ns() + self.probe_ns if probe is not None else NO_DEADLINE
             for pos in sorted(ctx.pending | self.awake):
+                ctx.pdi_ns = t
                 self.firmware[pos].service(t)
+                if look != NO_DEADLINE and time.monotonic_ns() >= look:
+                    if probe is not None and probe():
+                        # the silicon answers while its firmware works: the frame first,
+                        # the slaves not served yet keep their raised interrupt (P19)
+                        self.yielded += 1
+                        return
+                    look = time.monotonic_ns() + self.probe_ns
         if ctx.flush and self.persist is not None:
             for pos in sorted(ctx.flush):
                 self.persist(pos)

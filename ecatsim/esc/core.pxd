@@ -28,7 +28,7 @@ cdef long long MII_PDI_ACCESS, MII_PHY_ADDRESS, N_SM, PDI_ERROR_CODE
 cdef long long PDI_ERROR_COUNTER, PDRAM_END, PDRAM_START, PHY_PORT_STATUS
 cdef long long REGISTER_END, RX_ERROR_COUNTER, SM_ACT_LATCH_ECAT, SM_ACT_LATCH_PDI
 cdef long long SM_BASE, SM_CTRL_WATCHDOG, SM_STRIDE, WD_COUNTER_PD
-cdef long long WD_COUNTER_PDI, WD_STATUS_PD
+cdef long long WD_COUNTER_PDI, WD_STATUS_PD, FMMU_BASE, FMMU_STRIDE, N_FMMU, _FMMU_BLOCK
 
 
 @cython.locals(b3="long long")
@@ -43,6 +43,7 @@ cdef class FrameContext:
     cdef public long long frame_no
     cdef public long long t_ns, pdi_ns
     cdef public bint irq_dirty, addr_dirty, logical_dirty, topology_dirty, timers_dirty
+    cdef public bint latch_wait
     cdef public set pending, flush
 
 
@@ -55,7 +56,7 @@ cdef class Esc(SmHost):
     cdef unsigned char[:] memv
     cdef public object t
     cdef public bytes ecat_wmask, pdi_wmask, ecat_w_hooked, pdi_w_hooked, ecat_r_hooked
-    cdef public bytes pdi_r_hooked
+    cdef public bytes pdi_r_hooked, ecat_w_change
     cdef public tuple ecat_w_hooks, pdi_w_hooks, ecat_r_hooks, pdi_r_hooks
     cdef public list sm
     cdef public object eeprom
@@ -65,8 +66,8 @@ cdef class Esc(SmHost):
     cdef public tuple fmmus
     cdef public tuple sm_windows
     cdef public bint pdram_ok
-    cdef public long long slaves_behind
-    cdef public bint port1_closed, port0_open
+    cdef public long long ports, wired, ports_link, ports_open
+    cdef public bint port1_closed, port0_open, port0_closed
     cdef public list link_down
     cdef public bint al_control_locked
     cdef public long long reset_progress_frame
@@ -74,6 +75,7 @@ cdef class Esc(SmHost):
     cdef public bint irq_line
     cdef public long long wr_s, wr_e
     cdef public bytearray _scratch
+    cdef unsigned char[:] _scratch_view
     cdef public object on_reset
 
     @cython.locals(n="long long", lo="long long", hi="long long", wr=bint, rd=bint, f=FmmuMap)
@@ -104,6 +106,8 @@ cdef class Esc(SmHost):
     cpdef void sync1_tick(self) except *
     @cython.locals(end="long long", ws="long long", we="long long")
     cpdef int64_t ecat_read(self, long long ado, unsigned char[:] out) except -1
+    @cython.locals(n="long long", k="long long", tmp="unsigned char[:]")
+    cpdef int64_t ecat_read_or(self, long long ado, unsigned char[:] data) except -1
     @cython.locals(mv="unsigned char[:]", k="long long")
     cpdef int64_t ecat_read_system_time(self, unsigned char[:] out) except -1
     @cython.locals(end="long long", ws="long long", we="long long")
@@ -113,8 +117,11 @@ cdef class Esc(SmHost):
     @cython.locals(end="long long", e="long long", k="long long", mv="unsigned char[:]")
     cpdef bint _plain_read(self, long long ado, unsigned char[:] out) except -1
     @cython.locals(e="long long", i="long long", k="long long", m="long long",
-                   wmask=bytes, hooked=bytes, mem=bytearray, hooks=tuple, entry=tuple)
+                   wmask=bytes, hooked=bytes, change=bytes, mem=bytearray, hooks=tuple,
+                   entry=tuple, ra="long long", rs="long long")
     cpdef void reg_write(self, long long s, bytes data, bint pdi) except *
+    @cython.locals(mem=bytearray, lo="long long", hi="long long", a="long long")
+    cpdef bint _changed(self, long long ra, long long rs, bytes old, long long s) except -1
     @cython.locals(lo="long long", hi="long long")
     cpdef bytes old_reg(self, long long ra, long long rs, bytes old, long long s)
     @cython.locals(i="long long", hooked=bytes, hooks=tuple, entry=tuple, ra="long long",

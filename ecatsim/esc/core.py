@@ -63,10 +63,13 @@ from ecatsim.esc.regs import (
     EV_SYNC0,
     EV_SYNC1,
     EV_WATCHDOG_PD,
+    FMMU_BASE,
+    FMMU_STRIDE,
     LOST_LINK_COUNTER,
     MII_ECAT_ACCESS,
     MII_PDI_ACCESS,
     MII_PHY_ADDRESS,
+    N_FMMU,
     N_SM,
     PDI_ERROR_CODE,
     PDI_ERROR_COUNTER,
@@ -117,6 +120,33 @@ PASSIVE_SIDE_EFFECTS = frozenset(
     }
 )
 
+#: ECAT-written side effects that act only on a change of their register's value: a write
+#: of the bytes already there runs no hook, so a broadcast that clears what is already
+#: clear costs a copy per slave (decision P20). The others act on every write: AL control,
+#: the EEPROM and MII commands, clear-on-write counters, the DC time loop and latches, the
+#: reset sequence, the start time (auto-activation).
+CHANGE_ONLY_SIDE_EFFECTS = frozenset(
+    {
+        "fmmu",  # recompiles the FMMU maps from memory (§5.48)
+        "sm_config",  # restores the old value while the SM is enabled (§5.49)
+        "sm_activate",  # acts on changed bits only (§5.49 Table 90)
+        "station_address",  # the address map is rebuilt from memory (§5.9)
+        "dl_control",  # DL status is recomputed from memory and links (§5.17)
+        "ecat_event_mask",  # the IRQ field is recomputed (§5.29)
+        "wd_divider",  # the watchdog's times are recomputed (§5.39)
+        "wd_time_pd",  # (§5.41)
+        "wd_time_pdi",  # no action (§5.40)
+        "dc_system_time_offset",  # the SYNC deadlines are recomputed (Table 96)
+        "dc_system_time_delay",  # no action (Table 97)
+        "dc_cyclic_unit_control",  # no action (Table 104)
+        "dc_cycle_time",  # restores the old value for a non-owner (Tables 112, 113)
+        "dc_latch_control",  # restores the old value for a non-owner (Tables 114, 115)
+        "dc_activation",  # acts on a changed value only (Table 105)
+    }
+)
+#: the six FMMUs' registers, one block for the hook: it recompiles them all at once
+_FMMU_BLOCK = N_FMMU * FMMU_STRIDE
+
 #: the logical commands as plain ints (compiled: C constants)
 _LRD = int(Cmd.LRD)
 _LWR = int(Cmd.LWR)
@@ -161,6 +191,7 @@ class FrameContext:
         "flush",
         "frame_no",
         "irq_dirty",
+        "latch_wait",
         "logical_dirty",
         "pdi_ns",
         "pending",
@@ -179,6 +210,9 @@ class FrameContext:
         self.addr_dirty = True
         self.logical_dirty = True
         self.topology_dirty = True
+        #: an ESC waits for a frame entering at a port that leads out of the process, to
+        #: latch its receive time (DcUnit.latch_wait)
+        self.latch_wait = False
         self.timers_dirty = True
         #: positions of ESCs whose PDI interrupt line (AL event & mask) is raised
         self.pending: set[int] = set()
@@ -191,6 +225,7 @@ class _Tables:
     ecat_wmask: bytes
     pdi_wmask: bytes
     ecat_w_hooked: bytes
+    ecat_w_change: bytes
     ecat_r_hooked: bytes
     pdi_w_hooked: bytes
     pdi_r_hooked: bytes
@@ -219,6 +254,7 @@ def tables() -> _Tables:
         k: [None] * REGISTER_END for k in ("_ew_", "_er_", "_pw_", "_pr_")
     }
     bits = {k: bytearray(REGISTER_END) for k in maps}
+    change = bytearray(REGISTER_END)
     for r in rows:
         if r.side_effect is None or not r.available:
             continue
@@ -226,13 +262,18 @@ def tables() -> _Tables:
             fn = getattr(Esc, prefix + r.side_effect, None)
             if fn is None:
                 continue
+            # the FMMU hook recompiles all six: one call per write of the block (P20)
+            ra, rs = (FMMU_BASE, _FMMU_BLOCK) if r.side_effect == "fmmu" else (r.addr, r.size)
             for a in range(r.addr, r.addr + r.size):
-                lst[a] = (fn, r.addr, r.size)
+                lst[a] = (fn, ra, rs)
                 bits[prefix][a] = 1
+                if prefix == "_ew_" and r.side_effect in CHANGE_ONLY_SIDE_EFFECTS:
+                    change[a] = 1
     return _Tables(
         ecat_wmask=_mask_bytes(rows, "ecat_wmask"),
         pdi_wmask=_mask_bytes(rows, "pdi_wmask"),
         ecat_w_hooked=bytes(bits["_ew_"]),
+        ecat_w_change=bytes(change),
         ecat_r_hooked=bytes(bits["_er_"]),
         pdi_w_hooked=bytes(bits["_pw_"]),
         pdi_r_hooked=bytes(bits["_pr_"]),
@@ -260,12 +301,14 @@ class Esc(SmHost):
     #: fixed attributes (compiled: the typed fields of core.pxd)
     __slots__ = (
         "_scratch",
+        "_scratch_view",
         "al_control_locked",
         "ctx",
         "dc",
         "ecat_irq",
         "ecat_r_hooked",
         "ecat_r_hooks",
+        "ecat_w_change",
         "ecat_w_hooked",
         "ecat_w_hooks",
         "ecat_wmask",
@@ -284,15 +327,19 @@ class Esc(SmHost):
         "pdi_w_hooks",
         "pdi_wmask",
         "pdram_ok",
+        "port0_closed",
         "port0_open",
         "port1_closed",
+        "ports",
+        "ports_link",
+        "ports_open",
         "position",
         "reset_progress_frame",
-        "slaves_behind",
         "sm",
         "sm_windows",
         "t",
         "wd",
+        "wired",
         "wr_e",
         "wr_s",
     )
@@ -320,6 +367,7 @@ class Esc(SmHost):
         self.ecat_wmask = t.ecat_wmask
         self.pdi_wmask = t.pdi_wmask
         self.ecat_w_hooked = t.ecat_w_hooked
+        self.ecat_w_change = t.ecat_w_change
         self.pdi_w_hooked = t.pdi_w_hooked
         self.ecat_r_hooked = t.ecat_r_hooked
         self.pdi_r_hooked = t.pdi_r_hooked
@@ -337,11 +385,20 @@ class Esc(SmHost):
         self.fmmus: tuple[FmmuMap, ...] = ()
         self.sm_windows: tuple[tuple[int, int, SyncManager], ...] = ()
         self.pdram_ok = False
-        self.slaves_behind = 0
+        #: the ports that exist (bit p): 0 and 1 on the TMC8460; a junction has 2 and 3 too
+        self.ports = 0x3
+        #: the ports with a cable to a slave or an interface (bit p), set by the segment
+        self.wired = 0x1
+        #: the ports with a link (bit p) and the open ones (loop control and link), kept by
+        #: update_dl_status for the segment's routes (ecatsim/topology.py)
+        self.ports_link = 0x1
+        self.ports_open = 0x1
+        #: port 0 closed by its loop setting or a lost link (the circulating-frame check)
+        self.port0_closed = False
         self.port1_closed = True
         self.port0_open = True
-        #: injected link faults per port (0, 1)
-        self.link_down = [False, False]
+        #: injected link faults per port (0-3)
+        self.link_down = [False, False, False, False]
         self.al_control_locked = False
         self.reset_progress_frame = -1
         self.ecat_irq = 0
@@ -352,6 +409,7 @@ class Esc(SmHost):
         self.wr_s = 0
         self.wr_e = 0
         self._scratch = bytearray(2048)
+        self._scratch_view = memoryview(self._scratch)
         #: called after a hardware reset ('RES' sequence or power cycle); set by the slave
         self.on_reset: Callable[[], None] | None = None
         self.power_on()
@@ -395,41 +453,53 @@ class Esc(SmHost):
 
     # ================================================================ topology
 
-    def set_topology(self, slaves_behind: int) -> None:
-        """Record how many slaves are connected behind port 1 (0: port 1 has no link)."""
-        self.slaves_behind = slaves_behind
+    def set_wired(self, wired: int, ports: int = 0x3) -> None:
+        """Record which ports (bit p) have a cable (to a slave or an interface with
+        carrier) and which ports exist."""
+        self.wired = wired
+        self.ports = ports | 0x3
         self.update_dl_status()
 
     def update_dl_status(self) -> None:
         """Compute 0x0110:0x0111 from links and the loop settings in 0x0100.
 
-        Port 0 faces the master and has a link unless a fault took it down; port 1 has a
-        link if a slave is behind it and the cable is up; ports 2 and 3 are not implemented
-        (closed, no link). Ref: TMC8460 §5.19 Tables 30, 31; §5.17 Table 28 bits 8-15.
+        A port has a link if it exists, has a cable and no fault took the link down. Loop
+        setting per port (2 bits of 0x0101): 0 auto and 1 auto-close (closed without a
+        link), 2 always open, 3 always closed. Ports that do not exist (2 and 3 on the
+        TMC8460) are closed with no communication.
+        Ref: TMC8460 §5.19 Tables 30, 31; §5.17 Table 28 bits 8-15.
         """
         m = self.mem
         loop = m[DL_CONTROL + 1]
-        link0 = not self.link_down[0]
-        link1 = self.slaves_behind > 0 and not self.link_down[1]
         lo = m[DL_STATUS] & 0x07
-        lo |= (0x10 if link0 else 0) | (0x20 if link1 else 0)
-        hi = 0x50  # ports 2 and 3: closed, no communication
-        # port 0
-        p0 = loop & 0x03
-        closed0 = p0 == 0x03 or not link0
-        self.port0_open = link0  # a forced-closed port 0 is the circulating-frame case
-        hi |= 0x01 if closed0 else 0x02
-        p1 = (loop >> 2) & 0x03
-        closed1 = p1 == 0x03 or (p1 in (0, 1) and not link1)
-        if p1 == 0x02 and not link1:
-            closed1 = False
-        hi |= 0x04 if closed1 else (0x08 if link1 else 0x00)
+        hi = 0
+        links = 0
+        opened = 0
+        for p in range(4):
+            bit = 1 << p
+            link = bool(self.ports & bit and self.wired & bit) and not self.link_down[p]
+            setting = (loop >> (2 * p)) & 0x03
+            absent = not self.ports & bit
+            closed = absent or setting == 0x03 or (setting != 0x02 and not link)
+            if link:
+                links |= bit
+                lo |= 0x10 << p
+            if closed:
+                hi |= 0x01 << (2 * p)
+            else:
+                opened |= bit
+                if link:
+                    hi |= 0x02 << (2 * p)
+        self.ports_link = links
+        self.ports_open = opened
+        self.port0_open = bool(links & 0x1)  # no link: no frame enters at port 0
+        self.port0_closed = not opened & 0x1
+        self.port1_closed = not opened & 0x2
         old = m[DL_STATUS] | (m[DL_STATUS + 1] << 8)
         m[DL_STATUS] = lo
         m[DL_STATUS + 1] = hi
-        self.port1_closed = closed1
-        self.mii.set_link(0, link0)
-        self.mii.set_link(1, link1)
+        self.mii.set_link(0, bool(links & 0x1))
+        self.mii.set_link(1, bool(links & 0x2))
         if old != (lo | (hi << 8)):
             self._set_ecat_event(ECAT_EV_DL_STATUS)
             self.ctx.topology_dirty = True
@@ -459,8 +529,8 @@ class Esc(SmHost):
         m[PDI_ERROR_CODE] = code & 0xFF
 
     def set_link(self, port: int, up: bool) -> None:
-        """A link fault on port 0 or 1: DL status changes; a lost link at an open port in
-        Auto loop mode counts in 0x0310+port. Ref: TMC8460 §5.19, §5.38 Table 52."""
+        """A link fault on a port (0-3): DL status changes; a lost link at an open port
+        in Auto loop mode counts in 0x0310+port. Ref: TMC8460 §5.19, §5.38 Table 52."""
         if self.link_down[port] == (not up):
             return
         self.link_down[port] = not up
@@ -587,12 +657,11 @@ class Esc(SmHost):
     def ecat_read_or(self, ado: int, data: memoryview) -> int:
         """Broadcast read: the read data is ORed into the datagram. Ref: ETG.1000.4 §5.4.3."""
         n = len(data)
-        tmp = memoryview(self._scratch)[:n]
+        tmp = self._scratch_view[:n]
         if not self.ecat_read(ado, tmp):
             return 0
-        data[:] = (int.from_bytes(data, "little") | int.from_bytes(tmp, "little")).to_bytes(
-            n, "little"
-        )
+        for k in range(n):  # compiled: a C loop
+            data[k] |= tmp[k]
         return 1
 
     def ecat_write(self, ado: int, data: memoryview | bytes) -> int:
@@ -826,13 +895,26 @@ class Esc(SmHost):
         if i < 0:
             return
         hooks = self.pdi_w_hooks if pdi else self.ecat_w_hooks
+        change = self.ecat_w_change
         while i >= 0:
             entry = hooks[i]
             if entry is None:  # pragma: no cover - bitmap and list are built together
                 break
             fn, ra, rs = entry
-            fn(self, ra, rs, self.old_reg(ra, rs, old, s))
+            if pdi or not change[i] or self._changed(ra, rs, old, s):
+                fn(self, ra, rs, self.old_reg(ra, rs, old, s))
             i = _first(hooked, ra + rs, e) if ra + rs < e else -1
+
+    def _changed(self, ra: int, rs: int, old: bytes, s: int) -> bool:
+        """The write starting at ``s`` (the bytes before it: ``old``) changed a byte of the
+        register [ra, ra + rs) (decision P20)."""
+        mem = self.mem
+        lo = max(ra, s)
+        hi = min(ra + rs, s + len(old))
+        for a in range(lo, hi):  # noqa: SIM110 - compiled: a C loop (any() is a generator)
+            if mem[a] != old[a - s]:
+                return True
+        return False
 
     def reg_read_hooks(self, s: int, e: int, pdi: bool) -> None:
         """The read side effects of the registers in [s, e) for the ECAT (``pdi`` False)
@@ -1191,7 +1273,9 @@ class Esc(SmHost):
     def _ew_dc_receive_time(self, ra: int, rs: int, old: bytes) -> None:
         """A write to 0x0900 latches the receive times. Ref: TMC8460 §5.50.1 Table 92."""
         if ra == DC_RECV_TIME_P0:
-            self.dc.latch_receive_times(self.ctx.t_ns, self.slaves_behind)
+            self.dc.latch_receive_times(self.ctx.t_ns)
+            if self.dc.latch_wait:
+                self.ctx.latch_wait = True
         else:
             self.mem[ra : ra + rs] = old
 

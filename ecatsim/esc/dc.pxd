@@ -9,9 +9,9 @@ cimport cython
 from libc.stdint cimport int64_t
 
 cdef unsigned long long MASK64, HALF64
-cdef long long HALF32
+cdef long long HALF32, NO_STAMP, LATER
 # the registers, imported from regs.py: C constants here
-cdef long long DC_ACTIVATION, DC_ACTIVATION_STATUS, DC_LATCH0_CONTROL, DC_LATCH0_POS, DC_LATCH0_STATUS, DC_NEXT_SYNC1, DC_RECV_TIME_P0, DC_RECV_TIME_P1, DC_RECV_TIME_PU, DC_SPEED_COUNTER_DIFF, DC_SPEED_COUNTER_START, DC_START_TIME, DC_SYNC0_CYCLE, DC_SYNC0_STATUS, DC_SYNC1_CYCLE, DC_SYNC1_STATUS, DC_SYSTEM_TIME, DC_SYSTEM_TIME_DELAY, DC_SYSTEM_TIME_DIFF, DC_SYSTEM_TIME_OFFSET, ESC_CFG_SYNC_OUT, ESC_CONFIG, SYNC_LATCH_CONFIG
+cdef long long DC_ACTIVATION, DC_ACTIVATION_STATUS, DC_LATCH0_CONTROL, DC_LATCH0_POS, DC_LATCH0_STATUS, DC_NEXT_SYNC1, DC_RECV_TIME_P0, DC_RECV_TIME_PU, DC_SPEED_COUNTER_DIFF, DC_SPEED_COUNTER_START, DC_START_TIME, DC_SYNC0_CYCLE, DC_SYNC0_STATUS, DC_SYNC1_CYCLE, DC_SYNC1_STATUS, DC_SYSTEM_TIME, DC_SYSTEM_TIME_DELAY, DC_SYSTEM_TIME_DIFF, DC_SYSTEM_TIME_OFFSET, ESC_CFG_SYNC_OUT, ESC_CONFIG, SYNC_LATCH_CONFIG
 
 
 @cython.locals(k="long long")
@@ -31,6 +31,8 @@ cdef void _put32(bytearray m, long long a, unsigned long long v) except *
 cdef class DcUnit:
     cdef public bytearray mem
     cdef public long long position, hop_ns, turnaround_ns, sync1_countdown
+    cdef public long long arrive_ns, latch_wait
+    cdef public list port_ns
     cdef public double drift_ppm, rate_ppb, spd
     cdef public long long moved_ns, t_ref
     cdef public unsigned long long local_ref

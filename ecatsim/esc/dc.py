@@ -18,7 +18,6 @@ from ecatsim.esc.regs import (  # compiled: C constants (dc.pxd)
     DC_LATCH0_STATUS,
     DC_NEXT_SYNC1,
     DC_RECV_TIME_P0,
-    DC_RECV_TIME_P1,
     DC_RECV_TIME_PU,
     DC_SPEED_COUNTER_DIFF,
     DC_SPEED_COUNTER_START,
@@ -47,6 +46,9 @@ MOVE_NS = 50_000
 #: the near future of the start time plausibility check (0x0981.6 = 1 / 0). Ref: Table 105
 NEAR_FUTURE_SHORT = 1 << 31
 NEAR_FUTURE_LONG = 1 << 63
+#: DcUnit.port_ns: the frame does not come in at that port; it comes in with a later frame
+NO_STAMP = -1
+LATER = -2
 
 
 def _trunc(x: float) -> int:
@@ -87,13 +89,16 @@ class DcUnit:
     """Time base and time-loop control of one ESC."""
 
     __slots__ = (
+        "arrive_ns",
         "drift_ppm",
         "hop_ns",
+        "latch_wait",
         "local_ref",
         "mem",
         "moved_ns",
         "next_sync0",
         "next_sync1",
+        "port_ns",
         "position",
         "rate_ppb",
         "spd",
@@ -117,6 +122,16 @@ class DcUnit:
         self.drift_ppm = drift_ppm
         self.hop_ns = hop_ns
         self.turnaround_ns = turnaround_ns
+        #: when a frame reaches this slave's processing unit, after it entered the segment
+        #: (ns); the segment sets it from the route frames take (ecatsim/topology.py)
+        self.arrive_ns = position * hop_ns
+        #: when that frame comes back in at ports 0-3 (ns after it entered; port 0: the
+        #: processing unit's time): NO_STAMP where it does not, LATER where it leaves the
+        #: process there and a later frame brings it back (the next daemon's reply)
+        self.port_ns = [self.arrive_ns, NO_STAMP, NO_STAMP, NO_STAMP]
+        #: ports (bit p) whose receive time the next frame entering there latches
+        #: (TMC8460 §5.50.2 Table 103, forwarding mode)
+        self.latch_wait = 0
         self.rate_ppb = 0.0
         #: local clock ticks per host ns (drift plus the loop's correction), set by _set_rate
         self.spd = 1.0 + drift_ppm * 1e-6
@@ -134,7 +149,7 @@ class DcUnit:
 
     def arrival_ns(self, frame_t_ns: int) -> int:
         """When a frame sent at ``frame_t_ns`` reaches this slave's port 0."""
-        return frame_t_ns + self.position * self.hop_ns
+        return frame_t_ns + self.arrive_ns
 
     def local_time(self, t_ns: int) -> int:
         """Local clock at host time ``t_ns`` (drift and control-loop correction applied)."""
@@ -151,20 +166,31 @@ class DcUnit:
         """Local copy of the system time = local time + offset 0x0920. Ref: Table 96."""
         return (self.local_time(t_ns) + self.offset()) & MASK64
 
-    def latch_receive_times(self, frame_t_ns: int, slaves_behind: int) -> None:
-        """A write to 0x0900 latches port 0, port 1 and processing-unit receive times.
-
-        Port 1 sees the frame coming back from the slaves behind this one.
-        Ref: TMC8460 §5.50.1 Tables 92-94.
-        """
+    def latch_receive_times(self, frame_t_ns: int) -> None:
+        """A write to 0x0900 latches the receive times of port 0 and the processing unit
+        at once, and those of ports 1-3 when the frame comes back in there: within this
+        frame's walk (the slaves behind the port are in this process), or with the next
+        frame entering at that port (the port leads out of the process: stamped by
+        :meth:`stamp_port`). Ref: TMC8460 §5.50.1 Tables 92-94, §5.50.2 Table 103 (0x0936
+        = 0, forwarding mode: ports 1-3 stamp the next frame after the write)."""
         t0 = self.arrival_ns(frame_t_ns)
         p0 = self.local_time(t0)
         m = self.mem
         _U32.pack_into(m, DC_RECV_TIME_P0, p0 & 0xFFFFFFFF)
-        if slaves_behind > 0:
-            back = 2 * slaves_behind * self.hop_ns + self.turnaround_ns
-            _U32.pack_into(m, DC_RECV_TIME_P1, self.local_time(t0 + back) & 0xFFFFFFFF)
+        for p in range(1, 4):
+            off = self.port_ns[p]
+            if off >= 0:
+                t = self.local_time(frame_t_ns + off)
+                _U32.pack_into(m, DC_RECV_TIME_P0 + 4 * p, t & 0xFFFFFFFF)
+            elif off == LATER:
+                self.latch_wait |= 1 << p
         _U64.pack_into(m, DC_RECV_TIME_PU, p0)
+
+    def stamp_port(self, port: int, t_ns: int) -> None:
+        """A frame came in at ``port`` at host time ``t_ns`` after a latching write.
+        Ref: TMC8460 §5.50.1 Table 93."""
+        self.latch_wait &= ~(1 << port)
+        _U32.pack_into(self.mem, DC_RECV_TIME_P0 + 4 * port, self.local_time(t_ns) & 0xFFFFFFFF)
 
     def refresh_system_time(self, frame_t_ns: int) -> None:
         """ECAT read of 0x0910: the system time latched at this slave's frame SOF.

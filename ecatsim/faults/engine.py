@@ -237,7 +237,7 @@ class FaultEngine:
 
     def _in_state(self, target: int | None, state: AlState) -> bool:
         seg = self.segment
-        escs = seg.escs[: seg.reach] if target is None else [seg.escs[target]]
+        escs = seg.chain if target is None else [seg.escs[target]]
         return bool(escs) and all((e.mem[regs.AL_STATUS] & 0x0F) == state for e in escs)
 
     def _fired(self, a: Armed, force_done: bool = False) -> None:
@@ -307,13 +307,14 @@ class FaultEngine:
         log.info("fault_fired", id=a.id, kind=s.kind, slave=pos)
 
     def set_cable(self, pos: int, port: int, up: bool) -> None:
-        """A cable between ``pos`` (port 0/1) and its neighbour goes down or up: both ends
-        see it. Ref: TMC8460 §5.19 (DL status), §5.38 (lost link counter)."""
-        escs = self.segment.escs
-        escs[pos].set_link(port, up)
-        peer = pos + 1 if port == 1 else pos - 1
-        if 0 <= peer < len(escs):
-            escs[peer].set_link(1 - port, up)
+        """The cable at ``pos``'s ``port`` (0-3) goes down or up: both ends see it (one end
+        only where the cable leads to an interface). Ref: TMC8460 §5.19 (DL status),
+        §5.38 (lost link counter)."""
+        seg = self.segment
+        seg.escs[pos].set_link(port, up)
+        peer = seg.peer(pos, port)
+        if peer is not None:
+            seg.escs[peer[0]].set_link(peer[1], up)
 
     def _power_off(self, pos: int, now_ns: int, due_ns: int) -> None:
         """No power: both cables are dead until the slave powers up again, and the device

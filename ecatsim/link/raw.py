@@ -42,6 +42,8 @@ TP_STATUS_VLAN_TPID_VALID = 0x40
 SIOCGIFFLAGS = 0x8913
 SIOCSIFFLAGS = 0x8914
 IFF_UP = 0x1
+#: the interface is up and has carrier (operational). Ref: netdevice(7)
+IFF_RUNNING = 0x40
 #: Receive/send buffer: room for a few hundred full frames without hogging memory.
 SOCK_BUF = 1 << 20
 #: (code, jt, jf, k): keep 0x88A4 and 0x8100/0x88A4, drop PACKET_OUTGOING. Ref: filter(7).
@@ -134,6 +136,18 @@ def ensure_up(iface: str) -> None:
                 f"interface {iface} is down and bringing it up needs CAP_NET_ADMIN: "
                 f"run 'ip link set {iface} up' as root ({exc.strerror})"
             ) from exc
+
+
+def has_carrier(iface: str) -> bool:
+    """``iface`` is up with carrier (a veth whose peer is up, a NIC with a cable to a
+    powered port); False also when it cannot be read. Ref: netdevice(7) IFF_RUNNING."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        req = _IFREQ_FLAGS.pack(iface.encode(), 0)
+        try:
+            _name, flags = _IFREQ_FLAGS.unpack_from(fcntl.ioctl(s, SIOCGIFFLAGS, req))
+        except OSError:
+            return False
+    return bool(flags & IFF_UP and flags & IFF_RUNNING)
 
 
 def _monotonic(stamp_ns: int) -> int:

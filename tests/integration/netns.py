@@ -230,7 +230,7 @@ class Daemon:
     json`` is added unless ``args`` choose a format.
     """
 
-    def __init__(self, pair: NetnsPair, args: Sequence[str], log: Path) -> None:
+    def __init__(self, pair: NetnsPair | Port, args: Sequence[str], log: Path) -> None:
         self.pair = pair
         self.args = tuple(args)
         self.log = log
@@ -322,3 +322,63 @@ class Daemon:
     def restart(self, timeout: float = READY_TIMEOUT) -> None:
         self.stop()
         self.start(timeout)
+
+
+class ExtraNetns:
+    """One more namespace (``ns``), removed on exit like a :class:`NetnsPair`'s, for
+    topologies of several daemons; :meth:`veth` cables it to another namespace.
+
+    Names: ``ecs-<pid>-<n>-x``; interfaces ``vx<6 hex>`` (the other end ``vy<6 hex>``)."""
+
+    def __init__(self) -> None:
+        if not is_root():
+            raise PermissionError("ExtraNetns needs root (ip netns add, veth)")
+        self.ns = f"ecs-{os.getpid()}-{next(_counter)}-x"
+
+    def __enter__(self) -> ExtraNetns:
+        with _lock:
+            _live.add(self.ns)
+        try:
+            _run("ip", "netns", "add", self.ns)
+            _sysctl_in(self.ns, "net.ipv6.conf.default.disable_ipv6", "1")
+            _sysctl_in(self.ns, "net.ipv6.conf.all.disable_ipv6", "1")
+            _run("ip", "-n", self.ns, "link", "set", "lo", "up")
+        except BaseException:
+            _del_ns(self.ns)
+            raise
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        _del_ns(self.ns)
+
+    def veth(self, other_ns: str) -> tuple[str, str]:
+        """A veth pair, one end here and one in ``other_ns``, both up: (here, there)."""
+        return add_veth(self.ns, other_ns)
+
+
+def add_veth(ns_a: str, ns_b: str) -> tuple[str, str]:
+    """A veth pair between two namespaces this process made, both ends up (removed with
+    the namespaces): the names of its ends in ``ns_a`` and ``ns_b``."""
+    tag = f"{(os.getpid() * 4099 + next(_counter) * 40503) & 0xFFFFFF:06x}"
+    a, b = f"vx{tag}", f"vy{tag}"
+    _run(
+        "ip", "link", "add", a, "netns", ns_a, "type", "veth", "peer", "name", b, "netns", ns_b,
+    )  # fmt: skip
+    for ns, dev in ((ns_a, a), (ns_b, b)):
+        _sysctl_in(ns, f"net.ipv6.conf.{dev}.disable_ipv6", "1")
+        _run("ip", "-n", ns, "link", "set", dev, "up")
+    return a, b
+
+
+class Port:
+    """Where a :class:`Daemon` runs: a namespace and its interface (a NetnsPair has the
+    same two attributes)."""
+
+    def __init__(self, slave_ns: str, slave_if: str) -> None:
+        self.slave_ns = slave_ns
+        self.slave_if = slave_if

@@ -31,7 +31,7 @@ def test_a_door_key_must_hold_a_mapping() -> None:
 
 
 def test_an_unknown_top_level_key_names_the_allowed_ones() -> None:
-    allowed = r"canbus: unknown key \(allowed: slaves, faults, tmcl, lin, eni, esi_dir\)"
+    allowed = r"canbus: unknown key \(allowed: slaves, faults, tmcl, lin, eni, esi_dir, out_iface\)"
     with pytest.raises(UserError, match=allowed):
         parse_segment({"slaves": SLAVES, "canbus": {}}, "seg.yaml")
 

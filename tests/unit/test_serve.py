@@ -255,7 +255,7 @@ def test_a_traced_daemon_serves_in_python(srv: ModuleType) -> None:
 class Failing(Segment):
     """A segment whose frame processing fails."""
 
-    def process(self, buf: bytearray, off: int, n: int, t_ns: int = 0) -> bool:
+    def process(self, buf: bytearray, off: int, n: int, t_ns: int = 0, entry: int = 0) -> bool:
         raise RuntimeError("broken segment")
 
 

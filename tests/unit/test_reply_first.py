@@ -1,0 +1,126 @@
+"""Reply first, react after (decisions P19, P20): the ESC's part of a broadcast is a copy
+plus the side effects that change state, and the firmware's reactions run after the reply,
+stopping for a frame that comes meanwhile and going on after its reply, with the same AL
+states and codes a polling master reads."""
+
+from __future__ import annotations
+
+import struct
+
+from ecatsim.esc.core import Esc, tables
+from ecatsim.wire import datagram as dg
+from tests.perf.hotpath import configure_to_op, op_segment
+from tests.support.tinymaster import TinyMaster, segment_of
+
+AL_STATUS, AL_EVENT = 0x0130, 0x0220
+
+
+def bwr_only(m: TinyMaster, ado: int, data: bytes) -> int:
+    """A BWR with no service after it (the reply is out, the firmware has not acted)."""
+    return m.one(dg.build(dg.Cmd.BWR, 0, ado, data), service=False).wkc
+
+
+def brd_only(m: TinyMaster, ado: int, n: int) -> tuple[bytes, int]:
+    r = m.one(dg.build(dg.Cmd.BRD, 0, ado, bytes(n)), service=False)
+    return r.data, r.wkc
+
+
+def al_status(m: TinyMaster, n: int) -> list[int]:
+    return [struct.unpack_from("<H", m.seg.escs[i].mem, AL_STATUS)[0] for i in range(n)]
+
+
+def test_the_work_after_a_reply_stops_for_a_waiting_frame_and_goes_on_after_it() -> None:
+    m, _, _ = op_segment(4)
+    seg = m.seg
+    assert al_status(m, 4) == [8, 8, 8, 8]
+    waiting = [True]
+    seg.frame_waiting = lambda: waiting[0]
+    seg.probe_ns = 0  # look after every slave
+    assert bwr_only(m, 0x0120, b"\x02\x00") == 4  # PREOP
+    seg.service()  # the first slave acts, then the waiting frame comes first
+    assert seg.yielded == 1
+    assert al_status(m, 4) == [2, 8, 8, 8]
+    # the frame that waited: a polling master sees the slaves that have acted
+    assert brd_only(m, AL_STATUS, 2) == (b"\x0a\x00", 4)  # 2 | 8: ORed over the slaves
+    assert [bool(seg.escs[i].mem[AL_EVENT] & 0x01) for i in range(4)] == [False, True, True, True]
+    waiting[0] = False
+    seg.service()  # after that frame's reply: the rest
+    assert seg.yielded == 1
+    assert al_status(m, 4) == [2, 2, 2, 2]
+    assert [seg.escs[i].mem[AL_EVENT] & 0x01 for i in range(4)] == [0, 0, 0, 0]
+    assert m.brd(AL_STATUS, 2).data == b"\x02\x00"
+
+
+def test_without_a_waiting_frame_the_work_runs_to_its_end() -> None:
+    m, _, _ = op_segment(3)
+    m.seg.frame_waiting = lambda: False
+    m.seg.probe_ns = 0
+    m.bwr(0x0120, b"\x01\x00")
+    assert al_status(m, 3) == [1, 1, 1]
+    assert m.seg.yielded == 0
+
+
+def test_clearing_the_fmmus_by_broadcast_clears_the_maps() -> None:
+    m, _, _ = op_segment(3)
+    assert all(len(e.fmmus) == 2 for e in m.seg.escs)
+    r = m.bwr(0x0600, bytes(256))
+    assert r.wkc == 3
+    assert [e.fmmus for e in m.seg.escs] == [(), (), ()]
+    assert m.lrw(0, bytes(3 * 29)).wkc == 0  # nothing maps the logical space any more
+    r = m.bwr(0x0600, bytes(256))  # again, over what is already clear
+    assert (r.wkc, [e.fmmus for e in m.seg.escs]) == (3, [(), (), ()])
+
+
+def test_a_write_of_the_same_fmmu_bytes_keeps_the_maps() -> None:
+    m, _, _ = op_segment(2)
+    before = [e.fmmus for e in m.seg.escs]
+    cfg = bytes(m.seg.escs[0].mem[0x0600:0x0620])
+    m.apwr(0, 0x0600, cfg)
+    assert m.seg.escs[0].fmmus == before[0]
+    assert m.lrw(0, bytes(2 * 29)).wkc == 6  # both slaves: outputs written, inputs read
+
+
+def test_a_repeated_al_control_write_is_a_new_request_each_time() -> None:
+    """AL control acts on every write, not on a change: the same request twice raises the
+    AL event twice (TMC8460 §5.20)."""
+    seg, _ = segment_of(2)
+    m = TinyMaster(seg)
+    m.bwr(0x0120, b"\x11\x00")
+    for _ in range(2):
+        bwr_only(m, 0x0120, b"\x01\x00")
+        assert [e.mem[AL_EVENT] & 0x01 for e in seg.escs] == [1, 1]
+        seg.service()
+        assert [e.mem[AL_EVENT] & 0x01 for e in seg.escs] == [0, 0]
+
+
+def test_sm_config_written_while_enabled_keeps_its_value() -> None:
+    m, _, _ = op_segment(1)
+    old = bytes(m.seg.escs[0].mem[0x0810:0x0818])
+    m.bwr(0x0810, struct.pack("<HHB", 0x1400, 4, 0x20))  # SM2 is enabled: refused
+    assert bytes(m.seg.escs[0].mem[0x0810:0x0818]) == old
+
+
+def test_the_fmmu_hook_is_one_block_and_acts_on_a_change_only() -> None:
+    t = tables()
+    assert t.ecat_w[0x0600] == (Esc._ew_fmmu, 0x0600, 96)
+    assert t.ecat_w[0x065C] == (Esc._ew_fmmu, 0x0600, 96)
+    assert t.ecat_w_change[0x0600] == 1 and t.ecat_w_change[0x0806] == 1
+    assert t.ecat_w_change[0x0120] == 0  # AL control: every write
+    assert t.ecat_w_change[0x0502] == 0  # EEPROM control: every write
+    assert t.ecat_w_change[0x0910] == 0  # the DC time loop: every write
+
+
+def test_broadcast_read_ors_every_slave() -> None:
+    seg, _ = segment_of(3)
+    m = TinyMaster(seg)
+    for i, v in enumerate((0x01, 0x10, 0x80)):
+        seg.escs[i].mem[0x0F80] = v  # user RAM
+    r = m.one(dg.build(dg.Cmd.BRD, 0, 0x0F80, b"\x02\x00"))
+    assert (r.data, r.wkc, r.adp) == (b"\x93\x00", 3, 3)
+
+
+def test_configure_to_op_still_reaches_op_on_every_slave() -> None:
+    seg, _ = segment_of(5, device="tmc8670")
+    m = TinyMaster(seg)
+    configure_to_op(m, 5)
+    assert al_status(m, 5) == [8] * 5
