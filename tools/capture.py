@@ -7,7 +7,7 @@ MAC is set (the slaves set it, ETG.1000.4 §5.2; the daemon's ``mark_processed``
 and reply are paired by the index byte of the first datagram (ETG.1000.4 §5.4.1.2),
 which the slaves leave unchanged. A request seen again with the same index and the same
 datagrams while its first copy is unanswered is a resend (SOEM resends after its 2 ms
-timeout). ``analyse`` turns the stamped frames into the figures ``ecatsim bench
+timeout; within ``RESEND_WINDOW_NS``). ``analyse`` turns the stamped frames into the figures ``ecatsim bench
 --bringup`` reports; it is plain data in, plain data out (tests/unit/test_capture.py).
 
     with MasterCapture(pair.master_ns, pair.master_if) as cap:
@@ -33,6 +33,12 @@ ETH_P_ECAT = 0x88A4
 #: ``parse`` keeps the EtherCAT ones. Ref: packet(7)
 ETH_P_ALL = 0x0003
 SO_TIMESTAMPNS = 35
+#: SO_RCVBUF beyond net.core.rmem_max (root): the thread may fall behind, the kernel
+#: keeps the frames. Ref: socket(7)
+SO_RCVBUFFORCE = 33
+#: a request sent again with the same index and datagram this soon is a resend; later it
+#: is a new request (a master's cyclic frames repeat while their outputs do not change)
+RESEND_WINDOW_NS = 20_000_000
 #: bytes of each frame kept: Ethernet + EtherCAT header + the first datagram's header and
 #: up to 48 bytes of its data (enough to tell a resend from a new request)
 SNAP = 14 + 2 + 10 + 48
@@ -102,7 +108,7 @@ def analyse(
         if not f.reply:
             old = pending.get(f.idx)
             if old is not None:
-                if old.body == f.body and old.cmd == f.cmd:
+                if old.body == f.body and f.t_ns - old.t_ns < RESEND_WINDOW_NS:
                     resends += 1
                     if len(resent) < slowest:
                         resent.append(
@@ -167,7 +173,10 @@ class MasterCapture:
     def _open(self) -> socket.socket:
         s = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(ETH_P_ALL))
         s.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
-        s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 32 << 20)
+        try:
+            s.setsockopt(socket.SOL_SOCKET, SO_RCVBUFFORCE, 64 << 20)
+        except PermissionError:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 64 << 20)
         s.bind((self._end[1], ETH_P_ALL))
         return s
 

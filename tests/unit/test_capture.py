@@ -89,3 +89,10 @@ def test_p999_is_nearest_rank() -> None:
         frames += [req(i * MS, i & 0xFF), rep(i * MS + (i + 1) * 1000, i & 0xFF)]
     a = analyse(frames)
     assert (a["frames"], a["p999_us"], a["max_us"], a["over_1ms"]) == (2000, 1998.0, 2000.0, 1000)
+
+
+def test_the_same_request_much_later_is_a_new_one() -> None:
+    """A master's cyclic frames repeat while its outputs do not change: the same index and
+    datagram 30 ms later is a new request (the first one was not answered)."""
+    a = analyse([req(0, 9), req(30 * MS, 9), rep(30 * MS + 50_000, 9)])
+    assert (a["frames"], a["max_us"], a["resends"], a["unanswered"]) == (1, 50.0, 0, 1)
