@@ -7,8 +7,9 @@ MAC is set (the slaves set it, ETG.1000.4 §5.2; the daemon's ``mark_processed``
 and reply are paired by the index byte of the first datagram (ETG.1000.4 §5.4.1.2),
 which the slaves leave unchanged. A request seen again with the same index and the same
 datagrams while its first copy is unanswered is a resend (SOEM resends after its 2 ms
-timeout; within ``RESEND_WINDOW_NS``). ``analyse`` turns the stamped frames into the figures ``ecatsim bench
---bringup`` reports; it is plain data in, plain data out (tests/unit/test_capture.py).
+timeout; within ``RESEND_WINDOW_NS``). ``analyse`` turns the stamped frames into the
+figures ``ecatsim bench --bringup`` reports; it is plain data in, plain data out
+(tests/unit/test_capture.py).
 
     with MasterCapture(pair.master_ns, pair.master_if) as cap:
         cap.mark("config_init")
