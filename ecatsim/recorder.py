@@ -1,3 +1,6 @@
+# cython: boundscheck=False, wraparound=False
+# (compiled: the frame copy below is a C loop without index checks; every index is kept
+# inside both buffers by the clamp before it)
 """A small in-memory recorder of the last frames, for diagnostics when something fails.
 
 Slots are preallocated; recording is one copy into the next slot (no per-frame objects).
@@ -29,7 +32,7 @@ class FrameRecorder:
         """Keep ``buf[:n]`` (at most ``SLOT`` bytes) as the newest frame: one copy into the
         next slot (compiled: a C loop between typed views)."""
         i = self._next
-        n = min(n, SLOT)
+        n = min(n, SLOT, len(buf))
         ring = self._view
         base = i * SLOT
         for k in range(n):
