@@ -37,6 +37,9 @@ class BenchOptions:
     rates: tuple[int, ...]
     hold_floor: bool
     repeat: int
+    bringup: tuple[int, ...] = ()
+    cycles: int = 2000
+    overlap: bool = False
 
 
 @click.command("bench")
@@ -125,13 +128,35 @@ class BenchOptions:
     "and print the median of the ratios (the machine's drift between runs moves a single "
     "run's ratio by up to 2x).",
 )
+@click.option(
+    "--bringup",
+    multiple=True,
+    type=click.IntRange(min=1),
+    help="Instead of the round trips: bring N drives to OP with DC and run --cycles cycles, "
+    "every reply timed by a capture on the master's end (repeat the option for more sizes).",
+)
+@click.option(
+    "--cycles",
+    type=click.IntRange(min=1),
+    default=2000,
+    show_default=True,
+    help="Cycles at --period-us after the bring-up of --bringup.",
+)
+@click.option(
+    "--overlap",
+    is_flag=True,
+    help="--bringup: the master maps the process data overlapped (config_overlap_map), so "
+    "its IO map holds more drives.",
+)
 def bench(**kw: object) -> None:
     """Measure the daemon against a real master and a C echo floor. Root.
 
     \b
     Per run it prints the master's round trip (median, p99), the floor's, their ratio,
     lost frames and WKC errors, the daemon's CPU, and the daemon's own reply time (median,
-    p99.99, max) from kernel timestamps on both ends of the link.
+    p99.99, max) from kernel timestamps on both ends of the link. With --bringup: the
+    reply times of every frame of a bring-up and the cycles after it (p50, p99.9, max,
+    over 1 ms and 2 ms, resends, unanswered, the slowest frames) and the cycles' WKC.
     """
     opts = BenchOptions(**kw)  # type: ignore[arg-type]
     if not TOOL.exists():

@@ -50,6 +50,7 @@ CORE = (
     "ecatsim.wire.frame",
     "ecatsim.recorder",
     "ecatsim.segment",
+    "ecatsim.sequence",
     "ecatsim.device.cia402",
     "ecatsim.device.servo",
     "ecatsim.device.drive",

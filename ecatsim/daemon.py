@@ -35,7 +35,8 @@ from ecatsim.link.base import Link
 from ecatsim.link.follow import CpuFollower
 from ecatsim.recorder import FrameRecorder
 from ecatsim.segment import Segment
-from ecatsim.wire.frame import ecat_offset, mark_processed
+from ecatsim.sequence import NOT_ECAT, REPLY, FrameSequence
+from ecatsim.wire.frame import ecat_offset
 
 if TYPE_CHECKING:
     from ecatsim.responder import Responder as ResponderType
@@ -121,6 +122,8 @@ class Daemon:
         self.busy_poll = busy_poll
         self.trace_frames = trace_frames
         self.recorder = FrameRecorder()
+        #: the per-frame sequence, the same the compiled responder runs (decision P21)
+        self.sequence = FrameSequence(segment, self.recorder, link.ethernet)
         #: serve with the compiled responder where it applies (a raw link, the OS clock);
         #: tests compare it with the Python path
         self.compiled = True
@@ -184,24 +187,21 @@ class Daemon:
 
     def handle_frame(self, buf: bytearray, n: int, rx_ns: int, entry: int = 0) -> None:
         """Answer the frame in ``buf[:n]``, received at host time ``rx_ns`` (0: unknown,
-        now) on the daemon's link (``entry`` 0) or the out link (1): process it, send it
-        on, then the work after the reply."""
-        link = self.link
-        off = ecat_offset(buf, n, link.ethernet)
-        if off < 0:
-            return
-        self.recorder.record(buf, n)
-        if self.trace_frames:
+        now) on the daemon's link (``entry`` 0) or the out link (1): the per-frame
+        sequence (decision P21) with the reply sent here, where faults may alter or hold
+        it and a frame trace logs it."""
+        if self.trace_frames and ecat_offset(buf, n, self.link.ethernet) >= 0:
             log.debug("frame_in", data=bytes(buf[:n]).hex())
-        seg = self.segment
-        t_rx = rx_ns or seg.clock.now_ns()
+        seq = self.sequence
+        t_rx = rx_ns or self.segment.clock.now_ns()
         try:
-            seg.pulses_due(t_rx)  # pulses due before this frame arrived come first
-            reply = seg.process(buf, off, n, t_rx, entry)
+            code = seq.arrive(buf, n, t_rx, entry)
         except Exception as exc:  # the loop never dies on a frame
             self._failure("process", exc)
             return
-        self._answer(buf, off, n, reply, t_rx)
+        if code == NOT_ECAT:
+            return
+        self._answer(buf, seq.off, n, code == REPLY, t_rx)
 
     def _answer(self, buf: bytearray, off: int, n: int, reply: bool, t_rx: int) -> None:
         """Send the processed frame (unless it is destroyed), then the work after it."""
@@ -211,8 +211,6 @@ class Daemon:
             link = out.link  # it leaves at the out port
         faults = self.faults
         if reply:
-            if link.ethernet and (out is None or self.segment.processed):
-                mark_processed(buf)
             copies = 1
             if faults.wire_live:
                 copies, delay_ns = faults.on_reply(buf, off, n)
@@ -229,14 +227,18 @@ class Daemon:
         self._after(t_rx)
 
     def _after(self, t_rx: int) -> None:
-        """The work after a frame's reply: its DC time loops (decision P7), the firmware
-        and the timers due by its arrival, time-triggered faults."""
+        """The sequence's steps after the reply: the frame's DC time loops (decision P7),
+        the firmware and the timers due by its arrival; then time-triggered faults."""
         seg = self.segment
+        seq = self.sequence
         try:
-            seg.after_reply()
+            seq.after()
         except Exception as exc:
             self._failure("process", exc)
-        self._service(t_rx)
+        try:
+            seq.service(t_rx)
+        except Exception as exc:
+            self._failure("service", exc)
         follower = self.follower
         if follower is not None and (self._follow_due or 0 < follower.look_ns <= t_rx):
             self._follow(t_rx)
@@ -387,11 +389,11 @@ class Daemon:
             srv.set_follow(self._follow, follower.fileno(), follower.look_ns)
         else:
             srv.set_follow(None, -1, 0)
-        seg = self.segment if self._fast_ok() else None
+        seq = self.sequence if self._fast_ok() else None
         before = srv.replied
         n = t_rx = 0
         try:
-            code, n, t_rx = srv.serve(buf, deadline_ns, seg, t_rx_ns, timers and seg is not None)
+            code, n, t_rx = srv.serve(buf, deadline_ns, seq, t_rx_ns, timers and seq is not None)
         except mod.SegmentError as exc:  # the loop never dies on a frame
             self._failure("process", exc.__cause__ or exc)
             code = mod.DROPPED  # handled: by a failure, as in handle_frame

@@ -3,7 +3,7 @@
 from collections.abc import Callable
 
 from ecatsim.recorder import FrameRecorder
-from ecatsim.segment import Segment
+from ecatsim.sequence import FrameSequence
 
 TIMEOUT: int
 WAKE: int
@@ -35,7 +35,7 @@ class Responder:
         self,
         buf: bytearray,
         deadline_ns: int,
-        seg: Segment | None = None,
+        seq: FrameSequence | None = None,
         t_rx: int = 0,
         timers: bool = False,
     ) -> tuple[int, int, int]: ...

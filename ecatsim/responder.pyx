@@ -6,11 +6,11 @@ reply and the segment's timers, and goes back to waiting; it returns to the daem
 where Python is needed (another descriptor, a signal, the daemon's own deadline, a frame
 it does not serve whole).
 
-What happens to a frame is :meth:`Daemon.handle_frame`'s, through the same calls:
-``Segment.pulses_due`` fires the SYNC pulses due before it, ``Segment.process`` walks it
-(ETG.1000.4 §5.3-5.4), and after the reply ``Segment.after_reply`` and
-``Segment.service`` (:meth:`Daemon._after`); a timer that falls due is
-``Segment.service`` (:meth:`Daemon._service_timers`). Only the I/O is here: ppoll(2) (or
+What happens to a frame is written once, in the core's per-frame sequence
+(ecatsim/sequence.py, decision P21), which :meth:`Daemon.handle_frame` runs too:
+``FrameSequence.arrive`` (record, the SYNC pulses due before it, the walk, the processed
+bit), then the send here, then ``FrameSequence.after`` and ``FrameSequence.service``; a
+timer that falls due is ``Segment.service_at``. Only the I/O is here: ppoll(2) (or
 a busy spin) on the raw socket, the other descriptors and a timerfd_create(2) timer armed
 once per deadline; recvmsg(2) on the packet(7) socket with its SO_TIMESTAMPNS receive time
 (socket(7)) and the 802.1Q tag from PACKET_AUXDATA, as ``RawLink.recv_into`` receives
@@ -32,7 +32,7 @@ from posix.unistd cimport close, read
 
 from ecatsim.recorder cimport FrameRecorder
 from ecatsim.segment cimport Segment
-from ecatsim.wire.frame cimport ecat_offset, mark_processed
+from ecatsim.sequence cimport FrameSequence, _NOT_ECAT, _DROPPED
 
 from os import strerror
 
@@ -289,8 +289,6 @@ cdef class Responder:
     #: the deadline the timer fd is armed for (-1: none)
     cdef long long armed
     cdef bytearray buf
-    #: a typed view of ``buf`` while serve() runs (one buffer export per call, not per frame)
-    cdef unsigned char[:] view
     cdef FrameRecorder recorder
     cdef readonly bint busy
     #: the CPU following: called with a time after a frame from another CPU, returns the
@@ -478,31 +476,20 @@ cdef class Responder:
                 if not look:
                     self.run_follow(clock_ns(CLOCK_MONOTONIC))
 
-    cdef int answer(self, long n, Segment seg, long long t_rx) except -1:
-        """Daemon.handle_frame and Daemon._answer for a frame served whole: record it as
-        received, fire the SYNC pulses due before it, process it, then send the reply (or
-        not: DROPPED). FRAME: not an EtherCAT frame (Python ignores it).
-        Ref: ETG.1000.4 §5.3-5.4."""
-        cdef bytearray buf = self.buf
-        cdef bytearray slot
-        cdef uint8_t *b
-        cdef bint reply
-        cdef long long off = ecat_offset(self.view, n, True)
-        if off < 0:
-            return FRAME
-        slot = self.recorder.next_slot()  # kept as received, before the walk patches it
-        memcpy(<char *>slot, <char *>buf, <size_t>min(n, len(slot)))
-        self.recorder.commit(n)
+    cdef int answer(self, long n, FrameSequence seq, long long t_rx) except -1:
+        """The per-frame sequence's first step (``FrameSequence.arrive``), then the send:
+        REPLIED, DROPPED (destroyed: no reply) or FRAME (not an EtherCAT frame: Python
+        ignores it). Ref: ETG.1000.4 §5.3-5.4."""
+        cdef long long code
         self.stage = IN_FRAME
         self.stage_n = n
-        seg.pulses_due(t_rx)  # pulses due before this frame arrived come first
-        reply = seg.process(buf, off, n, t_rx)
+        code = seq.arrive(self.buf, n, t_rx)
         self.stage = IN_NOTHING
-        if not reply:
+        if code == _NOT_ECAT:
+            return FRAME
+        if code == _DROPPED:
             return DROPPED
-        mark_processed(self.view)
-        b = <uint8_t *>(<char *>buf)
-        if send(self.fd, b, <size_t>n, 0) < 0:
+        if send(self.fd, <uint8_t *>(<char *>self.buf), <size_t>n, 0) < 0:
             if errno not in (ENOBUFS, EAGAIN, ENETDOWN, ENXIO):  # dropped, as a wire would
                 PyErr_SetFromErrno(OSError)
         self.replied += 1
@@ -510,24 +497,27 @@ cdef class Responder:
             sched_yield()  # a master woken on this CPU takes the reply first (Daemon._answer)
         return REPLIED
 
-    cdef int after(self, Segment seg, long long t, int code) except -1:
-        """Daemon._after for a frame served here: the work it left for after its reply,
-        the firmware and timers due by its arrival, then the CPU following."""
+    cdef int after(self, FrameSequence seq, long long t, int code) except -1:
+        """The sequence's steps after the send: the work the frame left for after its reply
+        and the firmware and timers due by its arrival; then the CPU following."""
         self.stage = IN_AFTER
         self.stage_t = t
         self.stage_code = code
-        seg.after_reply()
-        self.service(seg, t, code)
+        seq.after()
+        self.stage = IN_SERVICE
+        seq.service(t)
+        self.stage = IN_NOTHING
         if self.follow is not None and (self.follow_due or 0 < self.follow_at <= t):
             self.run_follow(t)
         return 0
 
-    def serve(self, bytearray buf not None, long long deadline_ns, Segment seg=None,
+    def serve(self, bytearray buf not None, long long deadline_ns, FrameSequence seq=None,
               long long t_rx=0, bint timers=False):
         """Wait until a frame arrives in ``buf``, ``deadline_ns`` (host monotonic) passes or
-        one of ``others`` is readable, and serve the frame with ``seg`` (a Segment; None:
-        hand every frame back as FRAME) and the work after it. ``t_rx``: the frame's arrival
-        time (host monotonic ns; 0: from the kernel's receive time stamp).
+        one of ``others`` is readable, and serve the frame with ``seq`` (the segment's
+        per-frame sequence; None: hand every frame back as FRAME) and the work after it.
+        ``t_rx``: the frame's arrival time (host monotonic ns; 0: from the kernel's receive
+        time stamp).
 
         ``timers`` (the segment runs on the OS monotonic clock): go on serving frames, and
         run the segment's timers (``Segment.next_deadline``, ``Segment.service``) as they
@@ -539,13 +529,12 @@ cdef class Responder:
         work after it would, OSError where the socket fails."""
         cdef int policy = sched_getscheduler(0)
         self.rt = policy == SCHED_FIFO or policy == SCHED_RR
-        if seg is None and timers:
+        if seq is None and timers:
             raise ValueError("timers: a segment is needed")
         self.buf = buf
-        self.view = buf
         self.stage = IN_NOTHING
         try:
-            return self.serve_frames(deadline_ns, seg, t_rx, timers)
+            return self.serve_frames(deadline_ns, seq, t_rx, timers)
         except Exception as exc:
             if self.stage == IN_FRAME:
                 raise SegmentError(self.stage_n) from exc
@@ -555,7 +544,8 @@ cdef class Responder:
                 raise ServiceError("service", self.stage_t, self.stage_code) from exc
             raise
         finally:
-            self.view = None  # the caller's buffer is free to change size again
+            if seq is not None:
+                seq.release()  # the caller's buffer is free to change size again
             self.stage = IN_NOTHING
 
     cdef int service(self, Segment seg, long long t, int code) except -1:
@@ -568,13 +558,14 @@ cdef class Responder:
         self.stage = IN_NOTHING
         return 0
 
-    cdef tuple serve_frames(self, long long deadline_ns, Segment seg, long long t_rx,
+    cdef tuple serve_frames(self, long long deadline_ns, FrameSequence seq, long long t_rx,
                             bint timers):
         """serve()'s loop."""
         cdef long long stamp = 0
         cdef long long wait_until, now, t
         cdef long n
         cdef int code, i
+        cdef Segment seg = seq.segment if seq is not None else None
         for i in range(self.nothers + 3):
             self.pfd[i].revents = 0
         while True:
@@ -593,12 +584,11 @@ cdef class Responder:
                 self.service(seg, now, TIMEOUT)  # a SYNC pulse or a watchdog of the segment
                 continue
             t = t_rx if t_rx else rx_time(stamp)
-            if seg is None:
+            if seq is None:
                 return (FRAME, n, t)
-            code = self.answer(n, seg, t)
+            code = self.answer(n, seq, t)
             if code == FRAME:
                 return (FRAME, n, t)
-            self.after(seg, t, code)
+            self.after(seq, t, code)
             if not timers:
                 return (code, n, t)
-

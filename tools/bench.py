@@ -376,6 +376,18 @@ def run(args: BenchOptions) -> int:
     if os.geteuid() != 0:
         print("bench: needs root (namespaces, raw sockets)", file=sys.stderr)
         return 2
+    if args.bringup:
+        from bringup import main as bringup_main
+
+        rt_flags: tuple[str, ...] = ("--no-rt",) if args.no_rt else ()
+        if args.rt_priority and not args.no_rt:
+            rt_flags = ("--rt-priority", str(args.rt_priority))
+        if args.no_follow_master_cpu:
+            rt_flags = (*rt_flags, "--no-follow-master-cpu")
+        if args.cpu is not None:
+            rt_flags = (*rt_flags, "--cpu", str(args.cpu))
+        return bringup_main(args.bringup, args.cycles, args.period_us, args.overlap, rt_flags,
+                            args.repeat)  # fmt: skip
     tmp = Path(tempfile.mkdtemp(prefix="ecatsim-bench-"))
     echo = tmp / "echo"
     subprocess.run(["cc", "-O2", "-o", str(echo), "-x", "c", "-"], input=ECHO_C.encode(),

@@ -13,9 +13,12 @@ firmware's INIT transitions after the reply), a BRD of 0x0130. Each figure is th
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 import time
 from pathlib import Path
+
+import structlog
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -66,6 +69,8 @@ def main() -> int:
     ap.add_argument("--slaves", type=int, action="append")
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args()
+    # the firmware logs each AL transition: not part of the cost measured here
+    structlog.configure(wrapper_class=structlog.make_filtering_bound_logger(logging.WARNING))
     print(core_line())
     for n in args.slaves or [128, 512]:
         for name, (walk, after) in run(n, args.repeat).items():

@@ -9,7 +9,8 @@ import struct
 
 from ecatsim.esc.core import Esc, tables
 from ecatsim.wire import datagram as dg
-from tests.perf.hotpath import configure_to_op, op_segment
+from ecatsim.wire.frame import ecat_offset
+from tests.perf.hotpath import MS, CspCycle, configure_to_op, op_segment
 from tests.support.tinymaster import TinyMaster, segment_of
 
 AL_STATUS, AL_EVENT = 0x0130, 0x0220
@@ -124,3 +125,36 @@ def test_configure_to_op_still_reaches_op_on_every_slave() -> None:
     m = TinyMaster(seg)
     configure_to_op(m, 5)
     assert al_status(m, 5) == [8] * 5
+
+
+def test_dc_time_loops_wait_for_the_reply() -> None:
+    """The FRMW of 0x0910 (the frame's last datagram): the reply carries the reference's
+    time and WKC = number of slaves at once; the other slaves' time loops run in
+    after_reply(), with the results they have when run inline (decision P7)."""
+    a, b = CspCycle(3), CspCycle(3)
+    b.seg.reply_first = False  # inline, in the walk
+    for c in (a, b):
+        c.pulse()
+        c.clock.t = c.t + MS // 2
+    raw = bytearray(a.frame(0x0F))
+    off = ecat_offset(raw, len(raw), True)
+    rebased = [e.dc.t_ref for e in a.seg.escs]  # each time loop rebases its clock
+    assert a.seg.process(raw, off, len(raw), a.clock.t)
+    assert a.seg._dc_pending == 8  # waiting: 8 bytes of time
+    assert [e.dc.t_ref for e in a.seg.escs] == rebased  # not yet
+    p = off + 2 + 10 + 3 * (12 + 17) + 2  # behind the LRW (header, images, WKC)
+    assert raw[p] == dg.Cmd.FRMW
+    assert struct.unpack_from("<H", raw, p + 10 + 8)[0] == 3
+    a.seg.after_reply()
+    assert a.seg._dc_pending == 0
+    after = [e.dc.t_ref for e in a.seg.escs]
+    assert after[0] == rebased[0]  # the reference does not correct itself
+    assert all(t != r for t, r in zip(after[1:], rebased[1:], strict=True))
+    inline = bytearray(b.frame(0x0F))
+    assert b.seg.process(inline, off, len(inline), b.clock.t)
+    assert b.seg._dc_pending == 0
+    assert bytes(inline) == bytes(raw)
+    assert [e.dc.t_ref for e in b.seg.escs] == after
+    assert [bytes(e.mem[0x0910:0x0940]) for e in b.seg.escs] == [
+        bytes(e.mem[0x0910:0x0940]) for e in a.seg.escs
+    ]

@@ -1,0 +1,145 @@
+"""``ecatsim bench --bringup N [--cycles K]``: every frame of a bring-up and of K cycles,
+timed at the master's end of the link.
+
+A pysoem master in its own network namespace brings N TMC8670 drives to OP with DC (SYNC0
+every cycle), as tools/bench.py does: config_init, config_dc with SYNC0 on every slave,
+csp by SDO, config_map (or config_overlap_map, ``--overlap``: SOEM's IO map then holds
+inputs and outputs of a slave in the same bytes), SAFEOP, OP; then K cycles at the period
+with every drive enabled and moving. A packet socket on the master's interface
+(tools/capture.py) stamps every request and reply; each is paired and timed, per phase
+and overall: p50, p99.9, max, how many over 1 ms and over 2 ms (SOEM's, pysoem's and
+KickCAT's default timeout), resends, unanswered frames and the slowest frames by command
+and address. The cycles add lost frames and cycles whose WKC fell short of the expected
+one. Results: a summary on stdout and bench/results/bringup-<N>-<time>.json.
+Ref: docs/performance.md (targets 9-11).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from capture import MasterCapture, analyse
+
+from bench import CSP, ROOT, cycles
+from tests.integration.netns import Daemon, NetnsPair, in_netns
+
+
+def bring_up(m: Any, cap: MasterCapture, pair: NetnsPair, n: int, period_us: int,
+             overlap: bool) -> None:  # fmt: skip
+    """The bring-up, each phase marked in the capture."""
+    import pysoem
+
+    with in_netns(pair.master_ns):
+        m.open(pair.master_if)
+    cap.mark("config_init")
+    found = m.config_init()
+    if found != n:
+        raise SystemExit(f"bench: the master found {found} slaves, not {n}")
+    cap.mark("config_dc")
+    m.config_dc()
+    for s in m.slaves:
+        s.dc_sync(True, period_us * 1000)
+    cap.mark("sdo")
+    for s in m.slaves:
+        s.sdo_write(0x6060, 0, bytes([CSP]))  # cyclic synchronous position
+    cap.mark("config_map")
+    if overlap:
+        m.config_overlap_map()
+    else:
+        m.config_map()
+    cap.mark("safeop")
+    if m.state_check(pysoem.SAFEOP_STATE, 5_000_000) != pysoem.SAFEOP_STATE:
+        raise SystemExit("bench: the segment did not reach SAFEOP")
+    cap.mark("op")
+    m.state = pysoem.OP_STATE
+    m.send_processdata()
+    m.receive_processdata(2000)
+    m.write_state()
+    for _ in range(5000):
+        m.send_processdata()
+        m.receive_processdata(2000)
+        if m.state_check(pysoem.OP_STATE, 2000) == pysoem.OP_STATE:
+            break
+    if m.read_state() != pysoem.OP_STATE:
+        raise SystemExit("bench: the segment did not reach OP")
+
+
+def run_bringup(n: int, cycles_k: int, period_us: int, overlap: bool,
+                extra: tuple[str, ...]) -> dict[str, Any]:  # fmt: skip
+    """One bring-up of ``n`` drives and ``cycles_k`` cycles on a fresh daemon."""
+    import pysoem
+
+    tmp = Path(tempfile.mkdtemp(prefix="ecatsim-bringup-"))
+    with NetnsPair() as pair:
+        d = Daemon(pair, ("--slaves", str(n), *extra), tmp / f"daemon{n}.log")
+        d.start(timeout=120)
+        m = pysoem.Master()
+        try:
+            with MasterCapture(pair.master_ns, pair.master_if) as cap:
+                t0 = time.perf_counter()
+                bring_up(m, cap, pair, n, period_us, overlap)
+                bring_up_s = time.perf_counter() - t0
+                cap.mark("cycles")
+                assert d.pid is not None
+                cyc = cycles(m, cycles_k * period_us / 1e6, period_us, d.pid)
+                cap.mark("end")
+                time.sleep(0.05)
+        finally:
+            m.close()
+            d.stop()
+    frames = analyse(cap.frames, cap.marks)
+    frames.get("phases", {}).pop("end", None)
+    return {"slaves": n, "overlap": overlap, "period_us": period_us,
+            "bring_up_s": round(bring_up_s, 2), "frames": frames,
+            "cycles": {k: cyc[k] for k in ("cycles", "lost", "wkc_errors", "expected_wkc",
+                                           "wkc_error_seen", "cpu_percent", "rtt_us",
+                                           "fell_behind", "lost_master_stalled",
+                                           "drives_enabled", "steal_s")}}  # fmt: skip
+
+
+def summary(r: dict[str, Any]) -> str:
+    f, c = r["frames"], r["cycles"]
+    lines = [f"N={r['slaves']} ({'overlap map' if r['overlap'] else 'map'}) bring-up "
+             f"{r['bring_up_s']} s, {c['cycles']} cycles: {f['frames']} frames, reply p50 "
+             f"{f['p50_us']} p99.9 {f['p999_us']} max {f['max_us']} us, over 1 ms "
+             f"{f['over_1ms']}, over 2 ms {f['over_2ms']}, resends {f['resends']}, "
+             f"unanswered {f['unanswered']}; cycles lost {c['lost']}, WKC short "
+             f"{c['wkc_errors']} (expected {c['expected_wkc']}), daemon {c['cpu_percent']} %, "
+             f"enabled {c['drives_enabled']}/{r['slaves']}"]  # fmt: skip
+    for name, p in f.get("phases", {}).items():
+        lines.append(f"  {name:12s} {p['frames']:6d} frames  p50 {p['p50_us']:8.1f}  p99.9 "
+                     f"{p['p999_us']:8.1f}  max {p['max_us']:8.1f} us  >1ms {p['over_1ms']}  "
+                     f">2ms {p['over_2ms']}")  # fmt: skip
+    for s in f["slowest"][:5]:
+        lines.append(f"  slowest: {s['us']} us {s['cmd']} adp {s['adp']} ado {s['ado']} "
+                     f"len {s['length']}")  # fmt: skip
+    return "\n".join(lines)
+
+
+def main(sizes: tuple[int, ...], cycles_k: int, period_us: int, overlap: bool,
+         extra: tuple[str, ...], repeat: int = 1) -> int:  # fmt: skip
+    """Each size ``repeat`` times; prints and writes bench/results/bringup-*.json."""
+    if os.geteuid() != 0:
+        print("bench: needs root (namespaces, raw sockets)")
+        return 2
+    out: dict[str, Any] = {"when": time.strftime("%Y-%m-%d %H:%M:%S %Z"),
+                           "machine": platform.node(), "cpus": os.cpu_count(),
+                           "load_1min": os.getloadavg()[0],
+                           "python": platform.python_version(), "runs": []}  # fmt: skip
+    for n in [n for n in sizes for _ in range(repeat)]:
+        r = run_bringup(n, cycles_k, period_us, overlap, extra)
+        out["runs"].append(r)
+        print(summary(r), flush=True)
+    res = ROOT / "bench" / "results"
+    res.mkdir(parents=True, exist_ok=True)
+    tag = "-".join(str(n) for n in sizes)
+    path = res / f"bringup-{tag}-{time.strftime('%Y%m%d-%H%M%S')}.json"
+    path.write_text(json.dumps(out, indent=2) + "\n")
+    print(f"written {path.relative_to(ROOT)}")
+    return 0
