@@ -36,7 +36,7 @@ cdef class Segment:
     cdef public bint reply_first
     cdef public long long sync0_late_ns, sync0_ticks
     cdef public object frame_waiting
-    cdef public long long yielded, probe_ns
+    cdef public long long yielded, probe_ns, resume_pos
     cdef public long long _cur, _cur_exit, exit
     cdef public bint processed, out_up
     cdef public list chain, routes, wiring

@@ -88,6 +88,7 @@ class Segment:
         "processed",
         "reach",
         "reply_first",
+        "resume_pos",
         "routes",
         "sync0_late_ns",
         "sync0_ticks",
@@ -117,6 +118,8 @@ class Segment:
         self.frame_waiting: Callable[[], bool] | None = None
         #: times the work after a reply stopped for a waiting frame
         self.yielded = 0
+        #: the position the next round of firmware work starts at (0: the first)
+        self.resume_pos = 0
         #: how often (ns of work) the work after a reply looks for a waiting frame
         self.probe_ns = PROBE_NS
         #: positions whose service runs after every frame, interrupt or not: the TMC8460
@@ -564,7 +567,11 @@ class Segment:
         if (ctx.pending or self.awake) and self.firmware:
             probe = self.frame_waiting
             look = time.monotonic_ns() + self.probe_ns if probe is not None else NO_DEADLINE
-            for pos in sorted(ctx.pending | self.awake):
+            order = sorted(ctx.pending | self.awake)
+            first = self.resume_pos
+            if first:  # where the last round stopped: every slave gets its turn (P19)
+                order = [p for p in order if p >= first] + [p for p in order if p < first]
+            for pos in order:
                 ctx.pdi_ns = t
                 self.firmware[pos].service(t)
                 if look != NO_DEADLINE and time.monotonic_ns() >= look:
@@ -572,8 +579,10 @@ class Segment:
                         # the silicon answers while its firmware works: the frame first,
                         # the slaves not served yet keep their raised interrupt (P19)
                         self.yielded += 1
+                        self.resume_pos = pos + 1
                         return
                     look = time.monotonic_ns() + self.probe_ns
+            self.resume_pos = 0
         if ctx.flush and self.persist is not None:
             for pos in sorted(ctx.flush):
                 self.persist(pos)
