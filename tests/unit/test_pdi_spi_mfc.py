@@ -16,6 +16,7 @@ from ecatsim.errors import UserError
 from ecatsim.frontdoors import build_doors
 from ecatsim.mfcio.stepdir import sr_for
 from tests.support.mfcio import mb0, mb1
+from tests.support.spisock import spi_frame
 from tests.support.tinymaster import TinyMaster
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -58,13 +59,7 @@ def rig(tmp_path: Path):  # type: ignore[no-untyped-def]
     host.serve()
 
     def spi(mosi: bytes) -> bytes:
-        c.sendall(struct.pack("<H", len(mosi)) + mosi)
-        host.serve()
-        c.settimeout(1)
-        out = b""
-        while len(out) < len(mosi):
-            out += c.recv(len(mosi) - len(out))
-        return out
+        return spi_frame(c, host, mosi)
 
     yield seg, clock, spi
     c.close()

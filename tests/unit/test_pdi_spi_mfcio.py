@@ -17,6 +17,7 @@ from ecatsim.frontdoors import build_doors
 from ecatsim.mfcio.block import MfcioBlock
 from ecatsim.pdi_spi.external import ExternalFirmware
 from tests.support.mfcio import mb0, mb1
+from tests.support.spisock import spi_frame
 from tests.support.tinymaster import TinyMaster
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -50,13 +51,7 @@ def board(tmp_path: Path):  # type: ignore[no-untyped-def]
     host.serve()
 
     def spi(mosi: bytes) -> bytes:
-        c.sendall(struct.pack("<H", len(mosi)) + mosi)
-        host.serve()
-        c.settimeout(1)
-        out = b""
-        while len(out) < len(mosi):
-            out += c.recv(len(mosi) - len(out))
-        return out
+        return spi_frame(c, host, mosi)
 
     m = TinyMaster(seg, clock)
     m.apwr(0, 0x0010, struct.pack("<H", STATION))

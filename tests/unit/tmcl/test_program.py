@@ -8,6 +8,21 @@ from __future__ import annotations
 from ecatsim.tmcl import protocol as P
 from tests.unit.tmcl.conftest import Bench
 
+#: §5.6.5's example: VECT 0, Irq / SGP 0, 3, 100 / EI 0 / EI 255 / Loop: WAIT TICKS 0, 50 /
+#: JA Loop; Irq: GGP 20, 2 / CALC ADD, 1 / AGP 20, 2 / RETI (a timer interrupt every 100 ms)
+TIMER_PROGRAM = [
+    (P.VECT, 0, 0, 6),
+    (P.SGP, 0, 3, 100),
+    (P.EI, 0, 0, 0),
+    (P.EI, 255, 0, 0),
+    (P.WAIT, 0, 0, 50),
+    (P.JA, 0, 0, 4),
+    (P.GGP, 20, 2, 0),
+    (P.CALC, 0, 0, 1),
+    (P.AGP, 20, 2, 0),
+    (P.RETI, 0, 0, 0),
+]
+
 
 def download(bench: Bench, program: list[tuple[int, int, int, int]], at: int = 0) -> None:
     assert bench.cmd(P.DOWNLOAD_START, 0, 0, at)[0] == P.OK
@@ -127,23 +142,7 @@ def test_wait_pos_with_timeout_sets_eto(bench: Bench) -> None:
 
 
 def test_timer_interrupt_handler_fires_on_its_period(bench: Bench) -> None:
-    # §5.6.5: VECT 0, Irq / SGP 0, 3, 100 / EI 0 / EI 255 / Loop: WAIT TICKS 0, 50 / JA Loop
-    # Irq: GGP 20, 2 / CALC ADD, 1 / AGP 20, 2 / RETI
-    download(
-        bench,
-        [
-            (P.VECT, 0, 0, 6),
-            (P.SGP, 0, 3, 100),
-            (P.EI, 0, 0, 0),
-            (P.EI, 255, 0, 0),
-            (P.WAIT, 0, 0, 50),
-            (P.JA, 0, 0, 4),
-            (P.GGP, 20, 2, 0),
-            (P.CALC, 0, 0, 1),
-            (P.AGP, 20, 2, 0),
-            (P.RETI, 0, 0, 0),
-        ],
-    )
+    download(bench, TIMER_PROGRAM)
     bench.value(P.RUN_APP, 1, 0, 0)
     bench.advance(0.95)
     assert bench.value(P.GGP, 20, 2) == 9  # at 100, 200, ... 900 ms
@@ -251,21 +250,7 @@ def test_a_new_download_disarms_the_old_programs_interrupts_and_timers(bench: Be
 def test_stop_and_run_continue_with_the_programs_interrupts(bench: Bench) -> None:
     """Decision T29: 128 then 129 (no address) goes on where the program was, with what it
     set up; 131 resets it all, timers included."""
-    download(
-        bench,
-        [
-            (P.VECT, 0, 0, 6),
-            (P.SGP, 0, 3, 100),
-            (P.EI, 0, 0, 0),
-            (P.EI, 255, 0, 0),
-            (P.WAIT, 0, 0, 50),
-            (P.JA, 0, 0, 4),
-            (P.GGP, 20, 2, 0),
-            (P.CALC, 0, 0, 1),
-            (P.AGP, 20, 2, 0),
-            (P.RETI, 0, 0, 0),
-        ],
-    )
+    download(bench, TIMER_PROGRAM)
     bench.value(P.RUN_APP, 1, 0, 0)
     bench.advance(0.25)
     bench.value(P.STOP_APP)
