@@ -25,7 +25,7 @@ from ecatsim.link.base import Link
 from ecatsim.link.errors import LinkError
 from ecatsim.link.follow import CpuFollower
 from ecatsim.link.raw import RawLink, has_carrier, iface_ipv4_addresses
-from ecatsim.linklock import LinkLock, lock_link
+from ecatsim.linklock import LinkLock, lock_link, lock_name
 from ecatsim.mfcio import trace as mfcio_trace
 from ecatsim.mfcio.block import MfcioBlock
 from ecatsim.privileges import drop_privileges
@@ -180,18 +180,25 @@ def follow_master(opts: RunOptions, link: Link) -> CpuFollower | None:
 
 
 def run_daemon(opts: RunOptions) -> None:
-    """Take the link's lock (before anything is written: EEPROM, trace), then serve."""
-    link_lock = take_link(opts)
+    """Take the locks of the link and of the out interface (before anything is written:
+    EEPROM, trace), then serve."""
+    locks = [take_link(opts)]
     try:
-        serve(opts)
+        cfg = segment_config(opts)
+        out_name = opts.out_iface or cfg.out_iface
+        if out_name is not None:  # a link too: one daemon sends and receives on it (O1)
+            locks.append(
+                LinkLock(run_dir() / lock_name("iface", out_name), f"--out-iface {out_name}")
+            )
+        serve(opts, cfg)
     finally:
-        if link_lock is not None:
-            link_lock.close()
+        for lock in reversed(locks):
+            if lock is not None:
+                lock.close()
 
 
-def serve(opts: RunOptions) -> None:
+def serve(opts: RunOptions, cfg: SegmentConfig) -> None:
     """Build everything, log ``ready``, serve until SIGINT/SIGTERM."""
-    cfg = segment_config(opts)
     priority = realtime.choose_priority(opts.rt_priority, opts.no_rt, opts.busy_poll, opts.cpu)
     clock = MonotonicClock()
     out_name = opts.out_iface or cfg.out_iface

@@ -63,3 +63,20 @@ def test_the_link_options_are_checked_before_any_lock(
     with pytest.raises(UserError, match="expected HOST:PORT"):
         take_link(RunOptions(udp="34980"))
     assert list(tmp_path.iterdir()) == []
+
+
+def test_the_out_interface_is_a_link_of_its_own(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``--out-iface B`` sends and receives on B: a daemon serving B already refuses it,
+    before anything is built, and the daemon's own link lock is let go again."""
+    from ecatsim.runner import run_daemon
+
+    monkeypatch.setenv("ECATSIM_RUN_DIR", str(tmp_path))
+    other = lock_link(tmp_path, "ecat9", None, None)  # another daemon serves ecat9
+    assert other is not None
+    with pytest.raises(UserError) as exc:
+        run_daemon(RunOptions(udp="127.0.0.1:34999", out_iface="ecat9"))
+    assert str(exc.value).startswith(f"--out-iface ecat9: ecatsim PID {os.getpid()} serves")
+    assert sorted(p.name for p in tmp_path.iterdir()) == [lock_name("iface", "ecat9")]
+    other.close()
