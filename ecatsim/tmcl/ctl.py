@@ -70,10 +70,13 @@ def handle(door: TmclDoor, command: str, args: list[str]) -> dict[str, Any]:
             on = _onoff(args[2])
             setattr(ax.faults, kind, on)
             if kind == "encoder_loss":
-                ax.enc_frozen = ax.encoder() if on else None
-                if not on:
-                    ax.enc_offset = 0
-                    ax.enc_offset = ax.enc_frozen or ax.enc_offset
+                if on:
+                    ax.enc_frozen = ax.encoder()
+                elif ax.enc_frozen is not None:
+                    # the counter goes on from where it stopped: the counts it missed while
+                    # the signal was gone are lost, as with an incremental encoder
+                    frozen, ax.enc_frozen = ax.enc_frozen, None
+                    ax.enc_offset += frozen - ax.encoder()
             ax.settled = False
             return {"faults": [k for k in FAULTS if getattr(ax.faults, k)]}
         if command == "switch":

@@ -150,6 +150,23 @@ def test_encoder_initialisation_and_closed_loop_need_a_working_encoder() -> None
     b.door.close()
 
 
+def test_an_encoder_back_from_a_loss_counts_on_from_where_it_stopped() -> None:
+    """ctl fault encoder_loss on/off: the counter (AP 209) freezes, then counts on from the
+    frozen value; a position set with SAP 209 before is kept."""
+    b = Bench()
+    b.sap(209, 5000)
+    assert b.gap(209) == 5000
+    b.door.ctl("fault", ["1", "encoder_loss", "on"])
+    ax = b.m.axis
+    ax.rotor += 256 * 10  # ten full steps turned while the signal is gone
+    assert b.gap(209) == 5000
+    b.door.ctl("fault", ["1", "encoder_loss", "off"])
+    assert b.gap(209) == 5000
+    ax.rotor += 256 * ax.fullsteps  # a full turn with the signal back: AP 210 counts
+    assert b.gap(209) == 5000 + ax.enc_res
+    b.door.close()
+
+
 def test_torque_mode_only_in_closed_loop() -> None:
     b = Bench()
     assert b.cmd(P.SAP, 14, 0, 500)[0] == P.INVALID_VALUE
