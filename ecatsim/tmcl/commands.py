@@ -134,7 +134,7 @@ def read_axis(m: Module, n: int) -> int:
         208: ax.driver_errors,
         209: lambda: P.to_signed(ax.encoder()),
         230: ax.gamma,
-        233: lambda: P.to_signed(round(ax.pos)),
+        233: lambda: P.to_signed(round(ax.pos / ax.pos_per_pulse())),  # µsteps (T34)
         236: lambda: ax.csf_target,
         237: ax.position_error,
     }

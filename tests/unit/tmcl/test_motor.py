@@ -224,6 +224,7 @@ def test_closed_loop_positions_are_encoder_steps_moved_at_pps() -> None:
     b.advance(1.2)
     assert b.gap(8) == 1
     assert b.gap(1) == 4000
+    assert b.gap(233) == 51_200  # the ramp's virtual position in microsteps (§6, T34)
     assert abs(_turns(b) - 1.0) < 1e-3
     b.door.close()
 
