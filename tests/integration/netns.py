@@ -382,3 +382,13 @@ class Port:
     def __init__(self, slave_ns: str, slave_if: str) -> None:
         self.slave_ns = slave_ns
         self.slave_if = slave_if
+
+
+def proc_status(pid: int) -> dict[str, str]:
+    """The fields of ``/proc/PID/status`` (capabilities, user ids) of a daemon. Ref: proc(5)."""
+    out = {}
+    with open(f"/proc/{pid}/status") as f:
+        for line in f:
+            k, _, v = line.partition(":")
+            out[k] = v.strip()
+    return out

@@ -12,7 +12,7 @@ from typing import Any
 import pytest
 
 from ecatsim import __version__
-from tests.integration.netns import NetnsPair
+from tests.integration.netns import NetnsPair, proc_status
 
 pytestmark = pytest.mark.integration
 
@@ -115,22 +115,13 @@ def test_sigint_exits_cleanly(netns_pair: NetnsPair, tmp_path: Path) -> None:
     assert "Traceback" not in text
 
 
-def _caps(pid: int) -> dict[str, str]:
-    out = {}
-    with open(f"/proc/{pid}/status") as f:
-        for line in f:
-            k, _, v = line.partition(":")
-            out[k] = v.strip()
-    return out
-
-
 def test_daemon_keeps_only_cap_net_raw_and_switches_user(
     daemon_factory: object, master_factory: object
 ) -> None:
 
     d = daemon_factory("--user", "nobody")  # type: ignore[operator]
     time.sleep(0.2)  # the daemon drops privileges right after "ready"
-    st = _caps(d.pid)  # `ip netns exec` execs the daemon: same pid
+    st = proc_status(d.pid)  # `ip netns exec` execs the daemon: same pid
     assert st["Uid"].split()[0] == "65534"
     assert int(st["CapEff"], 16) == 1 << 13  # CAP_NET_RAW only
     assert int(st["CapPrm"], 16) == 1 << 13

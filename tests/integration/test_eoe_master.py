@@ -17,7 +17,7 @@ from pathlib import Path
 
 from ecatsim.ctl import request
 from tests.integration.conftest import DaemonFactory
-from tests.integration.netns import NetnsPair, in_netns
+from tests.integration.netns import NetnsPair, in_netns, proc_status
 from tests.support.icmp import Pinger
 from tests.support.soem_build import eoe_bridge
 
@@ -140,15 +140,6 @@ def test_soem_bridges_pings_to_the_second_drive_and_sets_its_ip(
         b.close()
 
 
-def _caps(pid: int) -> dict[str, str]:
-    out = {}
-    with open(f"/proc/{pid}/status") as f:
-        for line in f:
-            k, _, v = line.partition(":")
-            out[k] = v.strip()
-    return out
-
-
 def test_eoe_daemon_keeps_cap_net_admin_and_sets_the_ip_as_another_user(
     netns_pair: NetnsPair, daemon_factory: DaemonFactory, tmp_path: Path
 ) -> None:
@@ -160,7 +151,7 @@ def test_eoe_daemon_keeps_cap_net_admin_and_sets_the_ip_as_another_user(
     d = daemon_factory("--config", str(cfg), "--user", "nobody", "--ctl", str(tmp_path / "c"))
     time.sleep(0.2)  # the daemon drops privileges right after "ready"
     assert d.pid is not None
-    st = _caps(d.pid)
+    st = proc_status(d.pid)
     assert st["Uid"].split()[0] == "65534"
     for k in ("CapEff", "CapPrm", "CapBnd"):
         assert int(st[k], 16) == (1 << 12) | (1 << 13), (k, st[k])  # NET_ADMIN + NET_RAW

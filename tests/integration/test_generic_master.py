@@ -22,6 +22,7 @@ import ecatsim.client
 from ecatsim.ctl import request
 from tests.integration.netns import NetnsPair
 from tests.integration.test_esc_master import RX_TIMEOUT_US, to_op
+from tests.support.eni import coe_init_cmds
 from tests.support.kickcat import kickcat_trial
 
 pytestmark = pytest.mark.integration
@@ -158,28 +159,6 @@ def test_mixed_segment_tmc8670_esi_slave_tmc8460(
 ENI_PAIR = Path(__file__).resolve().parents[1] / "data" / "eni" / "unknown-pair.xml"
 
 
-def eni_coe_init_cmds() -> list[list[tuple[int, int, bytes, bool]]]:
-    """Per slave, the CoE InitCmds of the ENI's PS transition, as an ENI-driven master
-    sends them in PREOP."""
-    from ecatsim.generic.dictionary import num
-
-    out = []
-    for s in ET.parse(ENI_PAIR).getroot().findall("Config/Slave"):
-        out.append(
-            [
-                (
-                    num(c.findtext("Index")),
-                    num(c.findtext("SubIndex")),
-                    bytes.fromhex(c.findtext("Data") or ""),
-                    c.get("CompleteAccess") == "true",
-                )
-                for c in s.findall("Mailbox/CoE/InitCmds/InitCmd")
-                if c.findtext("Transition") == "PS"
-            ]
-        )
-    return out
-
-
 def test_eni_of_two_unknown_slaves_reaches_op_under_an_eni_driven_master(
     master_factory: Any, daemon_factory: Any, tmp_path: Path
 ) -> None:
@@ -196,7 +175,7 @@ def test_eni_of_two_unknown_slaves_reaches_op_under_an_eni_driven_master(
         assert info is not None
         assert s.man == 0x00BEEF00 and s.id == int(info.findtext("ProductCode") or 0)
         assert s.name == (info.findtext("Name") or "")[:40]
-    for s, cmds in zip(m.slaves, eni_coe_init_cmds(), strict=True):
+    for s, cmds in zip(m.slaves, coe_init_cmds(ENI_PAIR, "PS"), strict=True):
         for index, sub, data, ca in cmds:
             s.sdo_write(index, sub, data, ca=ca)  # an abort raises SdoError: none may
     assert struct.unpack("<H", m.slaves[0].sdo_read(0x8000, 1))[0] == 5

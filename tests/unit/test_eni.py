@@ -24,28 +24,11 @@ from ecatsim.generic.minimaster import MiniMaster
 from ecatsim.slave.al import AlState
 from ecatsim.slave.firmware import Firmware
 from ecatsim.wire import datagram as dg
+from tests.support.eni import coe_init_cmds
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 PAIR = DATA / "eni" / "unknown-pair.xml"
 MIXED = DATA / "eni" / "mixed.xml"
-
-
-def coe_init_cmds(eni: Path) -> list[list[tuple[int, int, bytes, bool]]]:
-    """Per slave, the SDO downloads of its CoE InitCmds, as a master sends them."""
-    out = []
-    for s in ET.parse(eni).getroot().findall("Config/Slave"):
-        out.append(
-            [
-                (
-                    num(c.findtext("Index")),
-                    num(c.findtext("SubIndex")),
-                    bytes.fromhex(c.findtext("Data") or ""),
-                    c.get("CompleteAccess") == "true",
-                )
-                for c in s.findall("Mailbox/CoE/InitCmds/InitCmd")
-            ]
-        )
-    return out
 
 
 def test_models_in_order_built_in_esi_then_eni() -> None:
