@@ -75,6 +75,9 @@ static int eoe_hook(ecx_contextt *context, uint16 slave, void *eoembx)
    int size = sizeof(rx_buf);
    (void)context;
    (void)slave;
+   /* only fragments are the hook's: a Set/Get IP response goes back to its caller */
+   if (EOE_HDR_FRAME_TYPE_GET(etohs(((ec_EOEt *)eoembx)->frameinfo1)) != EOE_FRAG_DATA)
+      return 0;
    int r = ecx_EOEreadfragment(eoembx, &rx_fragment, &rx_size, &rx_offset, &rx_frame,
                                &size, rx_buf);
    if (r > 0)
@@ -114,7 +117,13 @@ static void run_command(char *line, char *out, size_t n)
       p.subnet_set = 1;
       EOE_IP4_ADDR_TO_U32(&p.ip, a, b, c, d);
       EOE_IP4_ADDR_TO_U32(&p.subnet, mask >> 24, mask >> 16, mask >> 8, mask);
-      wkc = ecx_EOEsetIp(&ecx_context, eoe_slave, 0, &p, EC_TIMEOUTRXM);
+      /* a master retries a mailbox request that got no answer in its timeout */
+      for (int tries = 0; tries < 3; tries++)
+      {
+         wkc = ecx_EOEsetIp(&ecx_context, eoe_slave, 0, &p, EC_TIMEOUTRXM);
+         if (wkc == 1)
+            break;
+      }
       if (wkc == 1)
          snprintf(out, n, "setip %d\n", wkc);
       else /* what the mailbox looked like afterwards, for the test's message */
