@@ -73,8 +73,8 @@ def main() -> None:
                 bring_up(pair.master_if, args.slaves, args.cycles)
         finally:
             daemon.stop()
-    # the master's requests: a reply has bit 1 of its source MAC set (ETG.1000.4 §5.2)
-    frames = [data for _t, data in cap.raw if data[12:14] == b"\x88\xa4" and not data[6] & 2]
+    # the master's requests: the EtherCAT frames it sent
+    frames = [data for _t, reply, data in cap.raw if data[12:14] == b"\x88\xa4" and not reply]
     with PcapWriter(args.output) as w:
         for f in frames:
             w.write(f)

@@ -2,10 +2,12 @@
 
 A :class:`Capture` holds packet sockets on one or both ends of the link, each in its
 network namespace, that stamp every EtherCAT frame with the kernel's time as it is seen
-(SO_TIMESTAMPNS); a thread reads them. A frame is a reply when bit 1 of its source MAC is
-set (the slaves set it, ETG.1000.4 §5.2; the daemon's ``mark_processed``); request and
-reply are paired by the index byte of the first datagram (ETG.1000.4 §5.4.1.2), which the
-slaves leave unchanged. Two uses:
+(SO_TIMESTAMPNS); a thread reads them. A frame's direction is where it was seen: on the
+master's end a frame the host sends is a request and one it receives a reply; with taps
+on both ends what arrives at the daemon is a request and what arrives at the master a
+reply (not bit 1 of the source MAC, which a master may set in its own requests: KickCAT
+does). Request and reply are paired by the index byte of the first datagram
+(ETG.1000.4 §5.4.1.2), which the slaves leave unchanged. Two uses:
 
 - :meth:`Capture.master_end` (``ecatsim bench --bringup``): one tap of every protocol on
   the master's interface sees the master's requests on their way out and the replies on
@@ -81,9 +83,10 @@ class Frame:
     body: bytes
 
 
-def parse(data: bytes, t_ns: int) -> Frame | None:
+def parse(data: bytes, t_ns: int, reply: bool | None = None) -> Frame | None:
     """A captured frame as a :class:`Frame`, None if it is not EtherCAT with a datagram
-    (an 802.1Q tag is stepped over)."""
+    (an 802.1Q tag is stepped over). A reply if ``reply`` says so, or without it if bit 1
+    of the source MAC is set (the slaves set it, ETG.1000.4 §5.2)."""
     off = 12
     if len(data) >= off + 2 and data[off : off + 2] == b"\x81\x00":
         off += 4
@@ -91,7 +94,9 @@ def parse(data: bytes, t_ns: int) -> Frame | None:
         return None
     p = off + 2 + 2
     cmd, idx, adp, ado, lf = _HDR.unpack_from(data, p)
-    return Frame(t_ns, bool(data[6] & 0x02), idx, cmd, adp, ado, lf & 0x7FF,
+    if reply is None:
+        reply = bool(data[6] & 0x02)
+    return Frame(t_ns, reply, idx, cmd, adp, ado, lf & 0x7FF,
                  bytes(data[p : p + 10 + min(lf & 0x7FF, 48)]))  # fmt: skip
 
 
@@ -218,8 +223,8 @@ class Capture:
         self._ends = tuple(ends)
         self._outgoing = outgoing
         self._snap = snap
-        #: (kernel time ns, the frame's first ``snap`` bytes) in the order read
-        self.raw: list[tuple[int, bytes]] = []
+        #: (kernel time ns, a reply or not, the frame's first ``snap`` bytes) as read
+        self.raw: list[tuple[int, bool, bytes]] = []
         self.marks: list[tuple[int, str]] = []
         self._stop = threading.Event()
         self._socks: list[socket.socket] = []
@@ -237,7 +242,7 @@ class Capture:
 
     def frames(self) -> list[Frame]:
         """The EtherCAT frames captured so far."""
-        out = (parse(data, t) for t, data in self.raw)
+        out = (parse(data, t, reply) for t, reply, data in self.raw)
         return [f for f in out if f is not None]
 
     def stats(self) -> dict[str, Any]:
@@ -283,6 +288,7 @@ class Capture:
     def _run(self) -> None:
         space = socket.CMSG_SPACE(_STAMP.size)
         keep_outgoing, snap = self._outgoing, self._snap
+        master = self._socks[0]  # the master's end comes first
         raw = self.raw
         while True:
             ready = select.select(self._socks, [], [], 0.05)[0]
@@ -292,9 +298,12 @@ class Capture:
                 continue
             for s in ready:
                 data, anc, _flags, addr = s.recvmsg(snap, space)
-                if addr[2] == PACKET_OUTGOING and not keep_outgoing:
+                sent = addr[2] == PACKET_OUTGOING
+                if sent and not keep_outgoing:
                     continue
+                # one end: what the master sends is a request; two: what reaches the master
+                reply = not sent if keep_outgoing else s is master
                 for lvl, typ, d in anc:
                     if lvl == socket.SOL_SOCKET and typ == SO_TIMESTAMPNS:
                         sec, nsec = _STAMP.unpack_from(d)
-                        raw.append((sec * 1_000_000_000 + nsec, data))
+                        raw.append((sec * 1_000_000_000 + nsec, reply, data))

@@ -57,14 +57,17 @@ def test_reply_times_pair_requests_and_replies_by_index() -> None:
 
 
 def test_a_capture_parses_what_its_taps_read() -> None:
-    """The taps keep (kernel time, bytes); the frames are parsed afterwards: EtherCAT only,
-    a reply told by bit 1 of the source MAC."""
-    request = dg.ethernet_frame([dg.build(dg.Cmd.FPRD, 0x1001, 0x0130, bytes(2), idx=0x21)])
-    reply = bytearray(request)
-    reply[6] |= 0x02
+    """The taps keep (kernel time, direction, bytes); the frames are parsed afterwards,
+    EtherCAT only, a reply told by the end it was seen on, not by the source MAC (KickCAT
+    sets bit 1 in its own requests)."""
+    request = bytearray(
+        dg.ethernet_frame([dg.build(dg.Cmd.FPRD, 0x1001, 0x0130, bytes(2), idx=0x21)])
+    )
+    request[6] |= 0x02
     cap = Capture.both_ends((None, "lo"), (None, "lo"))
-    cap.raw = [(10_000, request), (12_000, b"\x00" * 12 + b"\x08\x00" + bytes(40)),
-               (35_000, bytes(reply))]  # fmt: skip
+    cap.raw = [(10_000, False, bytes(request)),
+               (12_000, True, b"\x00" * 12 + b"\x08\x00" + bytes(40)),
+               (35_000, True, bytes(request))]  # fmt: skip
     assert [(f.t_ns, f.reply, f.idx) for f in cap.frames()] == [(10_000, False, 0x21),
                                                                 (35_000, True, 0x21)]  # fmt: skip
     st = cap.stats()
