@@ -37,7 +37,6 @@ def is_ecat_frame(buf: bytearray | memoryview, n: int) -> bool:
     return etype == ETH_P_8021Q and n >= 20 and ((buf[16] << 8) | buf[17]) == ETH_P_ECAT
 
 
-
 def open_tap(name: str, error: type[Exception], what: str) -> int:
     """A non-blocking descriptor of the TAP device ``name`` (made if it does not exist),
     frames without a packet-info prefix; a failure is ``error`` with one line (prefixed
@@ -58,6 +57,7 @@ def open_tap(name: str, error: type[Exception], what: str) -> int:
             "(CAP_NET_ADMIN) and pick a name that is not another kind of interface"
         ) from exc
     return fd
+
 
 class TapLink:
     """A TAP device created (or attached to, if it is persistent) under ``name``."""
