@@ -78,3 +78,26 @@ def test_the_architecture_names_modules() -> None:
     """The check reads dotted names too (not only paths): the architecture names some."""
     _, modules = _named("docs/architecture.md")
     assert modules
+
+
+def _table_names() -> set[str]:
+    """The names in the first column of architecture.md's package table."""
+    text = (REPO / "docs/architecture.md").read_text()
+    section = text.split("## Packages and modules", 1)[1].split("\n## ", 1)[0]
+    rows = [line for line in section.splitlines() if line.startswith("| `")]
+    return {name for row in rows for name in re.findall(r"`([^`]+)`", row.split("|")[1])}
+
+
+def test_the_table_names_every_package_and_top_level_module() -> None:
+    """Issue 37: the map names the whole house, in one table without a break."""
+    pkg = REPO / "ecatsim"
+    expected = {f"ecatsim/{d.name}/" for d in pkg.iterdir() if (d / "__init__.py").is_file()}
+    expected |= {
+        f"ecatsim/{f.name}" for f in pkg.iterdir() if f.suffix in (".py", ".pyx") and f.is_file()
+    }
+    named = _table_names()
+    assert not expected - named, f"architecture.md's table leaves out {sorted(expected - named)}"
+    text = (REPO / "docs/architecture.md").read_text()
+    table = text.split("## Packages and modules", 1)[1].split("\n## ", 1)[0]
+    rows = [i for i, line in enumerate(table.splitlines()) if line.startswith("|")]
+    assert rows == list(range(rows[0], rows[-1] + 1)), "a blank line breaks the table"
