@@ -40,7 +40,7 @@ def core_modules() -> list[str]:
 SHARED = "ecatsim._cyutility"
 
 #: compiled-only Cython modules (a .pyx, no .py twin): the daemon's responder (decision P9)
-PYX = ["ecatsim.responder"]
+PYX = ["ecatsim.ethercat.responder"]
 
 
 def core() -> list[Extension]:

@@ -121,7 +121,7 @@ def run(
     user: str | None,
 ) -> None:
     """Emulate the segment on an interface until SIGINT/SIGTERM."""
-    from ecatsim.runner import RunOptions, run_daemon
+    from ecatsim.ethercat.run import RunOptions, run_daemon
 
     configure_logging(log_format, logging.DEBUG if trace_frames else logging.INFO)
     opts = RunOptions(
@@ -197,8 +197,8 @@ def ctl_cmd(
     """
     import json
 
-    from ecatsim.ctl import default_path, find_socket, parse_value, request
-    from ecatsim.ctl_table import format_status
+    from ecatsim.ctl.server import default_path, find_socket, parse_value, request
+    from ecatsim.ctl.table import format_status
 
     def num(v: str) -> int:
         return int(v, 0)
@@ -269,7 +269,7 @@ def ctl_cmd(
     elif command == "status":
         click.echo(format_status(reply))
     elif command == "pd":
-        from ecatsim.pd import format_entries
+        from ecatsim.slave.pd import format_entries
 
         click.echo(format_entries(reply.get("entries", [reply])))
     elif set(reply) == {"ok", "commands"}:  # a door's help: one command a line
@@ -289,8 +289,8 @@ def ctl_cmd(
 def plot_cmd(csv_path: Path, output: Path, slave: int | None) -> None:
     """Plot a --trace CSV: position, velocity, torque, set point over actual; or its
     FILE.mfcio.csv: a TMC8460's steps, motor position and encoder."""
+    from ecatsim.device.trace import plot, trace_columns
     from ecatsim.mfcio import trace as mfcio_trace
-    from ecatsim.trace import plot, trace_columns
 
     if trace_columns(csv_path)[: len(mfcio_trace.COLUMNS)] == mfcio_trace.COLUMNS:
         from ecatsim.mfcio.plot import plot_mfcio
@@ -362,7 +362,7 @@ def eeprom_build(
     alias: int | None,
 ) -> None:
     """Build an SII image from any ESI file (written atomically)."""
-    from ecatsim.esi import EsiError, read_esi
+    from ecatsim.device.esi import EsiError, read_esi
     from ecatsim.files import write_output
     from ecatsim.sii.image import SiiError, build_image
 
@@ -407,13 +407,13 @@ def esi() -> None:
 def esi_export(output: Path, device: str, description: Path | None, eoe: bool) -> None:
     """Write the ESI XML of an emulated device (written atomically); a TMC8460 MFCIO
     configuration (SII category 1) is decoded register by register in comments."""
-    from ecatsim.description import (
+    from ecatsim.device.description import (
         DescriptionError,
         default_description,
         load_description,
         with_protocol,
     )
-    from ecatsim.esi import export_esi
+    from ecatsim.device.esi import export_esi
     from ecatsim.files import write_output
     from ecatsim.slave.od_build import build_od
 
@@ -467,7 +467,7 @@ def eni() -> None:
 @click.option("--esi-dir", "esi_dir", type=click.Path(path_type=Path), help="ESIs of its slaves.")
 def eni_show(eni_path: Path, esi_dir: Path | None) -> None:
     """List the ENI's slaves and the model each one gets."""
-    from ecatsim.eni import format_slaves, load_eni
+    from ecatsim.ethercat.eni import format_slaves, load_eni
 
     click.echo(format_slaves(load_eni(eni_path, esi_dir)))
 

@@ -9,7 +9,7 @@ or no Cython at install) the ``.py`` runs.
 instead of the extensions (a meta-path finder installed by ``ecatsim/__init__.py``), so the
 daemon runs the pure-Python core: to rule the compiled code in or out when something looks
 wrong, at some cost in speed. It also leaves out the compiled-only responder
-(``ecatsim/responder.pyx``, loaded through :func:`load`).
+(``ecatsim/ethercat/responder.pyx``, loaded through :func:`load`).
 
 On a free-threaded interpreter (``python3.13t``) the compiled modules are not imported:
 they declare that they need the GIL (``Py_mod_gil``), and the core is not declared safe
@@ -48,9 +48,9 @@ CORE = (
     "ecatsim.slave.pdo",
     "ecatsim.slave.firmware",
     "ecatsim.wire.frame",
-    "ecatsim.recorder",
-    "ecatsim.segment",
-    "ecatsim.sequence",
+    "ecatsim.ethercat.recorder",
+    "ecatsim.ethercat.segment",
+    "ecatsim.ethercat.sequence",
     "ecatsim.device.cia402",
     "ecatsim.device.servo",
     "ecatsim.device.drive",
@@ -173,7 +173,7 @@ def say_if_pure() -> None:
 
 
 def load(name: str) -> ModuleType | None:
-    """The optional extension ``name`` (e.g. ``ecatsim.responder``), or None where
+    """The optional extension ``name`` (e.g. ``ecatsim.ethercat.responder``), or None where
     it was not built (no C compiler), the environment asks for pure Python, or the
     interpreter is free-threaded."""
     global _said_free_threaded

@@ -6,7 +6,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-from ecatsim.description import DescriptionError, DeviceDescription
+from ecatsim.device.description import DescriptionError, DeviceDescription
 from ecatsim.device.drive import Drive
 from ecatsim.device.echo import OdEchoDevice
 from ecatsim.device.servo import MotorParams

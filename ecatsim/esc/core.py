@@ -390,7 +390,7 @@ class Esc(SmHost):
         #: the ports with a cable to a slave or an interface (bit p), set by the segment
         self.wired = 0x1
         #: the ports with a link (bit p) and the open ones (loop control and link), kept by
-        #: update_dl_status for the segment's routes (ecatsim/topology.py)
+        #: update_dl_status for the segment's routes (ecatsim/ethercat/topology.py)
         self.ports_link = 0x1
         self.ports_open = 0x1
         #: port 0 closed by its loop setting or a lost link (the circulating-frame check)

@@ -123,7 +123,7 @@ class DcUnit:
         self.hop_ns = hop_ns
         self.turnaround_ns = turnaround_ns
         #: when a frame reaches this slave's processing unit, after it entered the segment
-        #: (ns); the segment sets it from the route frames take (ecatsim/topology.py)
+        #: (ns); the segment sets it from the route frames take (ecatsim/ethercat/topology.py)
         self.arrive_ns = position * hop_ns
         #: when that frame comes back in at ports 0-3 (ns after it entered; port 0: the
         #: processing unit's time): NO_STAMP where it does not, LATER where it leaves the

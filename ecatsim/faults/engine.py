@@ -23,9 +23,9 @@ import structlog
 
 from ecatsim.device.drive import Drive
 from ecatsim.esc import regs
+from ecatsim.ethercat.segment import Segment
 from ecatsim.faults.spec import Family, FaultSpec, FaultSpecError
 from ecatsim.faults.wire import patch
-from ecatsim.segment import Segment
 from ecatsim.slave.al import RANK, AlState
 from ecatsim.slave.firmware import Firmware
 from ecatsim.wire.mailbox import MbxError

@@ -11,11 +11,11 @@ from pathlib import Path
 
 import structlog
 
-from ecatsim.build import build_segment
 from ecatsim.clock import ManualClock
-from ecatsim.config import SegmentConfig, SlaveConfig
+from ecatsim.device.esi import EsiError, device_ids, parse_root
 from ecatsim.errors import UserError
-from ecatsim.esi import EsiError, device_ids, parse_root
+from ecatsim.ethercat.assembly import build_segment
+from ecatsim.ethercat.segment_file import SegmentConfig, SlaveConfig
 from ecatsim.generic.minimaster import BringUpError, MiniMaster
 
 log = structlog.get_logger("ecatsim.esi_check")

@@ -11,9 +11,9 @@ from collections.abc import Callable
 from typing import Any
 
 from ecatsim.generic.signals import Signal, SignalError, make_signal
-from ecatsim.pd import Mapped, find
 from ecatsim.slave.al import AlState
 from ecatsim.slave.od import Entry, ObjectDictionary, SdoAbort
+from ecatsim.slave.pd import Mapped, find
 
 
 class GenericDevice:

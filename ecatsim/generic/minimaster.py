@@ -12,9 +12,9 @@ from __future__ import annotations
 
 import struct
 
-from ecatsim.daemon import Daemon
+from ecatsim.ethercat.daemon import Daemon
+from ecatsim.ethercat.segment import Segment
 from ecatsim.link.loopback import LoopbackLink
-from ecatsim.segment import Segment
 from ecatsim.sii.image import parse_image
 from ecatsim.wire import datagram as dg
 

@@ -1,7 +1,7 @@
 """A generic slave's model: its description (for the SII), a maker of its object
 dictionary (one per slave: values are per slave) and its PDO rules.
 
-Sources: an ESI device (``from_esi``); the ENI builds the same model (ecatsim/eni.py).
+Sources: an ESI device (``from_esi``); the ENI builds the same model (ecatsim/ethercat/eni.py).
 The communication objects an ESI leaves out are made from its PDOs and SMs:
 0x1000, 0x1008, 0x1018, 0x1C00, 0x16xx/0x1Axx (entries from <RxPdo>/<TxPdo>), and
 0x1C12/0x1C13 holding the PDOs the ESI assigns by default (those with an ``Sm``).
@@ -17,8 +17,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ecatsim.description import DeviceDescription, PdoDescription, PdoEntry
-from ecatsim.esi import EsiError, read_esi_device
+from ecatsim.device.description import DeviceDescription, PdoDescription, PdoEntry
+from ecatsim.device.esi import EsiError, read_esi_device
 from ecatsim.generic.dictionary import num, read_objects
 from ecatsim.generic.types import pdo_entry_type
 from ecatsim.slave.al import AlState

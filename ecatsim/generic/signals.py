@@ -12,7 +12,7 @@ signals:
   - {input: Limit, constant: 42}
 ```
 
-ENTRY is ``0xIIII:SS`` or an entry's name (see ecatsim/pd.py).
+ENTRY is ``0xIIII:SS`` or an entry's name (see ecatsim/slave/pd.py).
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import re
 
-from ecatsim.description import DATA_TYPES
+from ecatsim.device.description import DATA_TYPES
 
 #: ESI name -> (OD data type, bits)
 BASE_TYPES: dict[str, tuple[str, int]] = {

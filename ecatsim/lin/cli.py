@@ -44,8 +44,8 @@ def lin(pty: Path | None, config_path: Path | None, ctl: Path | None, log_format
     control commands (temperature, voltage, coil faults, switch, stops).
     """
     from ecatsim.clock import MonotonicClock
-    from ecatsim.ctl import default_path
-    from ecatsim.frontdoors import serve_door
+    from ecatsim.ctl.server import default_path
+    from ecatsim.doors.from_config import serve_door
     from ecatsim.lin.config import BusConfig, load_bus
     from ecatsim.lin.server import LinDoor
 

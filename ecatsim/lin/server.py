@@ -33,7 +33,7 @@ _ON = {"on": True, "1": True, "true": True, "off": False, "0": False, "false": F
 
 
 class LinDoor:
-    """A LIN bus of TMC211 nodes behind a pty (a :class:`~ecatsim.doors.FrontDoor`)."""
+    """A LIN bus of TMC211 nodes behind a pty (a :class:`~ecatsim.doors.host.FrontDoor`)."""
 
     def __init__(self, cfg: BusConfig, pty: Path, clock: Clock | None = None) -> None:
         self.clock = clock or MonotonicClock()
@@ -142,7 +142,7 @@ def _stops(rest: list[str]) -> tuple[float, float] | None:
 
 
 def door_from_config(data: dict[str, object], src: str, base: Path | None) -> LinDoor:
-    """The segment file's ``lin:`` mapping as a front door (ecatsim/frontdoors.py)."""
+    """The segment file's ``lin:`` mapping as a front door (ecatsim/doors/from_config.py)."""
     cfg = parse_bus(data, src, base, "lin.")
     if cfg.pty is None:
         raise UserError(

@@ -229,7 +229,7 @@ class RawLink:
 
     def recv_into(self, buf: bytearray) -> int:
         """One frame into ``buf``; 0 if none was waiting (or it was our own outgoing one).
-        The daemon's compiled responder receives the same way (ecatsim/responder.pyx,
+        The daemon's compiled responder receives the same way (ecatsim/ethercat/responder.pyx,
         decision P4); tests/unit/link/test_links.py runs both."""
         while True:
             try:

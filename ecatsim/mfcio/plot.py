@@ -11,9 +11,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ecatsim.device.trace import read_trace, save_figure
 from ecatsim.errors import UserError
 from ecatsim.mfcio.trace import COLUMNS
-from ecatsim.trace import read_trace, save_figure
 
 #: AL state names by their AL status code. Ref: TMC8460 §5.20 Table 32.
 AL_NAMES = {1: "INIT", 2: "PREOP", 3: "BOOT", 4: "SAFEOP", 8: "OP"}

@@ -11,7 +11,7 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass, field
 
-from ecatsim.description import FMMU_TYPES, DeviceDescription
+from ecatsim.device.description import FMMU_TYPES, DeviceDescription
 from ecatsim.sii.crc import crc8
 
 CAT_MFCIO = 1  # TMC8460 MFCIO configuration, first at word 0x40 (TMC8460 §6.3)

@@ -1,7 +1,7 @@
 """EoE over the mailbox: Ethernet frames tunnelled both ways, and the IP parameter services.
 
 The master's fragments are reassembled and handed to the slave's Ethernet side (a TAP
-device, ecatsim/eoe_tap.py); frames from that side wait here and are fragmented as
+device, ecatsim/ethercat/eoe_tap.py); frames from that side wait here and are fragmented as
 the master reads the mailbox, interleaved with CoE/FoE replies by the mailbox engine.
 Control requests always get their EoE response type and a result code, never a mailbox
 error reply (a master blocked in Set IP cannot handle one).

@@ -14,7 +14,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import IntEnum
 
-from ecatsim.description import DATA_TYPES
+from ecatsim.device.description import DATA_TYPES
 
 
 class ObjectCode(IntEnum):

@@ -13,7 +13,7 @@ from typing import Any
 
 import yaml
 
-from ecatsim.description import DescriptionError, DeviceDescription, PdoDescription
+from ecatsim.device.description import DescriptionError, DeviceDescription, PdoDescription
 from ecatsim.slave.al import AlState
 from ecatsim.slave.od import (
     IDENTITY_TYPE,

@@ -73,8 +73,8 @@ def tmcl(
     ecatsim tmcl --listen pty:/tmp/tmcm1311 --eeprom tmcm.json --module-address 1 \\
                  --module-address 2
     """
-    from ecatsim.ctl import default_path
-    from ecatsim.frontdoors import serve_door
+    from ecatsim.ctl.server import default_path
+    from ecatsim.doors.from_config import serve_door
     from ecatsim.tmcl.server import TmclDoor, parse_config
 
     configure_logging(log_format, logging.INFO)

@@ -57,7 +57,7 @@ class LineState:
 
 
 class TmclDoor:
-    """Serves modules on lines; a :class:`~ecatsim.doors.FrontDoor`."""
+    """Serves modules on lines; a :class:`~ecatsim.doors.host.FrontDoor`."""
 
     def __init__(
         self,

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import struct
 
-from ecatsim.daemon import Daemon
+from ecatsim.ethercat.daemon import Daemon
 from ecatsim.link.loopback import LoopbackLink
 from ecatsim.wire import datagram as dg
 from tests.perf.hotpath import configure_to_op

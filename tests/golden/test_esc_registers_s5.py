@@ -10,7 +10,7 @@ import struct
 from ecatsim.clock import ManualClock
 from ecatsim.esc.core import Esc
 from ecatsim.esc.pdi import Pdi
-from ecatsim.segment import Segment
+from ecatsim.ethercat.segment import Segment
 from ecatsim.sii.crc import crc8
 from ecatsim.wire import datagram as dg
 from tests.support.tinymaster import TinyMaster, segment_of
@@ -297,9 +297,9 @@ def test_speed_counter_diff_follows_the_time_loop() -> None:
     whose clock runs 20 ppm slow settles near +5 x 20e-6 x (0x1000 + 2)^2 = +1679. Writing
     0x0930 resets it, 0x092C and the correction; 0x0934 resets 0x092C only.
     Ref: Tables 99-102."""
-    from ecatsim.build import build_segment
     from ecatsim.clock import ManualClock
-    from ecatsim.config import SegmentConfig, SlaveConfig
+    from ecatsim.ethercat.assembly import build_segment
+    from ecatsim.ethercat.segment_file import SegmentConfig, SlaveConfig
 
     clock = ManualClock(1_000_000_000)
     cfg = SegmentConfig(

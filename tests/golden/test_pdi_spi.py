@@ -11,9 +11,9 @@ import pytest
 
 from ecatsim.clock import ManualClock
 from ecatsim.esc.core import Esc, FrameContext
+from ecatsim.ethercat.segment import Segment
 from ecatsim.pdi_spi.external import ExternalFirmware
 from ecatsim.pdi_spi.protocol import SpiTiming, transfer
-from ecatsim.segment import Segment
 from tests.support.tinymaster import TinyMaster, segment_of
 
 

@@ -311,7 +311,7 @@ class Daemon:
         """A daemon killed with SIGKILL, or one that dropped root (--user) and so may not
         write /run/ecatsim, leaves its control socket behind; the next daemon on the link
         would replace it, but a test run leaves nothing behind."""
-        from ecatsim.ctl import default_path, run_dir
+        from ecatsim.ctl.server import default_path, run_dir
 
         for lock in run_dir().glob(f"iface-{self.pair.slave_if}@*.lock"):
             lock.unlink(missing_ok=True)  # the link's lock file (decision O1)

@@ -157,7 +157,7 @@ def test_default_control_socket_under_the_run_directory(
     assert r.returncode == 0, r.stderr
     assert r.stdout.splitlines()[1].split()[:5] == ["0", "0x0000", "INIT", "0x0000", "no"]
     # a missing object: the SDO abort within 1 s, and exit status 1 from the command line
-    from ecatsim.ctl import request
+    from ecatsim.ctl.server import request
 
     req = {"cmd": "od", "slave": 0, "index": 0x9999, "sub": 0}
     assert request(sock, req, timeout=1.0)["abort"] == 0x06020000

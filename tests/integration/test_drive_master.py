@@ -17,7 +17,7 @@ from typing import Any
 import pysoem
 import pytest
 
-from ecatsim import daemon as daemon_mod
+from ecatsim.ethercat import daemon as daemon_mod
 from tests.integration.test_esc_master import RX_TIMEOUT_US, to_op
 from tests.support.compiled import require_built
 from tests.support.stall import StallWatch, stalled
@@ -330,7 +330,7 @@ def test_csp_sine_with_dc_sync0(master_factory: Any, daemon_factory: Any, tmp_pa
     # nearly all of the k judged ones
     assert d.stop() == 0
     stopped = [json.loads(ln) for ln in d.log.read_text().splitlines() if '"stopped"' in ln]
-    require_built(daemon_mod.responder, "ecatsim.responder")
+    require_built(daemon_mod.responder, "ecatsim.ethercat.responder")
     assert stopped[-1]["compiled_replies"] >= 0.9 * k, (k, stopped[-1])
 
 
@@ -339,7 +339,7 @@ def test_overcurrent_emcy_quick_stop_and_fault_reset(
 ) -> None:
     """An injected overcurrent (control socket) faults the drive with an EMCY that pysoem
     receives; a fault reset recovers once the cause is gone; quick stop uses 6085h."""
-    from ecatsim.ctl import request
+    from ecatsim.ctl.server import request
     from tests.integration.test_faults import ctl_slave
 
     sock, m, s = ctl_slave(daemon_factory, master_factory, tmp_path)
@@ -492,7 +492,7 @@ def test_drive_faults_emcy_and_reset(
 ) -> None:
     """Each drive fault injected at run time: fault reaction, fault, 603Fh, an EMCY pysoem
     receives; fault reset recovers once the cause is cleared. Ref: issue "drive" (faults)."""
-    from ecatsim.ctl import request
+    from ecatsim.ctl.server import request
     from tests.integration.test_faults import ctl_slave
 
     sock, m, s = ctl_slave(daemon_factory, master_factory, tmp_path)

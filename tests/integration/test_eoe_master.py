@@ -15,7 +15,7 @@ import subprocess
 import time
 from pathlib import Path
 
-from ecatsim.ctl import request
+from ecatsim.ctl.server import request
 from tests.integration.conftest import DaemonFactory
 from tests.integration.netns import NetnsPair, in_netns, proc_status
 from tests.support.icmp import Pinger

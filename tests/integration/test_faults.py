@@ -13,7 +13,7 @@ from typing import Any
 import pysoem
 import pytest
 
-from ecatsim.ctl import request
+from ecatsim.ctl.server import request
 from tests.integration.netns import in_netns
 from tests.integration.test_esc_master import to_op
 

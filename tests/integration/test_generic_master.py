@@ -18,8 +18,8 @@ from typing import Any
 import pysoem
 import pytest
 
-import ecatsim.client
-from ecatsim.ctl import request
+import ecatsim.ctl.client
+from ecatsim.ctl.server import request
 from tests.integration.netns import NetnsPair
 from tests.integration.test_esc_master import RX_TIMEOUT_US, to_op
 from tests.support.eni import coe_init_cmds
@@ -101,7 +101,7 @@ def test_esi_slave_under_pysoem(master_factory: Any, daemon_factory: Any, tmp_pa
     cycle(m)
     got = request(sock, {"cmd": "pd", "slave": 0, "entry": "0x7000:02"})
     assert got["value"] == 1 and got["direction"] == "output"
-    with ecatsim.client.connect(socket=sock) as bus:
+    with ecatsim.ctl.client.connect(socket=sock) as bus:
         assert bus.slave(0).pd["Setpoint"] == 0x1234
         bus.slave(0).pd["0x6000:03"] = 1
         assert bus.slave(0).state == "OP"

@@ -13,7 +13,7 @@ from typing import Any
 import pysoem
 import pytest
 
-from ecatsim.ctl import request
+from ecatsim.ctl.server import request
 from ecatsim.mfcio.stepdir import sr_for
 from tests.integration.test_esc_master import RX_TIMEOUT_US, to_op
 from tests.support.mfcio import mb0, mb1, s32

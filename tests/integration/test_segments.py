@@ -18,7 +18,7 @@ from typing import Any
 import pysoem
 import pytest
 
-from ecatsim.ctl import request
+from ecatsim.ctl.server import request
 from tests.integration.netns import Daemon, ExtraNetns, NetnsPair, Port, add_veth, in_netns
 from tests.integration.test_esc_master import PRODUCT, REVISION, VENDOR, to_op
 

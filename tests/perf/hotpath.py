@@ -11,7 +11,7 @@ import struct
 import time
 from typing import Any
 
-from ecatsim.daemon import Daemon
+from ecatsim.ethercat.daemon import Daemon
 from ecatsim.link.loopback import LoopbackLink
 from ecatsim.wire import datagram as dg
 from ecatsim.wire.frame import ecat_offset, mark_processed

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from ecatsim import daemon as daemon_mod
+from ecatsim.ethercat import daemon as daemon_mod
 from tests.perf.hotpath import calibrate, csp_cycle_cost, frame_cost
 from tests.support.compiled import require_built
 
@@ -41,7 +41,7 @@ def test_dc_csp_cycle_not_regressed(drives: int) -> None:
 @pytest.mark.parametrize("drives", [1, 16])
 def test_dc_csp_cycle_through_the_responder_not_regressed(drives: int) -> None:
     """The same DC cycle with the frame answered by the compiled responder (decision P9)."""
-    require_built(daemon_mod.responder, "ecatsim.responder")
+    require_built(daemon_mod.responder, "ecatsim.ethercat.responder")
     unit = calibrate()
     ratio = csp_cycle_cost(drives, cycles=200, responder=True) / unit
     base = BASELINE[f"dc_csp_responder_{drives}"]

@@ -10,10 +10,10 @@ import struct
 from dataclasses import dataclass
 from typing import Any
 
-from ecatsim.build import build_segment
 from ecatsim.clock import ManualClock
-from ecatsim.config import SegmentConfig, SlaveConfig
-from ecatsim.segment import Segment
+from ecatsim.ethercat.assembly import build_segment
+from ecatsim.ethercat.segment import Segment
+from ecatsim.ethercat.segment_file import SegmentConfig, SlaveConfig
 from ecatsim.wire import datagram as dg
 from ecatsim.wire.frame import ecat_offset, mark_processed
 

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from ecatsim.clock import ManualClock
-from ecatsim.doors import DoorHost, serve_doors
+from ecatsim.doors.host import DoorHost, serve_doors
 from ecatsim.tmcl import protocol as P
 from ecatsim.tmcl.module import ModuleConfig
 from ecatsim.tmcl.server import TmclDoor

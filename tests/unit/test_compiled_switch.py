@@ -12,7 +12,7 @@ import pytest
 
 PROBE = """
 import ecatsim.slave.firmware as firmware
-import ecatsim.daemon as daemon
+import ecatsim.ethercat.daemon as daemon
 print(not firmware.__file__.endswith(".py"), daemon.responder is not None)
 """
 
@@ -52,7 +52,7 @@ def test_a_free_threaded_interpreter_loads_no_extension(
     monkeypatch.delenv("ECATSIM_PURE_PYTHON", raising=False)
     monkeypatch.setattr(compiled, "free_threaded", lambda: True)
     monkeypatch.setattr(compiled, "_said_free_threaded", False)
-    monkeypatch.delitem(sys.modules, "ecatsim.responder", raising=False)
-    assert compiled.load("ecatsim.responder") is None
-    assert "ecatsim.responder" not in sys.modules
+    monkeypatch.delitem(sys.modules, "ecatsim.ethercat.responder", raising=False)
+    assert compiled.load("ecatsim.ethercat.responder") is None
+    assert "ecatsim.ethercat.responder" not in sys.modules
     assert capsys.readouterr().out.count("compiled_paths_off") == 1

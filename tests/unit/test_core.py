@@ -138,7 +138,11 @@ def test_every_extension_is_optional(monkeypatch: pytest.MonkeyPatch) -> None:
     every extension setup.py declares is optional, including those cythonize makes anew.
     They are all Cython modules: no hand-written C is left."""
     exts, _ = _cythonize_calls(monkeypatch)
-    assert {e.name for e in exts} == {*compiled.CORE, "ecatsim.responder", "ecatsim._cyutility"}
+    assert {e.name for e in exts} == {
+        *compiled.CORE,
+        "ecatsim.ethercat.responder",
+        "ecatsim._cyutility",
+    }
     assert [e.name for e in exts if not e.optional] == []
     root = Path(compiled.__file__).parent
     assert sorted(p.name for p in root.rglob("*.[ch]")) == []

@@ -9,12 +9,12 @@ from pathlib import Path
 
 import pytest
 
-from ecatsim.build import build_segment
 from ecatsim.clock import MonotonicClock
-from ecatsim.config import default_segment
-from ecatsim.ctl import ControlSocket, find_socket
-from ecatsim.ctl_table import format_status, port_text
+from ecatsim.ctl.server import ControlSocket, find_socket
+from ecatsim.ctl.table import format_status, port_text
 from ecatsim.errors import UserError
+from ecatsim.ethercat.assembly import build_segment
+from ecatsim.ethercat.segment_file import default_segment
 from ecatsim.faults.engine import FaultEngine
 
 
@@ -136,7 +136,7 @@ def test_al_faults_on_a_slave_without_ecatsim_firmware_answer_one_line(
     tmp_path: Path, kind: str
 ) -> None:
     """A TMC8460 in device emulation has no firmware to refuse or leave a state."""
-    from ecatsim.config import load_segment
+    from ecatsim.ethercat.segment_file import load_segment
 
     root = Path(__file__).resolve().parents[2]
     segment = build_segment(load_segment(root / "config" / "tmc8460-mfcio.yaml"), MonotonicClock())
@@ -151,7 +151,7 @@ def test_al_faults_on_a_slave_without_ecatsim_firmware_answer_one_line(
 
 def test_a_refused_fault_is_not_left_armed(tmp_path: Path) -> None:
     """The refusal comes when the fault is armed, even one due later, and nothing stays."""
-    from ecatsim.config import load_segment
+    from ecatsim.ethercat.segment_file import load_segment
 
     root = Path(__file__).resolve().parents[2]
     segment = build_segment(load_segment(root / "config" / "tmc8460-mfcio.yaml"), MonotonicClock())

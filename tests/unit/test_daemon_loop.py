@@ -10,7 +10,7 @@ from typing import Any
 
 import pytest
 
-from ecatsim import daemon as daemon_module
+from ecatsim.ethercat import daemon as daemon_module
 from tests.perf.hotpath import MS, CspCycle
 
 

@@ -6,7 +6,7 @@ import os
 import select
 from typing import Any
 
-from ecatsim.doors import DoorHost, serve_doors
+from ecatsim.doors.host import DoorHost, serve_doors
 
 
 class PipeDoor:
@@ -125,7 +125,7 @@ def test_serve_doors_runs_until_stopped() -> None:
 
 def test_the_ethercat_daemon_serves_a_door_between_frames() -> None:
     """A door's descriptor ends the daemon's wait; its deadline is part of the loop's."""
-    from ecatsim.daemon import Daemon
+    from ecatsim.ethercat.daemon import Daemon
     from ecatsim.link.loopback import LoopbackLink
     from tests.perf.hotpath import segment_of
 

@@ -13,12 +13,12 @@ import pytest
 import structlog
 from click.testing import CliRunner
 
-from ecatsim.build import build_segment
 from ecatsim.cli import cli
 from ecatsim.clock import ManualClock
-from ecatsim.config import parse_segment
-from ecatsim.eni import load_eni
 from ecatsim.errors import UserError
+from ecatsim.ethercat.assembly import build_segment
+from ecatsim.ethercat.eni import load_eni
+from ecatsim.ethercat.segment_file import parse_segment
 from ecatsim.generic.dictionary import num
 from ecatsim.generic.minimaster import MiniMaster
 from ecatsim.slave.al import AlState
@@ -128,7 +128,7 @@ def test_process_data_of_the_eni_without_a_mailbox(tmp_path: Path) -> None:
     m = MiniMaster(seg)
     assert m.to_op(0) == "OP, outputs 2 bytes, inputs 5 bytes"
     app = seg.firmware[0].app  # type: ignore[attr-defined]
-    from ecatsim.pd import request as pd_request
+    from ecatsim.slave.pd import request as pd_request
 
     pd_request(app, {"entry": "Ready", "value": 1})
     pd_request(app, {"entry": "In/Count", "value": 7})

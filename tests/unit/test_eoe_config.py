@@ -11,10 +11,10 @@ import pytest
 from click.testing import CliRunner
 
 from ecatsim.cli import cli
-from ecatsim.config import EoeConfig, parse_segment
-from ecatsim.ctl_table import eoe_text
+from ecatsim.ctl.table import eoe_text
+from ecatsim.device.esi import read_esi
 from ecatsim.errors import UserError
-from ecatsim.esi import read_esi
+from ecatsim.ethercat.segment_file import EoeConfig, parse_segment
 from ecatsim.sii.image import parse_image
 
 

@@ -12,7 +12,7 @@ import pytest
 from click.testing import CliRunner
 
 from ecatsim.cli import cli
-from ecatsim.description import default_description
+from ecatsim.device.description import default_description
 from ecatsim.sii.image import build_image, parse_image
 from ecatsim.slave.od_build import build_od
 
@@ -96,9 +96,9 @@ def test_sii_mailbox_words_match_the_sms() -> None:
 
 
 def test_segment_yaml_loads_a_user_esi(tmp_path: Path) -> None:
-    from ecatsim.build import build_segment
     from ecatsim.clock import ManualClock
-    from ecatsim.config import load_segment
+    from ecatsim.ethercat.assembly import build_segment
+    from ecatsim.ethercat.segment_file import load_segment
 
     xml = tmp_path / "d.xml"
     assert run("esi", "export", "-o", str(xml))[0] == 0

@@ -11,12 +11,12 @@ from pathlib import Path
 
 import pytest
 
-from ecatsim.config import load_segment
-from ecatsim.daemon import Daemon
 from ecatsim.errors import UserError
+from ecatsim.ethercat.daemon import Daemon
+from ecatsim.ethercat.segment import Segment
+from ecatsim.ethercat.segment_file import load_segment
 from ecatsim.faults.spec import FaultSpecError, parse_fault
 from ecatsim.link.loopback import LoopbackLink
-from ecatsim.segment import Segment
 from ecatsim.wire import datagram as dg
 from tests.support.tinymaster import Reply, decode, segment_of
 

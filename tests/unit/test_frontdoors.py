@@ -7,9 +7,9 @@ from typing import Any
 
 import pytest
 
-from ecatsim import frontdoors
-from ecatsim.config import parse_segment
+from ecatsim.doors import from_config
 from ecatsim.errors import UserError
+from ecatsim.ethercat.segment_file import parse_segment
 from tests.unit.test_doors import PipeDoor
 
 SLAVES = [{"device": "echo"}]
@@ -37,22 +37,22 @@ def test_an_unknown_top_level_key_names_the_allowed_ones() -> None:
 
 
 def test_no_doors_no_host() -> None:
-    assert frontdoors.build_doors(parse_segment({"slaves": SLAVES}, "seg.yaml")) is None
+    assert from_config.build_doors(parse_segment({"slaves": SLAVES}, "seg.yaml")) is None
 
 
 def test_build_doors_hands_each_mapping_to_its_factory(monkeypatch: pytest.MonkeyPatch) -> None:
     seen: list[tuple[str, dict[str, Any], str, Path | None]] = []
 
-    def factory(key: str) -> frontdoors.DoorFactory:
+    def factory(key: str) -> from_config.DoorFactory:
         def make(data: dict[str, Any], src: str, base: Path | None) -> PipeDoor:
             seen.append((key, data, src, base))
             return PipeDoor()
 
         return make
 
-    monkeypatch.setattr(frontdoors, "_factory", factory)
+    monkeypatch.setattr(from_config, "_factory", factory)
     cfg = parse_segment({"slaves": SLAVES, "lin": {"pty": "x"}}, "seg.yaml", Path("/d"))
-    host = frontdoors.build_doors(cfg)
+    host = from_config.build_doors(cfg)
     assert host is not None
     try:
         assert list(host.doors) == ["lin"]
@@ -66,7 +66,7 @@ def test_a_failing_door_closes_the_ones_built_before(monkeypatch: pytest.MonkeyP
     closed: list[bool] = []
     first.close = lambda: closed.append(True)  # type: ignore[method-assign]
 
-    def factory(key: str) -> frontdoors.DoorFactory:
+    def factory(key: str) -> from_config.DoorFactory:
         def make(data: dict[str, Any], src: str, base: Path | None) -> PipeDoor:
             if key == "lin":
                 raise UserError(f"{src}: lin.pty: expected a path")
@@ -74,18 +74,18 @@ def test_a_failing_door_closes_the_ones_built_before(monkeypatch: pytest.MonkeyP
 
         return make
 
-    monkeypatch.setattr(frontdoors, "_factory", factory)
+    monkeypatch.setattr(from_config, "_factory", factory)
     cfg = parse_segment({"slaves": SLAVES, "tmcl": {}, "lin": {}}, "seg.yaml")
     with pytest.raises(UserError, match=r"lin\.pty"):
-        frontdoors.build_doors(cfg)
+        from_config.build_doors(cfg)
     assert closed == [True]
 
 
 def test_ctl_reaches_a_door_and_lists_it_in_status(tmp_path: Path) -> None:
-    from ecatsim.build import build_segment
     from ecatsim.clock import MonotonicClock
-    from ecatsim.ctl import ControlSocket
-    from ecatsim.doors import DoorHost
+    from ecatsim.ctl.server import ControlSocket
+    from ecatsim.doors.host import DoorHost
+    from ecatsim.ethercat.assembly import build_segment
     from ecatsim.faults.engine import FaultEngine
 
     segment = build_segment(parse_segment({"slaves": SLAVES}, "seg.yaml"), MonotonicClock())

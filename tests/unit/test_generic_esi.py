@@ -13,17 +13,17 @@ from pathlib import Path
 import pytest
 import structlog
 
-from ecatsim.build import build_segment
 from ecatsim.clock import ManualClock
-from ecatsim.config import parse_segment
 from ecatsim.errors import UserError
+from ecatsim.ethercat.assembly import build_segment
+from ecatsim.ethercat.segment_file import parse_segment
 from ecatsim.generic.minimaster import BringUpError, MiniMaster
 from ecatsim.generic.model import from_esi
-from ecatsim.pd import request as pd_request
 from ecatsim.sii.image import parse_image
 from ecatsim.slave.al import AlState
 from ecatsim.slave.firmware import Firmware
 from ecatsim.slave.od import SdoAbort
+from ecatsim.slave.pd import request as pd_request
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "esi"
 ACME = DATA / "acme-io.xml"
@@ -248,7 +248,7 @@ def test_generic_slave_entry_errors_are_one_line(slave: dict[str, object], msg: 
 
 
 def test_ctl_pd_table_for_people() -> None:
-    from ecatsim.pd import format_entries
+    from ecatsim.slave.pd import format_entries
 
     seg, _ = segment({"esi": "acme-io.xml", "device_type": "ACME-IO8"})
     rows = format_entries(pd_request(fw_of(seg).app, {})["entries"]).splitlines()
@@ -308,7 +308,7 @@ def test_io_without_mailbox_runs_in_device_emulation_on_its_own_sms() -> None:
 def test_more_than_255_names_leave_the_rest_unnamed_in_the_sii() -> None:
     import dataclasses
 
-    from ecatsim.description import PdoDescription, PdoEntry
+    from ecatsim.device.description import PdoDescription, PdoEntry
     from ecatsim.sii.image import build_image
 
     m = from_esi(ACME, device_type="ACME-IO8")

@@ -8,8 +8,8 @@ from pathlib import Path
 import pytest
 
 from ecatsim.errors import UserError
-from ecatsim.linklock import lock_link, lock_name
-from ecatsim.runner import RunOptions, take_link
+from ecatsim.ethercat.linklock import lock_link, lock_name
+from ecatsim.ethercat.run import RunOptions, take_link
 
 
 def test_a_second_lock_on_the_link_names_the_pid_serving_it(tmp_path: Path) -> None:
@@ -70,7 +70,7 @@ def test_the_out_interface_is_a_link_of_its_own(
 ) -> None:
     """``--out-iface B`` sends and receives on B: a daemon serving B already refuses it,
     before anything is built, and the daemon's own link lock is let go again."""
-    from ecatsim.runner import run_daemon
+    from ecatsim.ethercat.run import run_daemon
 
     monkeypatch.setenv("ECATSIM_RUN_DIR", str(tmp_path))
     other = lock_link(tmp_path, "ecat9", None, None)  # another daemon serves ecat9

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from ecatsim.trace import TraceWriter
+from ecatsim.device.trace import TraceWriter
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -126,9 +126,9 @@ def test_a_truncated_eeprom_image_is_refused_at_start(tmp_path: Path) -> None:
 
 
 def test_a_missing_eeprom_image_is_still_created(tmp_path: Path) -> None:
-    from ecatsim.build import build_segment
     from ecatsim.clock import ManualClock
-    from ecatsim.config import load_segment
+    from ecatsim.ethercat.assembly import build_segment
+    from ecatsim.ethercat.segment_file import load_segment
     from ecatsim.sii.image import parse_image
 
     image = tmp_path / "new.bin"
@@ -223,9 +223,9 @@ def test_ctl_of_a_tmcl_daemon_beside_an_ethercat_one(tmp_path: Path) -> None:
 
 
 def test_ctl_status_of_a_lin_only_daemon_is_a_table_of_its_nodes(tmp_path: Path) -> None:
-    from ecatsim.ctl import ControlSocket
-    from ecatsim.ctl_table import format_status
-    from ecatsim.doors import DoorHost
+    from ecatsim.ctl.server import ControlSocket
+    from ecatsim.ctl.table import format_status
+    from ecatsim.doors.host import DoorHost
     from ecatsim.lin.server import door_from_config
 
     door = door_from_config(
@@ -255,7 +255,7 @@ def test_ctl_status_of_a_lin_only_daemon_is_a_table_of_its_nodes(tmp_path: Path)
 def test_a_control_socket_in_use_does_not_invite_a_second_daemon(tmp_path: Path) -> None:
     """The refusal names the socket and how to see who serves it; it offers --ctl only for
     a daemon that serves something else (the link itself is locked: decision O1)."""
-    from ecatsim.ctl import ControlSocket
+    from ecatsim.ctl.server import ControlSocket
     from ecatsim.errors import UserError
 
     path = tmp_path / "ecat1.sock"

@@ -9,11 +9,11 @@ from pathlib import Path
 
 import pytest
 
-from ecatsim.build import build_segment
 from ecatsim.clock import ManualClock
-from ecatsim.config import load_segment, parse_segment
+from ecatsim.doors.from_config import build_doors
 from ecatsim.errors import UserError
-from ecatsim.frontdoors import build_doors
+from ecatsim.ethercat.assembly import build_segment
+from ecatsim.ethercat.segment_file import load_segment, parse_segment
 from ecatsim.mfcio.stepdir import sr_for
 from tests.support.mfcio import mb0, mb1
 from tests.support.spisock import spi_frame

@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from ecatsim.build import build_segment
 from ecatsim.clock import ManualClock
-from ecatsim.config import load_segment
-from ecatsim.frontdoors import build_doors
+from ecatsim.doors.from_config import build_doors
+from ecatsim.ethercat.assembly import build_segment
+from ecatsim.ethercat.segment_file import load_segment
 from ecatsim.mfcio.block import MfcioBlock
 from ecatsim.pdi_spi.external import ExternalFirmware
 from tests.support.mfcio import mb0, mb1

@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from ecatsim.config import SegmentConfig, SlaveConfig, parse_segment
-from ecatsim.doors import DoorHost
+from ecatsim.doors.from_config import build_doors
+from ecatsim.doors.host import DoorHost
 from ecatsim.errors import UserError
-from ecatsim.frontdoors import build_doors
+from ecatsim.ethercat.segment_file import SegmentConfig, SlaveConfig, parse_segment
 from ecatsim.pdi_spi.external import ExternalFirmware
 from tests.support.tinymaster import TinyMaster, segment_of
 

@@ -6,8 +6,8 @@ import os
 
 import pytest
 
-from ecatsim import realtime
 from ecatsim.errors import UserError
+from ecatsim.ethercat import realtime
 from tests.integration.netns import require_root
 
 

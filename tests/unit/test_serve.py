@@ -2,7 +2,8 @@
 the busy mode), a frame handed over untouched, every kind of frame served through the
 per-frame sequence it shares with Daemon.handle_frame (decision P21), and Daemon.run
 serving through it.
-Ref: ecatsim/responder.pyx; ecatsim/daemon.py Daemon.serve_once, Daemon.handle_frame."""
+Ref: ecatsim/ethercat/responder.pyx; ecatsim/ethercat/daemon.py Daemon.serve_once,
+Daemon.handle_frame."""
 
 from __future__ import annotations
 
@@ -16,14 +17,14 @@ from typing import Any
 
 import pytest
 
-from ecatsim import daemon as daemon_mod
-from ecatsim.build import build_segment
 from ecatsim.clock import MonotonicClock
-from ecatsim.config import SegmentConfig, SlaveConfig
-from ecatsim.daemon import Daemon
-from ecatsim.recorder import FrameRecorder
-from ecatsim.segment import Segment
-from ecatsim.sequence import FrameSequence
+from ecatsim.ethercat import daemon as daemon_mod
+from ecatsim.ethercat.assembly import build_segment
+from ecatsim.ethercat.daemon import Daemon
+from ecatsim.ethercat.recorder import FrameRecorder
+from ecatsim.ethercat.segment import Segment
+from ecatsim.ethercat.segment_file import SegmentConfig, SlaveConfig
+from ecatsim.ethercat.sequence import FrameSequence
 from ecatsim.wire import datagram as dg
 from tests.perf.hotpath import IN, MS, OUT, CspCycle
 from tests.support.compiled import record_results, require_built
@@ -35,7 +36,7 @@ TIMEOUT, WAKE, FRAME, REPLIED, DROPPED = 0, 1, 2, 3, 4
 
 @pytest.fixture
 def srv() -> ModuleType:
-    require_built(daemon_mod.responder, "ecatsim.responder")
+    require_built(daemon_mod.responder, "ecatsim.ethercat.responder")
     assert daemon_mod.responder is not None
     return daemon_mod.responder
 
@@ -408,7 +409,7 @@ def test_the_cpu_following_runs_only_when_its_descriptor_or_time_says_so(
     (the following stopped until then). Through Daemon.run: the compiled responder and the
     select(2) loop."""
     if compiled:
-        require_built(daemon_mod.responder, "ecatsim.responder")
+        require_built(daemon_mod.responder, "ecatsim.ethercat.responder")
     seg = build_segment(SegmentConfig((SlaveConfig(device="echo", serial=1),)), MonotonicClock())
     d = Daemon(link, seg)
     d.compiled = compiled

@@ -13,13 +13,13 @@ from typing import Any
 import pytest
 import yaml
 
-from ecatsim import topology
-from ecatsim.build import build_segment
 from ecatsim.clock import ManualClock
-from ecatsim.config import SegmentConfig, SlaveConfig, parse_segment
 from ecatsim.errors import UserError
+from ecatsim.ethercat import topology
+from ecatsim.ethercat.assembly import build_segment
+from ecatsim.ethercat.segment import Segment
+from ecatsim.ethercat.segment_file import SegmentConfig, SlaveConfig, parse_segment
 from ecatsim.faults.engine import FaultEngine
-from ecatsim.segment import Segment
 from ecatsim.wire import datagram as dg
 from tests.support.tinymaster import Reply, decode
 
@@ -281,8 +281,8 @@ def test_two_segments_chained_are_one_line() -> None:
 
 
 def test_ctl_status_table_shows_junction_ports_and_the_tree() -> None:
-    from ecatsim.ctl import ControlSocket
-    from ecatsim.ctl_table import format_status
+    from ecatsim.ctl.server import ControlSocket
+    from ecatsim.ctl.table import format_status
 
     _, seg = junction()
     status = ControlSocket.status(_StatusOnly(seg))  # type: ignore[arg-type]
@@ -306,7 +306,7 @@ def test_daemon_sends_each_frame_where_its_route_leaves() -> None:
     """The daemon with an out link (loopback links in process): a frame from the master
     leaves on the out link marked processed; the same frame coming back on the out link
     leaves on the daemon's link unmarked again; no carrier closes the loop at home."""
-    from ecatsim.daemon import Daemon, OutPort
+    from ecatsim.ethercat.daemon import Daemon, OutPort
     from ecatsim.link.loopback import LoopbackLink
 
     seg = line(2, out=True)

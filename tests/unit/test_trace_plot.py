@@ -8,7 +8,7 @@ from pathlib import Path
 from click.testing import CliRunner
 
 from ecatsim.cli import cli
-from ecatsim.trace import COLUMNS, TraceWriter
+from ecatsim.device.trace import COLUMNS, TraceWriter
 from tests.unit.device.test_drive import MS, command, enable, make
 
 
@@ -59,7 +59,7 @@ def test_eeprom_show_of_junk_says_it_is_no_sii_image(tmp_path: Path) -> None:
 
 
 def test_state_marks_merge_a_quick_enable_sequence() -> None:
-    from ecatsim.trace import mode_spans, state_marks
+    from ecatsim.device.trace import mode_spans, state_marks
 
     states = ["SWITCH_ON_DISABLED"] * 2 + ["READY_TO_SWITCH_ON", "SWITCHED_ON"]
     states += ["OPERATION_ENABLED"] * 96 + ["READY_TO_SWITCH_ON"]

@@ -7,9 +7,9 @@ import itertools
 
 import pytest
 
-from ecatsim.description import default_description
 from ecatsim.device import cia402
 from ecatsim.device.cia402 import Command, PdsState
+from ecatsim.device.description import default_description
 from ecatsim.device.drive import CSP, CST, PP, PV, Drive
 from ecatsim.device.servo import MotorParams, Profile
 from ecatsim.slave.al import AlState

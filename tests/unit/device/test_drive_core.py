@@ -10,8 +10,8 @@ from typing import Any
 
 import pytest
 
-from ecatsim.description import default_description
 from ecatsim.device import drive
+from ecatsim.device.description import default_description
 from ecatsim.device.drive import CSP, CST, CSV, HM, PP, PV
 from ecatsim.slave.al import AlState
 from ecatsim.slave.od_build import build_od

@@ -10,11 +10,11 @@ from pathlib import Path
 
 import pytest
 
-from ecatsim.config import parse_segment
-from ecatsim.ctl import ControlSocket
-from ecatsim.doors import DoorHost
+from ecatsim.ctl.server import ControlSocket
+from ecatsim.doors.from_config import build_doors
+from ecatsim.doors.host import DoorHost
 from ecatsim.errors import UserError
-from ecatsim.frontdoors import build_doors
+from ecatsim.ethercat.segment_file import parse_segment
 from ecatsim.lin.frame import SLAVE_RESPONSE, frame, header
 from ecatsim.lin.server import LinDoor, door_from_config
 from ecatsim.lin.tables import State

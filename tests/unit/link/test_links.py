@@ -17,13 +17,13 @@ from pathlib import Path
 
 import pytest
 
-from ecatsim import daemon
+from ecatsim.ethercat import daemon
+from ecatsim.ethercat.recorder import FrameRecorder
 from ecatsim.link.errors import LinkError
 from ecatsim.link.loopback import LoopbackLink, Manipulator
 from ecatsim.link.pcap import MAGIC_NSEC, MAGIC_USEC, PcapWriter
 from ecatsim.link.raw import RawLink, iface_ipv4_addresses
 from ecatsim.link.udp import UDP_PORT, UdpLink
-from ecatsim.recorder import FrameRecorder
 from tests.integration.netns import NetnsPair, in_netns, require_root
 from tests.support.compiled import require_built
 
@@ -106,7 +106,7 @@ def raw_pair(
     """A RawLink on the slave end, receiving as the compiled responder does (decision P4)
     or through Python's socket module; a plain ETH_P_ALL socket on the master end."""
     if request.param:
-        require_built(daemon.responder, "ecatsim.responder")
+        require_built(daemon.responder, "ecatsim.ethercat.responder")
     with in_netns(pair.slave_ns):
         link = ResponderLink(pair.slave_if) if request.param else RawLink(pair.slave_if)
     with in_netns(pair.master_ns):

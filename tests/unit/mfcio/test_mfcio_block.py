@@ -7,12 +7,12 @@ from __future__ import annotations
 import struct
 from pathlib import Path
 
-from ecatsim.build import build_segment
 from ecatsim.clock import ManualClock
-from ecatsim.config import load_segment
+from ecatsim.ethercat.assembly import build_segment
+from ecatsim.ethercat.segment import Segment
+from ecatsim.ethercat.segment_file import load_segment
 from ecatsim.mfcio.block import MfcioBlock
 from ecatsim.mfcio.stepdir import sr_for
-from ecatsim.segment import Segment
 from tests.support.mfcio import mb0, mb1, s32
 from tests.support.tinymaster import TinyMaster
 

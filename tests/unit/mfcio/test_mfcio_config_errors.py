@@ -6,11 +6,11 @@ from pathlib import Path
 
 import pytest
 
-from ecatsim.build import build_segment
 from ecatsim.clock import ManualClock
-from ecatsim.config import parse_segment
-from ecatsim.description import DescriptionError, parse_description
+from ecatsim.device.description import DescriptionError, parse_description
 from ecatsim.errors import UserError
+from ecatsim.ethercat.assembly import build_segment
+from ecatsim.ethercat.segment_file import parse_segment
 
 
 def build(data: object) -> None:

@@ -11,8 +11,8 @@ from pathlib import Path
 from click.testing import CliRunner
 
 from ecatsim.cli import cli
-from ecatsim.description import default_description
-from ecatsim.esi import export_esi, read_esi
+from ecatsim.device.description import default_description
+from ecatsim.device.esi import export_esi, read_esi
 from ecatsim.mfcio import trace as mfcio_trace
 from ecatsim.sii.image import build_image, format_image, parse_image
 from tests.unit.mfcio.test_mfcio_block import STATION, Bench
@@ -148,7 +148,7 @@ def test_ctl_mfcio_answers(tmp_path: Path) -> None:
     """``ecatsim ctl mfcio``: status, pins, inputs, the MFC CTRL SPI; errors as one line."""
     import json
 
-    from ecatsim.ctl import ControlSocket
+    from ecatsim.ctl.server import ControlSocket
     from ecatsim.faults.engine import FaultEngine
 
     b = Bench()

@@ -13,7 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ecatsim.description import DescriptionError, default_description, parse_description
+from ecatsim.device.description import DescriptionError, default_description, parse_description
 from ecatsim.sii.crc import crc8
 from ecatsim.sii.image import SiiError, build_image, format_image, parse_image
 from ecatsim.sii.store import EepromStore

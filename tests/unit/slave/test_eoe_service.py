@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import struct
 
-from ecatsim.config import EoeConfig
+from ecatsim.ethercat.segment_file import EoeConfig
 from ecatsim.slave.eoe import EoeService, find_eoe
 from ecatsim.slave.eoe_frag import Fragmenter, Reassembler
 from ecatsim.slave.firmware import Firmware

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import struct
 
-from ecatsim.description import default_description
+from ecatsim.device.description import default_description
 from ecatsim.slave.od_build import build_od
 from ecatsim.slave.pdo import Field, PdoImage, Plan, codec, compile_plan
 

@@ -7,11 +7,11 @@ from pathlib import Path
 
 import pytest
 
-from ecatsim.config import parse_segment
-from ecatsim.ctl import ControlSocket
-from ecatsim.doors import DoorHost
+from ecatsim.ctl.server import ControlSocket
+from ecatsim.doors.from_config import build_doors
+from ecatsim.doors.host import DoorHost
 from ecatsim.errors import UserError
-from ecatsim.frontdoors import build_doors
+from ecatsim.ethercat.segment_file import parse_segment
 from ecatsim.tmcl.server import TmclDoor, door_from_config
 
 

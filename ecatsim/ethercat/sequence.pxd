@@ -5,8 +5,8 @@ cimport cython
 # int64_t, not long long, for a final type's method with an exception value (P17)
 from libc.stdint cimport int64_t
 
-from ecatsim.recorder cimport FrameRecorder
-from ecatsim.segment cimport Segment
+from ecatsim.ethercat.recorder cimport FrameRecorder
+from ecatsim.ethercat.segment cimport Segment
 
 cdef long long _NOT_ECAT, _DROPPED, _REPLY
 

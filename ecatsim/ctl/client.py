@@ -1,9 +1,9 @@
 """A small client for test suites: a running daemon's slaves through its control socket.
 
 ```python
-import ecatsim.client
+import ecatsim.ctl.client
 
-with ecatsim.client.connect("ecat1") as bus:      # the daemon serving --iface ecat1
+with ecatsim.ctl.client.connect("ecat1") as bus:      # the daemon serving --iface ecat1
     bus.slave(2).pd["Channel 1"] = 1               # set an input (name or "0x6000:01")
     assert bus.slave(2).pd["0x7000:01"] == 0       # read an output the master wrote
     print(bus.slave(2).pd.items())                 # every mapped entry with its value
@@ -20,8 +20,8 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
-from ecatsim.ctl import default_path, find_socket, request
-from ecatsim.ctl_table import al_state_text
+from ecatsim.ctl.server import default_path, find_socket, request
+from ecatsim.ctl.table import al_state_text
 from ecatsim.errors import UserError
 
 

@@ -21,8 +21,7 @@ from pathlib import Path
 
 import structlog
 
-from ecatsim.config import SlaveConfig
-from ecatsim.description import (
+from ecatsim.device.description import (
     DeviceDescription,
     EscConfig,
     Identity,
@@ -31,14 +30,15 @@ from ecatsim.description import (
     PdoDescription,
     SmConfig,
 )
+from ecatsim.device.esi import EsiError, device_ids, parse_root
 from ecatsim.errors import UserError
-from ecatsim.esi import EsiError, device_ids, parse_root
+from ecatsim.ethercat.segment_file import SlaveConfig
 from ecatsim.generic.dictionary import num
 from ecatsim.generic.model import GenericModel, PdoSpec, pdo_entry
 from ecatsim.generic.types import by_bits
 from ecatsim.slave.od import Entry, ObjectCode, OdObject
 
-log = structlog.get_logger("ecatsim.eni")
+log = structlog.get_logger("ecatsim.ethercat.eni")
 
 #: identities with a built-in model: (vendor, product) -> device type
 BUILT_IN = {(0x286, 8670): "tmc8670", (0x286, 8460): "tmc8460"}

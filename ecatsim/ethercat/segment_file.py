@@ -47,8 +47,8 @@ from pathlib import Path
 
 import yaml
 
-from ecatsim import topology
 from ecatsim.errors import UserError
+from ecatsim.ethercat import topology
 from ecatsim.faults.spec import FaultSpec, FaultSpecError, parse_fault
 
 DEVICE_TYPES = ("tmc8670", "echo", "tmc8460", "generic")
@@ -127,7 +127,7 @@ class SlaveConfig:
     revision: int | None = None
     #: device generic: inputs driven without a test (validated when built)
     signals: tuple[object, ...] | None = None
-    #: device generic from an ENI: the model made for it (ecatsim/eni.py)
+    #: device generic from an ENI: the model made for it (ecatsim/ethercat/eni.py)
     model: object | None = None
     #: Ethernet over EtherCAT (ETG.1000.6 §5.7): the slave's TAP device and addresses
     eoe: EoeConfig | None = None
@@ -141,11 +141,11 @@ class SegmentConfig:
     source: str = "<default>"
     faults: tuple[FaultSpec, ...] = field(default_factory=tuple)
     #: the front doors besides EtherCAT, by key (``tmcl``, ``lin``): their YAML mapping as
-    #: written, validated by the door itself when it is built (ecatsim/frontdoors.py)
+    #: written, validated by the door itself when it is built (ecatsim/doors/from_config.py)
     doors: tuple[tuple[str, dict[str, object]], ...] = ()
     #: the directory relative paths in the file are taken from
     base: Path | None = None
-    #: per slave (in processing order) its ports' cables (ecatsim/topology.py); empty: a
+    #: per slave (in processing order) its ports' cables (ecatsim/ethercat/topology.py); empty: a
     #: line, port 1 of each slave to port 0 of the next
     wiring: tuple[tuple[int, ...], ...] = ()
     #: per slave the ports it has (bit p); empty: ports 0 and 1 everywhere
@@ -237,7 +237,7 @@ def parse_segment(data: object, src: str, base: Path | None = None) -> SegmentCo
     if "eni" in data:
         if "slaves" in data:
             raise _err(src, "eni", "the ENI lists the slaves: give eni: or slaves:, not both")
-        from ecatsim.eni import eni_segment_slaves
+        from ecatsim.ethercat.eni import eni_segment_slaves
 
         esi_dir = _path(src, base, "esi_dir", data["esi_dir"]) if "esi_dir" in data else None
         eni = _path(src, base, "eni", data["eni"])
@@ -356,7 +356,7 @@ def _chain(
     """Parse a line of slaves (``where``: its key), cabled port 1 to port 0, the first's
     port 0 to ``up``; a junction's ``port3``/``port2`` lines are parsed where a frame
     reaches them, so a slave's index is its position with every link up
-    (ecatsim/topology.py: 0 -> 3 -> 1 -> 2)."""
+    (ecatsim/ethercat/topology.py: 0 -> 3 -> 1 -> 2)."""
     if not isinstance(raw, list) or not raw:
         raise _err(src, where, "expected a non-empty list of slaves")
     prev = -1

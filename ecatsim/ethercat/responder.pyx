@@ -7,7 +7,7 @@ where Python is needed (another descriptor, a signal, the daemon's own deadline,
 it does not serve whole).
 
 What happens to a frame is written once, in the core's per-frame sequence
-(ecatsim/sequence.py, decision P21), which :meth:`Daemon.handle_frame` runs too:
+(ecatsim/ethercat/sequence.py, decision P21), which :meth:`Daemon.handle_frame` runs too:
 ``FrameSequence.arrive`` (record, the SYNC pulses due before it, the walk, the processed
 bit), then the send here, then ``FrameSequence.after`` and ``FrameSequence.service``; a
 timer that falls due is ``Segment.service_at``. Only the I/O is here: ppoll(2) (or
@@ -30,9 +30,9 @@ from posix.types cimport time_t
 from posix.uio cimport iovec
 from posix.unistd cimport close, read
 
-from ecatsim.recorder cimport FrameRecorder
-from ecatsim.segment cimport Segment
-from ecatsim.sequence cimport FrameSequence, _NOT_ECAT, _DROPPED
+from ecatsim.ethercat.recorder cimport FrameRecorder
+from ecatsim.ethercat.segment cimport Segment
+from ecatsim.ethercat.sequence cimport FrameSequence, _NOT_ECAT, _DROPPED
 
 from os import strerror
 

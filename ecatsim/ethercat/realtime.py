@@ -19,7 +19,7 @@ import structlog
 
 from ecatsim.errors import UserError
 
-log = structlog.get_logger("ecatsim.realtime")
+log = structlog.get_logger("ecatsim.ethercat.realtime")
 
 #: the SCHED_FIFO priority the blocking daemon takes unless told otherwise
 DEFAULT_PRIORITY = 20

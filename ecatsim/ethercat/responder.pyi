@@ -1,9 +1,9 @@
-"""Type stub of the daemon's compiled responder (ecatsim/responder.pyx, decision P9)."""
+"""Type stub of the daemon's compiled responder (ecatsim/ethercat/responder.pyx, decision P9)."""
 
 from collections.abc import Callable
 
-from ecatsim.recorder import FrameRecorder
-from ecatsim.sequence import FrameSequence
+from ecatsim.ethercat.recorder import FrameRecorder
+from ecatsim.ethercat.sequence import FrameSequence
 
 TIMEOUT: int
 WAKE: int

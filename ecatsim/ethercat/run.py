@@ -10,27 +10,33 @@ from pathlib import Path
 
 import structlog
 
-from ecatsim import compiled, realtime
-from ecatsim.build import build_segment
+from ecatsim import compiled
 from ecatsim.clock import MonotonicClock
-from ecatsim.config import SegmentConfig, default_segment, load_segment, repeat_default
-from ecatsim.ctl import ControlSocket, default_path, run_dir
-from ecatsim.daemon import Daemon, OutPort
+from ecatsim.ctl.server import ControlSocket, default_path, run_dir
 from ecatsim.device.drive import Drive
+from ecatsim.device.trace import TraceWriter
+from ecatsim.doors.from_config import build_doors
 from ecatsim.errors import UserError
+from ecatsim.ethercat import realtime
+from ecatsim.ethercat.assembly import build_segment
+from ecatsim.ethercat.daemon import Daemon, OutPort
+from ecatsim.ethercat.linklock import LinkLock, lock_link, lock_name
+from ecatsim.ethercat.privileges import drop_privileges
+from ecatsim.ethercat.segment import Segment
+from ecatsim.ethercat.segment_file import (
+    SegmentConfig,
+    default_segment,
+    load_segment,
+    repeat_default,
+)
 from ecatsim.faults.engine import FaultEngine
 from ecatsim.faults.spec import FaultSpecError
-from ecatsim.frontdoors import build_doors
 from ecatsim.link.base import Link
 from ecatsim.link.errors import LinkError
 from ecatsim.link.follow import CpuFollower
 from ecatsim.link.raw import RawLink, has_carrier, iface_ipv4_addresses
-from ecatsim.linklock import LinkLock, lock_link, lock_name
 from ecatsim.mfcio import trace as mfcio_trace
 from ecatsim.mfcio.block import MfcioBlock
-from ecatsim.privileges import drop_privileges
-from ecatsim.segment import Segment
-from ecatsim.trace import TraceWriter
 
 log = structlog.get_logger("ecatsim")
 
@@ -68,7 +74,7 @@ def segment_config(opts: RunOptions) -> SegmentConfig:
     if opts.eni is not None:
         if opts.config is not None or opts.slaves is not None:
             raise UserError("--eni lists the slaves: leave out --config and --slaves")
-        from ecatsim.config import parse_segment
+        from ecatsim.ethercat.segment_file import parse_segment
 
         data = {"eni": str(opts.eni.resolve())}
         if opts.esi_dir is not None:

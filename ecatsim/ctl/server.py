@@ -16,18 +16,18 @@ from typing import Any
 
 import structlog
 
-from ecatsim import topology
 from ecatsim.device.drive import Drive
-from ecatsim.doors import DoorHost
+from ecatsim.doors.host import DoorHost
 from ecatsim.errors import UserError
 from ecatsim.esc import regs
+from ecatsim.ethercat import topology
+from ecatsim.ethercat.segment import Segment
 from ecatsim.faults.engine import FaultEngine
 from ecatsim.faults.spec import parse_fault
-from ecatsim.segment import Segment
 from ecatsim.slave.eoe import find_eoe
 from ecatsim.slave.od import SdoAbort, abort_text
 
-log = structlog.get_logger("ecatsim.ctl")
+log = structlog.get_logger("ecatsim.ctl.server")
 
 #: one past the last byte address of the ESC (registers and process RAM)
 ADDRESS_END = 0x10000
@@ -258,7 +258,7 @@ class ControlSocket:
             v = od.value(index, sub)
             return {"ok": True, "value": v if not isinstance(v, bytes) else v.hex()}
         if cmd == "pd":  # process data by entry: every mapped entry, one, or set an input
-            from ecatsim.pd import request as pd_request
+            from ecatsim.slave.pd import request as pd_request
 
             return pd_request(getattr(seg.firmware[slave], "app", None), req)
         raise ValueError(f"unknown command {cmd!r}")

@@ -12,10 +12,8 @@ from typing import Any
 
 import structlog
 
-from ecatsim import topology
 from ecatsim.clock import Clock
-from ecatsim.config import SegmentConfig, SlaveConfig
-from ecatsim.description import (
+from ecatsim.device.description import (
     DescriptionError,
     DeviceDescription,
     default_description,
@@ -24,11 +22,14 @@ from ecatsim.description import (
 )
 from ecatsim.device.drive import Drive
 from ecatsim.device.echo import EchoDevice
+from ecatsim.device.esi import EsiError, read_esi
 from ecatsim.device.factory import make_coe_device
 from ecatsim.errors import UserError
 from ecatsim.esc.core import Esc, FrameContext
 from ecatsim.esc.pdi import EV_SM0, Pdi
-from ecatsim.esi import EsiError, read_esi
+from ecatsim.ethercat import topology
+from ecatsim.ethercat.segment import Segment, Serviceable
+from ecatsim.ethercat.segment_file import SegmentConfig, SlaveConfig
 from ecatsim.generic.device import GenericDevice, signals_of
 from ecatsim.generic.model import GenericModel, from_esi
 from ecatsim.generic.pinio import PinIo
@@ -37,7 +38,6 @@ from ecatsim.mfcio.block import MfcioBlock
 from ecatsim.mfcio.parts import parse_wiring
 from ecatsim.pdi_spi.external import ExternalFirmware
 from ecatsim.pdi_spi.protocol import SpiTiming
-from ecatsim.segment import Segment, Serviceable
 from ecatsim.sii.image import SiiError, build_image
 from ecatsim.sii.store import EepromStore
 from ecatsim.slave.al import AlState
@@ -54,7 +54,7 @@ from ecatsim.slave.pdo import CoeDevice, PdoImage, PdoRules
 from ecatsim.wire.eoe import IpParams
 from ecatsim.wire.mailbox import MbxType
 
-log = structlog.get_logger("ecatsim.build")
+log = structlog.get_logger("ecatsim.ethercat.assembly")
 
 #: Distinct local clock start per slave, so DC offsets are meaningful (ns).
 DC_START_STEP_NS = 1_000_003_000

@@ -4,8 +4,8 @@ Frames the master tunnels to the slave come out of the TAP device's kernel side 
 test answers pings or runs a server); every frame the kernel sends into it goes back to
 the master over EoE. Addresses are set with ioctl(2) on a socket (no helper programs), so
 an address the master sets later needs only CAP_NET_ADMIN, which the daemon keeps for it
-(docs/security.md). Served as a front door of the daemon loop (ecatsim/doors.py,
-ecatsim/frontdoors.py).
+(docs/security.md). Served as a front door of the daemon loop (ecatsim/doors/host.py,
+ecatsim/doors/from_config.py).
 
 Ref: Linux Documentation/networking/tuntap.rst (TUNSETIFF, IFF_TAP, IFF_NO_PI);
 netdevice(7) (SIOCSIFADDR, SIOCSIFNETMASK, SIOCSIFHWADDR, SIOCGIFHWADDR, SIOCSIFFLAGS);

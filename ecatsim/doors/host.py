@@ -16,7 +16,7 @@ from typing import Any, Protocol
 
 import structlog
 
-log = structlog.get_logger("ecatsim.doors")
+log = structlog.get_logger("ecatsim.doors.host")
 
 #: the longest a doors-only loop sleeps when no door has a deadline
 IDLE_TIMEOUT_NS = 200_000_000

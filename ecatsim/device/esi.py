@@ -10,7 +10,7 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from ecatsim.description import (
+from ecatsim.device.description import (
     COE_DETAILS,
     DATA_TYPES,
     DcOpMode,

@@ -2,7 +2,7 @@
 
 Blocking wake-up by default (select(2) on the link's fd with the next timer as timeout,
 decision P1); ``busy_poll`` spins on a non-blocking receive instead. On a raw link the
-compiled responder (ecatsim/responder.pyx, decision P9) runs the steady state: it waits,
+compiled responder (ecatsim/ethercat/responder.pyx, decision P9) runs the steady state: it waits,
 receives and answers each frame through the same segment calls as
 :meth:`Daemon.handle_frame`, the reference, runs the work after each reply and the
 segment's timers, and returns here only for what Python serves (the control socket, the
@@ -29,21 +29,21 @@ import structlog
 
 from ecatsim.clock import MonotonicClock
 from ecatsim.compiled import load
-from ecatsim.doors import DoorHost
+from ecatsim.doors.host import DoorHost
+from ecatsim.ethercat.recorder import FrameRecorder
+from ecatsim.ethercat.segment import Segment
+from ecatsim.ethercat.sequence import NOT_ECAT, REPLY, FrameSequence
 from ecatsim.faults.engine import FaultEngine
 from ecatsim.link.base import Link
 from ecatsim.link.follow import CpuFollower
-from ecatsim.recorder import FrameRecorder
-from ecatsim.segment import Segment
-from ecatsim.sequence import NOT_ECAT, REPLY, FrameSequence
 from ecatsim.wire.frame import ecat_offset
 
 if TYPE_CHECKING:
-    from ecatsim.responder import Responder as ResponderType
+    from ecatsim.ethercat.responder import Responder as ResponderType
 
-responder = load("ecatsim.responder")  # decision P9; None: the select(2) loop serves
+responder = load("ecatsim.ethercat.responder")  # decision P9; None: the select(2) loop serves
 
-log = structlog.get_logger("ecatsim.daemon")
+log = structlog.get_logger("ecatsim.ethercat.daemon")
 
 MAX_FRAME = 2048
 #: the longest the loop sleeps with no timer due

@@ -1,7 +1,7 @@
 """Build the front doors a segment file lists beside its slaves (``tmcl:``, ``lin:``).
 
 Each door package validates its own mapping: ``door_from_config(data, src, base)`` in the
-package's ``server`` module returns a :class:`~ecatsim.doors.FrontDoor` or raises
+package's ``server`` module returns a :class:`~ecatsim.doors.host.FrontDoor` or raises
 :class:`~ecatsim.errors.UserError` with one line naming the file, the key and the fix.
 """
 
@@ -16,13 +16,13 @@ from typing import Any, cast
 
 import structlog
 
-from ecatsim.config import SegmentConfig
-from ecatsim.doors import DoorHost, FrontDoor, serve_doors
-from ecatsim.eoe_tap import EoeTap
+from ecatsim.doors.host import DoorHost, FrontDoor, serve_doors
+from ecatsim.ethercat.eoe_tap import EoeTap
+from ecatsim.ethercat.segment import Segment
+from ecatsim.ethercat.segment_file import SegmentConfig
 from ecatsim.mfcio.block import MfcioBlock
 from ecatsim.pdi_spi.external import ExternalFirmware
 from ecatsim.pdi_spi.mfc import MfcSpi
-from ecatsim.segment import Segment
 from ecatsim.slave.eoe import find_eoe
 
 DoorFactory = Callable[[dict[str, object], str, Path | None], FrontDoor]
@@ -77,7 +77,7 @@ def serve_door(name: str, door: FrontDoor, ctl_path: Path, **ready: Any) -> None
     socket at ``ctl_path``, one ``ready`` log line with ``ready``'s fields, the loop until
     SIGINT/SIGTERM; the socket and the door are closed however it ends."""
     from ecatsim.clock import MonotonicClock
-    from ecatsim.ctl import ControlSocket
+    from ecatsim.ctl.server import ControlSocket
 
     host = DoorHost({name: door})
     try:

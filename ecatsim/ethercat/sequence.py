@@ -1,5 +1,5 @@
 """The per-frame sequence, written once (decision P21): what happens to a frame between
-its receipt and the next wait, for the compiled responder (ecatsim/responder.pyx, which
+its receipt and the next wait, for the compiled responder (ecatsim/ethercat/responder.pyx, which
 keeps only the system calls: wait, receive, send) and the daemon's Python loop
 (``Daemon.handle_frame``) alike.
 
@@ -19,8 +19,8 @@ Ref: docs/architecture.md "Frame path"; ETG.1000.4 §5.3-5.4.
 
 from __future__ import annotations
 
-from ecatsim.recorder import FrameRecorder
-from ecatsim.segment import Segment
+from ecatsim.ethercat.recorder import FrameRecorder
+from ecatsim.ethercat.segment import Segment
 from ecatsim.wire.frame import ecat_offset, mark_processed
 
 #: arrive()'s results

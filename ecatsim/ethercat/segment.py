@@ -2,7 +2,7 @@
 
 A frame enters at the daemon's interface (port 0 of the first slave) or at the out
 interface (``--out-iface``) and goes through the processing units of the ESCs on its
-route (ecatsim/topology.py), computed when the cabling, a link or a loop setting
+route (ecatsim/ethercat/topology.py), computed when the cabling, a link or a loop setting
 changes. Each slave whose processing unit the frame passes increments ADP for
 auto-increment and broadcast commands and adds its working-counter increment.
 Ref: ETG.1000.4 §5.3-5.4 (frame and datagram), Table 11 (commands), §5.4.3 (WKC);
@@ -15,11 +15,11 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Protocol
 
-from ecatsim import topology
 from ecatsim.clock import Clock
 from ecatsim.esc import regs
 from ecatsim.esc.core import Esc, FrameContext
 from ecatsim.esc.regs import DC_SYSTEM_TIME as _DC_SYSTEM_TIME  # compiled: a C constant
+from ecatsim.ethercat import topology
 from ecatsim.wire.datagram import CIRCULATING, LEN_MASK, MORE_FOLLOWS
 
 #: overdue SYNC0 pulses fired one by one before the rest are skipped (a stall this long,
@@ -106,7 +106,7 @@ class Segment:
         wiring: Sequence[Sequence[int]] | None = None,
         ports: Sequence[int] = (),
     ) -> None:
-        """``wiring``: per ESC its ports' cables (ecatsim/topology.py; None: a line);
+        """``wiring``: per ESC its ports' cables (ecatsim/ethercat/topology.py; None: a line);
         ``ports``: per ESC the ports it has (bit p; default ports 0 and 1)."""
         self.escs = list(escs)
         self.ctx = ctx
@@ -167,7 +167,7 @@ class Segment:
         #: host time of the earliest SYNC0/SYNC1 pulse (NO_DEADLINE: none)
         self._next_sync = 0
         n = len(self.escs)
-        #: per ESC the cables of its ports 0-3 (ecatsim/topology.py)
+        #: per ESC the cables of its ports 0-3 (ecatsim/ethercat/topology.py)
         self.wiring = [list(w) for w in wiring] if wiring is not None else topology.linear(n)
         topology.check(self.wiring)
         #: the out interface has carrier (a link at the port cabled to it)
