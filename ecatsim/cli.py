@@ -13,7 +13,7 @@ from pathlib import Path
 import click
 
 from ecatsim import __version__
-from ecatsim.bench_cli import bench
+from ecatsim.bench.cli import bench
 from ecatsim.errors import UserError
 from ecatsim.lin.cli import lin
 from ecatsim.logsetup import configure_logging, log_format_option

@@ -17,7 +17,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from tests.integration.netns import Daemon, NetnsPair  # noqa: E402
+from ecatsim.bench.netns import Daemon, NetnsPair  # noqa: E402
 from tests.support.kickcat import busy_cpus, kickcat_trial  # noqa: E402
 
 

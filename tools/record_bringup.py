@@ -5,38 +5,25 @@ unmutated afterwards: the recording ends with the slaves in OP).
     sudo .venv/bin/python tools/record_bringup.py -o tests/data/pysoem_bringup.pcap
 
 Runs the daemon and the master in a private namespace pair (removed afterwards) and
-captures the master's outgoing EtherCAT frames with a raw socket in its namespace.
+keeps the master's EtherCAT frames (the requests) from the bench's capture on its end.
 """
 
 from __future__ import annotations
 
 import argparse
-import socket
 import sys
 import tempfile
-import threading
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from ecatsim.bench.capture import Capture  # noqa: E402
+from ecatsim.bench.netns import Daemon, NetnsPair, in_netns  # noqa: E402
 from ecatsim.link.pcap import PcapWriter  # noqa: E402
-from tests.integration.netns import Daemon, NetnsPair, in_netns  # noqa: E402
 
-ETH_P_ALL = 0x0003
-ETH_P_ECAT = 0x88A4
-PACKET_OUTGOING = 4
-
-
-def capture(sock: socket.socket, out: list[bytes], stop: threading.Event) -> None:
-    sock.settimeout(0.05)
-    while not stop.is_set():
-        try:
-            data, addr = sock.recvfrom(2048)
-        except TimeoutError:
-            continue
-        if addr[2] == PACKET_OUTGOING and data[12:14] == ETH_P_ECAT.to_bytes(2, "big"):
-            out.append(data)
+#: whole frames (the pcap replays them)
+SNAP = 2048
 
 
 def bring_up(iface: str, slaves: int, cycles: int) -> None:
@@ -77,25 +64,17 @@ def main() -> None:
     ap.add_argument("--slaves", type=int, default=2)
     ap.add_argument("--cycles", type=int, default=50)
     args = ap.parse_args()
-    frames: list[bytes] = []
     with NetnsPair() as pair, tempfile.TemporaryDirectory() as tmp:
         daemon = Daemon(pair, ("--slaves", str(args.slaves)), Path(tmp) / "daemon.log")
         daemon.start()
         try:
-            with in_netns(pair.master_ns):
-                sock = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(ETH_P_ALL))
-                sock.bind((pair.master_if, 0))
-                stop = threading.Event()
-                t = threading.Thread(target=capture, args=(sock, frames, stop))
-                t.start()
-                try:
-                    bring_up(pair.master_if, args.slaves, args.cycles)
-                finally:
-                    stop.set()
-                    t.join()
-                    sock.close()
+            cap = Capture.master_end(pair.master_ns, pair.master_if, SNAP)
+            with cap, in_netns(pair.master_ns):
+                bring_up(pair.master_if, args.slaves, args.cycles)
         finally:
             daemon.stop()
+    # the master's requests: the EtherCAT frames it sent
+    frames = [data for _t, reply, data in cap.raw if data[12:14] == b"\x88\xa4" and not reply]
     with PcapWriter(args.output) as w:
         for f in frames:
             w.write(f)

@@ -28,7 +28,8 @@ from ecatsim.errors import UserError
 from ecatsim.esc.core import Esc, FrameContext
 from ecatsim.esc.pdi import EV_SM0, Pdi
 from ecatsim.ethercat import topology
-from ecatsim.ethercat.segment import Segment, Serviceable
+from ecatsim.ethercat.schedule import Serviceable
+from ecatsim.ethercat.segment import Segment
 from ecatsim.ethercat.segment_file import SegmentConfig, SlaveConfig
 from ecatsim.generic.device import GenericDevice, signals_of
 from ecatsim.generic.model import GenericModel, from_esi
@@ -371,5 +372,6 @@ def build_segment(cfg: SegmentConfig, clock: Clock, out: bool = False) -> Segmen
         wiring=segment_wiring(cfg, out),
         ports=cfg.ports,
     )
-    seg.awake = frozenset(i for i, fw in enumerate(firmware) if isinstance(fw, MfcioBlock | PinIo))
+    awake = (i for i, fw in enumerate(firmware) if isinstance(fw, MfcioBlock | PinIo))
+    seg.schedule.awake = frozenset(awake)
     return seg

@@ -328,7 +328,8 @@ class Daemon:
         link_fd = self._fd
         if link_fd >= 0 and not self.busy_poll:
             # the work after a reply stops for a frame that came meanwhile (decision P19)
-            self.segment.frame_waiting = lambda: bool(select.select((link_fd,), (), (), 0)[0])
+            waiting = lambda: bool(select.select((link_fd,), (), (), 0)[0])  # noqa: E731
+            self.segment.schedule.frame_waiting = waiting
         out_fd = self.out.link.fileno() if self.out is not None else -1
         watch = [f for f in (self._fd, out_fd, *self._watch, follow_fd) if f >= 0]
         clock = self.segment.clock
@@ -362,7 +363,7 @@ class Daemon:
         clock = self.segment.clock
         srv = self._make_responder()
         # the work after a reply stops for a frame that came meanwhile (decision P19)
-        self.segment.frame_waiting = srv.frame_waiting
+        self.segment.schedule.frame_waiting = srv.frame_waiting
         while not self._stop:
             fast = self._fast_ok()
             now = clock.now_ns()
@@ -459,7 +460,7 @@ class Daemon:
         ds = [
             d
             for d in (
-                self.segment.next_deadline() if segment else None,
+                self.segment.schedule.next_deadline() if segment else None,
                 self.faults.next_deadline(),
             )
             if d is not None
@@ -481,7 +482,7 @@ class Daemon:
         ctx = seg.ctx
         if self.out is not None:
             self.out.poll_carrier(seg, seg.clock.now_ns())
-        d = seg.next_deadline()
+        d = seg.schedule.next_deadline()
         if ctx.pending or ctx.flush or (d is not None and d <= seg.clock.now_ns()):
             self._service()
         doors = self.doors

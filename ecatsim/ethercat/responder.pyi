@@ -12,7 +12,7 @@ REPLIED: int
 DROPPED: int
 
 class SegmentError(Exception):
-    """Segment.pulses_due or Segment.process raised on a frame (its ``__cause__``);
+    """Schedule.pulses_due or Segment.process raised on a frame (its ``__cause__``);
     ``args[0]``: the frame's length."""
 
 class ServiceError(Exception):

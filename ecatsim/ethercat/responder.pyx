@@ -31,6 +31,7 @@ from posix.uio cimport iovec
 from posix.unistd cimport close, read
 
 from ecatsim.ethercat.recorder cimport FrameRecorder
+from ecatsim.ethercat.prefetch cimport hot_lines
 from ecatsim.ethercat.segment cimport Segment
 from ecatsim.ethercat.sequence cimport FrameSequence, _NOT_ECAT, _DROPPED
 
@@ -156,13 +157,13 @@ cdef enum:
     #: what serve() was running when an exception came, so that it names it (a try block
     #: per call would cost every frame its set-up)
     IN_NOTHING = 0
-    IN_FRAME = 1  # Segment.pulses_due, Segment.process: SegmentError
+    IN_FRAME = 1  # Schedule.pulses_due, Segment.process: SegmentError
     IN_AFTER = 2  # Segment.after_reply: ServiceError("process", ...)
     IN_SERVICE = 3  # Segment.service_at: ServiceError("service", ...)
 
 
 class SegmentError(Exception):
-    """``Segment.pulses_due`` or ``Segment.process`` raised on a frame (the cause): the
+    """``Schedule.pulses_due`` or ``Segment.process`` raised on a frame (the cause): the
     frame's failure, told apart from a failure of the socket (an OSError of serve()).
     ``args[0]``: the frame's length (the recorder holds it as received)."""
 
@@ -303,7 +304,7 @@ cdef class Responder:
     cdef int stage, stage_code
     cdef long stage_n
     cdef long long stage_t
-    #: the cache lines a cyclic frame reads (Segment.hot_lines), prefetched as the wait
+    #: the cache lines a cyclic frame reads (prefetch.hot_lines), prefetched as the wait
     #: ends, before the receive (decision P18); the objects are held here
     cdef const char *hot[MAX_HOT]
     cdef int nhot
@@ -356,9 +357,9 @@ cdef class Responder:
             self.follow_due = False
 
     cdef int look_hot(self, Segment seg) except -1:
-        """Take the lines to prefetch from ``seg.hot_lines()``: each object's whole struct
-        and each (bytearray, start, stop) range."""
-        cdef tuple hot = seg.hot_lines()
+        """Take the lines to prefetch from ``hot_lines(seg)`` (ecatsim/ethercat/prefetch.py):
+        each object's whole struct and each (bytearray, start, stop) range."""
+        cdef tuple hot = hot_lines(seg)
         cdef Py_ssize_t a, b
         self.nhot = 0
         for it in hot[0]:
@@ -388,7 +389,7 @@ cdef class Responder:
 
     def frame_waiting(self) -> bool:
         """A frame waits on the link (poll(2) without waiting): the segment's work after a
-        reply stops for it (``Segment.frame_waiting``, decision P19)."""
+        reply stops for it (``Schedule.frame_waiting``, decision P19)."""
         cdef pollfd p
         p.fd = self.fd
         p.events = POLLIN
@@ -520,7 +521,7 @@ cdef class Responder:
         time stamp).
 
         ``timers`` (the segment runs on the OS monotonic clock): go on serving frames, and
-        run the segment's timers (``Segment.next_deadline``, ``Segment.service``) as they
+        run the segment's timers (``Schedule.next_deadline``, ``Segment.service``) as they
         fall due, until ``deadline_ns`` or a wake-up; without, return after one frame.
 
         Returns (code, n, t_rx): TIMEOUT or WAKE with n = 0, else the last frame's length
@@ -573,7 +574,7 @@ cdef class Responder:
                 self.look_hot(seg)
             wait_until = deadline_ns
             if timers:
-                wait_until = min(wait_until, seg.next_deadline_ns())  # NO_DEADLINE: none
+                wait_until = min(wait_until, seg.schedule.next_deadline_ns())  # NO_DEADLINE: none
             n = self.wait_frame(wait_until, &stamp)
             if n == -WAKE:
                 return (WAKE, 0, 0)

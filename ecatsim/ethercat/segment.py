@@ -11,40 +11,33 @@ TMC8460 §5.35 (processing unit error counter).
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable, Sequence
-from typing import Protocol
 
 from ecatsim.clock import Clock
 from ecatsim.esc import regs
 from ecatsim.esc.core import Esc, FrameContext
 from ecatsim.esc.regs import DC_SYSTEM_TIME as _DC_SYSTEM_TIME  # compiled: a C constant
 from ecatsim.ethercat import topology
-from ecatsim.wire.datagram import CIRCULATING, LEN_MASK, MORE_FOLLOWS
-
-#: overdue SYNC0 pulses fired one by one before the rest are skipped (a stall this long,
-#: or a forward jump of the system time, is not caught up). Decision DC2.
-MAX_SYNC0_CATCHUP = 64
-#: frames arriving this long before the earliest SYNC deadline skip the per-slave check;
-#: larger than any clock correction that does not mark the timers dirty (dc.MOVE_NS)
-PULSE_HINT_MARGIN_NS = 200_000
-#: "no deadline" in the comparisons of deadlines
-NO_DEADLINE = 1 << 62
-#: the work after a reply looks whether a frame is waiting (``Segment.frame_waiting``)
-#: once per this many ns of firmware work, and leaves the rest for after that frame
-#: (decision P19)
-PROBE_NS = 50_000
-
-# Command codes as plain ints for the hot path. Ref: ETG.1000.4 Table 11.
-NOP, APRD, APWR, APRW, FPRD, FPWR, FPRW, BRD, BWR, BRW, LRD, LWR, LRW, ARMW, FRMW = range(15)
-
-
-class Serviceable(Protocol):
-    """What the segment runs after a frame: the firmware behind an ESC's PDI."""
-
-    def service(self, now_ns: int) -> None: ...
-
-    def reset(self) -> None: ...
+from ecatsim.ethercat.schedule import Schedule, Serviceable
+from ecatsim.wire.datagram import (  # compiled: C constants (segment.pxd)
+    APRD,
+    APRW,
+    APWR,
+    ARMW,
+    BRD,
+    BRW,
+    BWR,
+    CIRCULATING,
+    FPRD,
+    FPRW,
+    FPWR,
+    FRMW,
+    LEN_MASK,
+    LRD,
+    LRW,
+    LWR,
+    MORE_FOLLOWS,
+)
 
 
 class Segment:
@@ -64,11 +57,7 @@ class Segment:
         "_frmw_adp",
         "_frmw_reader",
         "_frmw_readers",
-        "_next_sync",
-        "_pulse_hint",
-        "_sync_escs",
         "addr_map",
-        "awake",
         "bad_frames",
         "chain",
         "clock",
@@ -77,23 +66,17 @@ class Segment:
         "escs",
         "exit",
         "firmware",
-        "frame_waiting",
         "frames",
         "irq",
         "logical",
         "out_up",
-        "persist",
         "port0_closed",
-        "probe_ns",
         "processed",
         "reach",
         "reply_first",
-        "resume_pos",
         "routes",
-        "sync0_late_ns",
-        "sync0_ticks",
+        "schedule",
         "wiring",
-        "yielded",
     )
 
     def __init__(
@@ -111,22 +94,11 @@ class Segment:
         self.escs = list(escs)
         self.ctx = ctx
         self.clock = clock
+        #: the firmware behind each ESC's PDI, by position
         self.firmware = list(firmware)
-        #: True when a frame waits to be received (the daemon's link): the firmware's work
-        #: after a reply stops for it and goes on after that frame's reply (decision P19);
-        #: None: the work runs to its end
-        self.frame_waiting: Callable[[], bool] | None = None
-        #: times the work after a reply stopped for a waiting frame
-        self.yielded = 0
-        #: the position the next round of firmware work starts at (0: the first)
-        self.resume_pos = 0
-        #: how often (ns of work) the work after a reply looks for a waiting frame
-        self.probe_ns = PROBE_NS
-        #: positions whose service runs after every frame, interrupt or not: the TMC8460
-        #: MFCIO blocks, which watch the memory blocks and the frames continuously
-        self.awake: frozenset[int] = frozenset()
-        self.persist = persist
-        self._sync_escs: list[Esc] = []
+        #: the work after the replies: SYNC pulses, timers and that firmware (the same
+        #: list), ecatsim/ethercat/schedule.py
+        self.schedule = Schedule(self.escs, ctx, self.firmware, persist)
         self.reach = len(self.escs)
         self.addr_map: dict[int, tuple[int, ...]] = {}
         #: the last FRMW's address and the ESCs it names (the reference clock's, the same
@@ -160,12 +132,6 @@ class Segment:
         self.port0_closed = False
         self.frames = 0
         self.bad_frames = 0
-        self.sync0_ticks = 0
-        self.sync0_late_ns = 0
-        #: host time before which no SYNC pulse can be due (recomputed by sync_until)
-        self._pulse_hint = 0
-        #: host time of the earliest SYNC0/SYNC1 pulse (NO_DEADLINE: none)
-        self._next_sync = 0
         n = len(self.escs)
         #: per ESC the cables of its ports 0-3 (ecatsim/ethercat/topology.py)
         self.wiring = [list(w) for w in wiring] if wiring is not None else topology.linear(n)
@@ -458,30 +424,18 @@ class Segment:
                 k = (-adp) & 0xFFFF
                 if k < reach:
                     inc += _physical(escs[k], cmd - APRD, ado, data)
-                adp = (adp + reach) & 0xFFFF
-                buf[p + 2] = adp & 0xFF
-                buf[p + 3] = adp >> 8
             elif cmd == BRD:
                 for i in range(reach):
                     inc += escs[i].ecat_read_or(ado, data)
-                adp = (adp + reach) & 0xFFFF
-                buf[p + 2] = adp & 0xFF
-                buf[p + 3] = adp >> 8
             elif cmd == BWR:
                 src = bytes(data)  # once per datagram: every slave writes the same bytes
                 for i in range(reach):
                     inc += escs[i].ecat_write(ado, src)
-                adp = (adp + reach) & 0xFFFF
-                buf[p + 2] = adp & 0xFF
-                buf[p + 3] = adp >> 8
             elif cmd == BRW:
                 for i in range(reach):
                     incoming = bytes(data)
                     inc += escs[i].ecat_read_or(ado, data)
                     inc += 2 * escs[i].ecat_write(ado, incoming)
-                adp = (adp + reach) & 0xFFFF
-                buf[p + 2] = adp & 0xFF
-                buf[p + 3] = adp >> 8
             elif cmd == ARMW:
                 k = (-adp) & 0xFFFF
                 for i in range(reach):
@@ -489,9 +443,6 @@ class Segment:
                         inc += escs[i].ecat_read(ado, data)
                     else:
                         inc += escs[i].ecat_write(ado, data)
-                adp = (adp + reach) & 0xFFFF
-                buf[p + 2] = adp & 0xFF
-                buf[p + 3] = adp >> 8
             elif cmd == FRMW:
                 if adp != self._frmw_adp:
                     self._frmw_readers = self.addr_map.get(adp, ())
@@ -512,6 +463,12 @@ class Segment:
                             inc += escs[i].ecat_read(ado, data)
                         else:
                             inc += escs[i].ecat_write(ado, data)
+            if APRD <= cmd <= APRW or BRD <= cmd <= BRW or cmd == ARMW:
+                # position addressing: each slave on the route counts ADP up by one
+                # (ETG.1000.4 §5.4.1, Table 11)
+                adp = (adp + reach) & 0xFFFF
+                buf[p + 2] = adp & 0xFF
+                buf[p + 3] = adp >> 8
             # NOP and unknown commands: no slave acts on them.
             if cmd:
                 irq = self.irq
@@ -526,149 +483,19 @@ class Segment:
                 return
             p = w + 2
 
-    def hot_lines(self) -> tuple[list[object], list[tuple[bytearray, int, int]]]:
-        """What a cyclic frame reads, for the compiled responder to prefetch as its wait
-        ends (decision P18): the objects (their structs), and the (memory, start, stop)
-        ranges of each ESC's memory: the event, AL event, SM and DC registers and the
-        buffers of the SMs its FMMUs map."""
-        objs: list[object] = [self, self.ctx, self.escs, self.logical]
-        ranges: list[tuple[bytearray, int, int]] = []
-        for esc in self.escs:
-            mem = esc.mem
-            objs += [esc, esc.dc, esc.wd, esc.fmmus, mem]
-            ranges += [(mem, 0x0100, 0x0140), (mem, 0x0200, 0x0240)]
-            ranges += [(mem, 0x0800, 0x0880), (mem, 0x0900, 0x0940)]
-            for f in esc.fmmus:
-                objs.append(f)
-                sm = f.sm
-                if sm is not None:
-                    objs.append(sm)
-                    ranges.append((mem, sm.start, sm.start + 3 * sm.length))
-        return objs, ranges
-
     # ----------------------------------------------------------------- after the reply
 
     def service(self, now_ns: int | None = None) -> None:
-        """Run timers and the firmware of every slave with a raised PDI interrupt, fire the
-        SYNC0 pulses due by ``now_ns`` (None: now), then persist EEPROM images that
-        changed. Never called between receive and reply."""
+        """The work after the replies due by ``now_ns`` (None: now): the DC time loops a
+        frame left (P7), then the schedule's pulses, timers and firmware. Never called
+        between receive and reply."""
         self.service_at(self.clock.now_ns() if now_ns is None else now_ns)
 
     def service_at(self, t: int) -> None:
         """:meth:`service` at host time ``t`` (the compiled responder's call: a C integer)."""
         if self._dc_pending:
             self.after_reply()
-        self.pulses_due(t)  # first: each pulse is handled at its own, earlier, time
-        for esc in self.escs:
-            d = esc.wd.deadline_ns
-            if d and t >= d:  # due (the running watchdogs of a cyclic bus are not)
-                esc.check_timers(t)
-        ctx = self.ctx
-        if (ctx.pending or self.awake) and self.firmware:
-            probe = self.frame_waiting
-            look = time.monotonic_ns() + self.probe_ns if probe is not None else NO_DEADLINE
-            order = sorted(ctx.pending | self.awake)
-            first = self.resume_pos
-            if first:  # where the last round stopped: every slave gets its turn (P19)
-                order = [p for p in order if p >= first] + [p for p in order if p < first]
-            for pos in order:
-                ctx.pdi_ns = t
-                self.firmware[pos].service(t)
-                if look != NO_DEADLINE and time.monotonic_ns() >= look:
-                    if probe is not None and probe():
-                        # the silicon answers while its firmware works: the frame first,
-                        # the slaves not served yet keep their raised interrupt (P19)
-                        self.yielded += 1
-                        self.resume_pos = pos + 1
-                        return
-                    look = time.monotonic_ns() + self.probe_ns
-            self.resume_pos = 0
-        if ctx.flush and self.persist is not None:
-            for pos in sorted(ctx.flush):
-                self.persist(pos)
-            ctx.flush.clear()
-
-    def pulses_due(self, t: int) -> None:
-        """sync_until(t), unless no pulse can be due by ``t`` (the per-frame fast path)."""
-        if t >= self._pulse_hint or self.ctx.timers_dirty:
-            self.sync_until(t)
-
-    def sync_until(self, t: int) -> None:
-        """Fire every SYNC0 pulse due by ``t`` in time order, each handled by the firmware
-        at the pulse's own time: outputs received before the pulse are applied and inputs
-        captured as of that instant, however late the host gets to it. Called before a
-        frame that arrived at ``t`` is processed, and from the timers.
-        Ref: TMC8460 §5.50.4 (SYNC0 generation); ETG.1000.6 §5.3 (DC synchronous mode).
-        """
-        ctx = self.ctx
-        nxt = NO_DEADLINE
-        for esc in self.sync_escs:
-            dc = esc.dc
-            fw = self.firmware[esc.position] if self.firmware else None
-            for k in range(MAX_SYNC0_CATCHUP + 1):
-                # NO_DEADLINE: no pulse scheduled (later than any host time t)
-                d1 = dc.sync1_deadline_or(NO_DEADLINE)
-                d = dc.sync0_deadline_or(NO_DEADLINE)
-                if d1 <= t and d1 < d:
-                    esc.sync1_tick()  # registers only: the firmware acts on SYNC0
-                    continue
-                if d > t:
-                    break
-                if k == MAX_SYNC0_CATCHUP:
-                    d = t  # too far behind: fire once now, the missed pulses are skipped
-                esc.sync0_tick(d)
-                self.sync0_ticks += 1
-                if t - d > self.sync0_late_ns:
-                    self.sync0_late_ns = t - d
-                if fw is not None and esc.position in ctx.pending:
-                    ctx.pdi_ns = d
-                    fw.service(d)
-            else:
-                d = dc.sync0_deadline_or(NO_DEADLINE)
-                d1 = dc.sync1_deadline_or(NO_DEADLINE)
-            nxt = min(nxt, d, d1)
-        self._set_next_sync(nxt)
-
-    def _set_next_sync(self, nxt: int) -> None:
-        self._next_sync = nxt
-        self._pulse_hint = nxt - PULSE_HINT_MARGIN_NS
-
-    def _refresh_next_sync(self) -> None:
-        """Recompute the earliest SYNC deadline (after a DC register change)."""
-        nxt = NO_DEADLINE
-        for esc in self.sync_escs:
-            for d in (esc.dc.sync0_deadline(), esc.dc.sync1_deadline()):
-                if d is not None and d < nxt:
-                    nxt = d
-        self._set_next_sync(nxt)
-
-    @property
-    def sync_escs(self) -> list[Esc]:
-        """ESCs whose SYNC unit runs (recomputed when an activation changes)."""
-        if self.ctx.timers_dirty:
-            self.ctx.timers_dirty = False
-            self._sync_escs = [e for e in self.escs if e.dc.next_sync0 is not None]
-        return self._sync_escs
-
-    def next_deadline(self) -> int | None:
-        """The earliest timer deadline (ns), for the daemon's poll timeout, None if there
-        is none. SYNC deadlines are those computed when the pulses last ran or a DC
-        register last changed; the time loop moves them by less than the ESC's MOVE_NS
-        until it marks them stale."""
-        best = self.next_deadline_ns()
-        return None if best == NO_DEADLINE else best
-
-    def next_deadline_ns(self) -> int:
-        """:meth:`next_deadline` as an integer, ``NO_DEADLINE`` if there is none (the
-        compiled responder's call after each frame: a C integer)."""
-        if self.ctx.timers_dirty:
-            self._refresh_next_sync()
-        best = self._next_sync
-        for e in self.escs:
-            d = e.wd.deadline_ns
-            if d and d < best:
-                best = d
-        return best
+        self.schedule.service_at(t)
 
 
 def _physical(esc: Esc, op: int, ado: int, data: memoryview) -> int:

@@ -63,7 +63,7 @@ class FrameSequence:
             return _NOT_ECAT
         self.recorder.record(view, n)  # as received, before the walk patches it
         seg = self.segment
-        seg.pulses_due(t_rx)  # pulses due before this frame arrived come first
+        seg.schedule.pulses_due(t_rx)  # pulses due before this frame arrived come first
         if not seg.process(buf, off, n, t_rx, entry):
             return _DROPPED
         if self.ethernet and seg.processed:

@@ -45,6 +45,12 @@ class Cmd(IntEnum):
     FRMW = 14
 
 
+# The same codes as plain ints, for the compiled frame walk (C constants there).
+NOP, APRD, APWR, APRW, FPRD, FPWR, FPRW, BRD, BWR, BRW, LRD, LWR, LRW, ARMW, FRMW = (
+    int(c) for c in Cmd
+)
+
+
 def build(
     cmd: int,
     adp: int,

@@ -182,7 +182,7 @@ def test_eeprom_read_identity_words() -> None:
 def test_eeprom_write_needs_enable_and_persists() -> None:
     seg, _ = segment_of(1)
     saved: list[int] = []
-    seg.persist = saved.append
+    seg.schedule.persist = saved.append
     m = TinyMaster(seg)
     m.apwr(0, 0x0508, b"\x34\x12")
     st = eeprom_cmd(m, 0x0200, 0x0040)

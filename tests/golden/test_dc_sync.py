@@ -56,12 +56,12 @@ def test_pulses_follow_the_dc_grid() -> None:
     b = DcBench()
     esc = b.seg.escs[0]
     b.at(b.t0 - 1)
-    assert b.seg.sync0_ticks == 0
+    assert b.seg.schedule.sync0_ticks == 0
     b.at(b.t0)
-    assert b.seg.sync0_ticks == 1 and esc.mem[0x098E] & 0x01
+    assert b.seg.schedule.sync0_ticks == 1 and esc.mem[0x098E] & 0x01
     assert esc.dc.sync0_deadline() == b.t0 + MS
     b.at(b.t0 + 3 * MS + 10)  # three more due: each fired, none skipped
-    assert b.seg.sync0_ticks == 4
+    assert b.seg.schedule.sync0_ticks == 4
     assert esc.dc.sync0_deadline() == b.t0 + 4 * MS
 
 
@@ -88,7 +88,7 @@ def test_a_late_daemon_keeps_the_order_of_frames_and_pulses() -> None:
     b.at(b.t0 + 2 * MS)
     b.clock.t = b.t0 + 2 * MS + 500_000
     assert b.lrw(333, b.clock.t) == 222
-    assert b.seg.sync0_ticks == 3
+    assert b.seg.schedule.sync0_ticks == 3
 
 
 def sys_time(b: DcBench) -> int:
@@ -168,12 +168,12 @@ def test_reset_stops_the_sync_unit() -> None:
     """A power cycle or 'RES' reset returns 0x0981 to 0: no more pulses until activated."""
     b = DcBench()
     b.at(b.t0)
-    assert b.seg.sync0_ticks == 1
+    assert b.seg.schedule.sync0_ticks == 1
     b.seg.escs[0].hardware_reset()
     b.at(b.t0 + 5 * MS)
-    assert b.seg.sync0_ticks == 1
+    assert b.seg.schedule.sync0_ticks == 1
     assert b.seg.escs[0].dc.sync0_deadline() is None
-    assert b.seg.next_deadline() is None
+    assert b.seg.schedule.next_deadline() is None
 
 
 def test_pulse_hint_follows_an_offset_change() -> None:
@@ -182,13 +182,13 @@ def test_pulse_hint_follows_an_offset_change() -> None:
     b = DcBench()
     t = TinyMaster(b.seg)
     b.at(b.t0)
-    assert b.seg.sync0_ticks == 1
+    assert b.seg.schedule.sync0_ticks == 1
     off = struct.unpack("<Q", t.aprd(0, 0x0920, 8).data)[0]
     t.apwr(0, 0x0920, struct.pack("<Q", off + 600_000))  # system time 0.6 ms ahead
     d = b.seg.escs[0].dc.sync0_deadline()
     assert d is not None and d == b.t0 + MS - 600_000
     b.lrw(1, d + 1000)  # a frame just after the moved pulse: the pulse comes first
-    assert b.seg.sync0_ticks == 2
+    assert b.seg.schedule.sync0_ticks == 2
 
 
 def test_acknowledge_mode_clears_the_sync_state_on_pdi_read() -> None:

@@ -344,7 +344,7 @@ def test_sm_event_times() -> None:
     t.apwr(0, 0x0818, struct.pack("<HHBBBB", 0x1200, 4, 0x20, 0, 0xC1, 0))
     pdi.sm_deactivate(2, False)  # the firmware locked them in INIT ...
     pdi.sm_deactivate(3, False)
-    seg.firmware = []  # ... and stays out of the way: the PDI accesses are the test's
+    seg.schedule.firmware = []  # ... and stays out of the way: the PDI accesses are the test's
     t.apwr(0, 0x1100, b"\x01\x02\x03\x04")
     pdi.access_time(clock.t)
     assert pdi.sm_read(2) == b"\x01\x02\x03\x04"
@@ -467,7 +467,7 @@ def bare(device: str = "echo") -> tuple[Segment, ManualClock, TinyMaster, Pdi]:
     it locked SM0-SM3 at its start (INIT); they are unlocked."""
     seg, clock = segment_of(1, device=device)
     pdi = Pdi(seg.escs[0])
-    seg.firmware = []
+    seg.schedule.firmware = []
     for n in range(4):
         pdi.sm_deactivate(n, False)
     return seg, clock, TinyMaster(seg), pdi

@@ -1,50 +1,48 @@
-"""Private network namespaces joined by a veth pair, for real-master tests.
+"""The real-master tests' network namespaces: the benchmark's harness
+(:mod:`ecatsim.bench.netns`: :class:`NetnsPair`, :func:`in_netns`, :class:`Daemon`) with
+what only the tests need.
 
-- :class:`NetnsPair` makes two namespaces (master, slave) with unique names and a veth
-  pair between them, IPv6 off (no router-solicitation noise on the wire), everything up.
-  Both namespaces are removed on exit, even after a failure, and at interpreter exit as a
-  safety net.
-- :func:`in_netns` switches the *calling thread* into a namespace (``setns(2)``), so a
-  pysoem master can open its raw socket there: the socket stays in that namespace.
-- :class:`Daemon` runs ``python -m ecatsim run --iface <slave end>`` inside the slave
-  namespace and waits for its ``ready`` log event.
+- :class:`Daemon` fails the test (with the daemon's log) when the daemon does not start;
+- :func:`require_root` skips without root locally and fails in CI;
+- :class:`ExtraNetns`, :func:`add_veth` and :class:`Port` for topologies of several daemons;
+- :func:`proc_status` reads a daemon's ``/proc/PID/status``.
 
 Ref: ip-netns(8), setns(2), veth(4).
 """
 
 from __future__ import annotations
 
-import atexit
-import contextlib
-import ctypes
-import itertools
-import json
 import os
-import re
-import signal
-import subprocess
-import sys
-import threading
-import time
-from collections.abc import Iterator, Sequence
-from pathlib import Path
 from types import TracebackType
 
 import pytest
 
-CLONE_NEWNET = 0x40000000
-NETNS_DIR = Path("/run/netns")
-READY_TIMEOUT = 10.0
-STOP_TIMEOUT = 5.0
+from ecatsim.bench import netns as harness
+from ecatsim.bench.netns import (
+    NAMES,
+    NetnsPair,
+    in_netns,
+    ip,
+    is_root,
+    netns_exists,
+    sysctl_in,
+    unique_tag,
+)
+from ecatsim.bench.netns import is_ready_line as _is_ready_line
 
-_counter = itertools.count()
-_lock = threading.Lock()
-#: namespaces this process created and has not removed yet (for the atexit safety net)
-_live: set[str] = set()
-
-
-def is_root() -> bool:
-    return os.geteuid() == 0
+__all__ = [
+    "Daemon",
+    "ExtraNetns",
+    "NetnsPair",
+    "Port",
+    "_is_ready_line",
+    "add_veth",
+    "in_netns",
+    "is_root",
+    "netns_exists",
+    "proc_status",
+    "require_root",
+]
 
 
 def require_root(what: str = "this test") -> None:
@@ -57,271 +55,11 @@ def require_root(what: str = "this test") -> None:
     pytest.skip(f"{reason}: run 'sudo .venv/bin/python -m pytest'")
 
 
-def _run(*args: str) -> None:
-    r = subprocess.run(args, capture_output=True, text=True, timeout=10, check=False)
-    if r.returncode != 0:
-        raise RuntimeError(f"{' '.join(args)} failed ({r.returncode}): {r.stderr.strip()}")
+class Daemon(harness.Daemon):
+    """The harness's daemon; a start that fails fails the test with the daemon's log."""
 
-
-def _del_ns(ns: str) -> None:
-    subprocess.run(["ip", "netns", "del", ns], capture_output=True, check=False, timeout=10)
-    with _lock:
-        _live.discard(ns)
-
-
-def _cleanup_all() -> None:
-    with _lock:
-        left = list(_live)
-    for ns in left:
-        _del_ns(ns)
-
-
-atexit.register(_cleanup_all)
-
-
-def netns_exists(ns: str) -> bool:
-    return (NETNS_DIR / ns).exists()
-
-
-class NetnsPair:
-    """Two namespaces (``master_ns``, ``slave_ns``) with a veth pair between them.
-
-    ``master_if`` lives in ``master_ns`` and ``slave_if`` in ``slave_ns``. Namespace names
-    are ``ecs-<pid>-<n>-m`` / ``-s``; interface names are ``vm<6 hex>`` / ``vs<6 hex>``
-    (IFNAMSIZ allows 15 characters; a TAP ``tap<6 hex>`` also fits). The interfaces are
-    created directly inside the fresh namespaces, so their names cannot clash with anything.
-    """
-
-    def __init__(self) -> None:
-        if not is_root():
-            raise PermissionError(
-                "NetnsPair needs root (ip netns add, veth): run the tests with sudo"
-            )
-        self.master_ns = ""
-        self.slave_ns = ""
-        self.master_if = ""
-        self.slave_if = ""
-
-    def _names(self) -> None:
-        pid = os.getpid()
-        n = next(_counter)
-        tag = f"{(pid * 4099 + n * 40503) & 0xFFFFFF:06x}"
-        self.master_ns = f"ecs-{pid}-{n}-m"
-        self.slave_ns = f"ecs-{pid}-{n}-s"
-        self.master_if = f"vm{tag}"
-        self.slave_if = f"vs{tag}"
-
-    def __enter__(self) -> NetnsPair:
-        try:
-            self._create()
-        except BaseException:
-            self._remove()
-            raise
-        return self
-
-    def _create(self) -> None:
-        for _attempt in range(100):
-            self._names()
-            # a stale namespace of a killed earlier run with the same pid: take the next n
-            if not netns_exists(self.master_ns) and not netns_exists(self.slave_ns):
-                break
-        else:
-            raise RuntimeError("no free namespace name: remove stale ones ('ip netns list')")
-        for ns in (self.master_ns, self.slave_ns):
-            with _lock:
-                _live.add(ns)
-            _run("ip", "netns", "add", ns)
-            # IPv6 off before the veth exists: it inherits 'default'
-            _sysctl_in(ns, "net.ipv6.conf.default.disable_ipv6", "1")
-            _sysctl_in(ns, "net.ipv6.conf.all.disable_ipv6", "1")
-        _run(
-            "ip", "link", "add", self.master_if, "netns", self.master_ns, "type", "veth",
-            "peer", "name", self.slave_if, "netns", self.slave_ns,
-        )  # fmt: skip
-        for ns, dev in ((self.master_ns, self.master_if), (self.slave_ns, self.slave_if)):
-            _sysctl_in(ns, f"net.ipv6.conf.{dev}.disable_ipv6", "1")
-            _run("ip", "-n", ns, "link", "set", "lo", "up")
-            _run("ip", "-n", ns, "link", "set", dev, "up")
-
-    def _remove(self) -> None:
-        for ns in (self.master_ns, self.slave_ns):
-            if ns:
-                _del_ns(ns)
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self._remove()
-
-    def exists(self) -> bool:
-        """True if either namespace still exists."""
-        return netns_exists(self.master_ns) or netns_exists(self.slave_ns)
-
-    def __repr__(self) -> str:
-        return f"NetnsPair({self.master_ns}:{self.master_if} <-> {self.slave_ns}:{self.slave_if})"
-
-
-def _sysctl_in(ns: str, key: str, value: str) -> None:
-    """Write a net sysctl inside ``ns`` (ignored if absent, e.g. IPv6 compiled out).
-
-    /proc/sys/net is resolved against the network namespace of the thread that opens it.
-    """
-    path = "/proc/sys/" + key.replace(".", "/")
-    with in_netns(ns), contextlib.suppress(OSError), open(path, "w") as f:
-        f.write(value)
-
-
-_libc = ctypes.CDLL(None, use_errno=True)
-
-
-def _setns(fd: int) -> None:
-    if _libc.setns(fd, CLONE_NEWNET) != 0:
-        err = ctypes.get_errno()
-        raise OSError(err, f"setns(CLONE_NEWNET): {os.strerror(err)}")
-
-
-@contextlib.contextmanager
-def in_netns(ns: str) -> Iterator[None]:
-    """Run the block with the calling thread in network namespace ``ns``.
-
-    Sockets created inside stay in that namespace after the block ends. Only this thread
-    moves; threads that already exist are unaffected, while threads and subprocesses
-    *started inside the block* inherit the namespace (clone(2)).
-    """
-    try:
-        target = os.open(NETNS_DIR / ns, os.O_RDONLY | os.O_CLOEXEC)
-    except FileNotFoundError:
-        raise RuntimeError(f"network namespace {ns!r} does not exist") from None
-    try:
-        own = os.open("/proc/thread-self/ns/net", os.O_RDONLY | os.O_CLOEXEC)
-        try:
-            _setns(target)
-            try:
-                yield
-            finally:
-                _setns(own)
-        finally:
-            os.close(own)
-    finally:
-        os.close(target)
-
-
-def _is_ready_line(line: str) -> bool:
-    """A log line announcing that the daemon serves frames (JSON or console format)."""
-    line = line.strip()
-    if line.startswith("{"):
-        try:
-            event = json.loads(line).get("event")
-        except (ValueError, AttributeError):
-            event = None
-        if event is not None:
-            return str(event) == "ready"
-    return re.search(r"\bready\b", line) is not None
-
-
-class Daemon:
-    """``python -m ecatsim run --iface <slave_if> [args]`` inside the slave namespace.
-
-    Output (stdout and stderr) goes to ``log``. ``start`` waits for the ``ready`` event and
-    fails the test with the log if the process dies or is not ready in time. ``--log-format
-    json`` is added unless ``args`` choose a format.
-    """
-
-    def __init__(self, pair: NetnsPair | Port, args: Sequence[str], log: Path) -> None:
-        self.pair = pair
-        self.args = tuple(args)
-        self.log = log
-        self.proc: subprocess.Popen[bytes] | None = None
-        self.starts = 0
-
-    @property
-    def command(self) -> list[str]:
-        fmt = [] if "--log-format" in self.args else ["--log-format", "json"]
-        return [
-            "ip", "netns", "exec", self.pair.slave_ns,
-            sys.executable, "-m", "ecatsim", "run", "--iface", self.pair.slave_if,
-            *fmt, *self.args,
-        ]  # fmt: skip
-
-    def _this_run(self) -> list[str]:
-        """Log lines of the current start (after its marker line)."""
-        text = self.log.read_text(errors="replace")
-        marker = f"--- start {self.starts}:"
-        return text[text.rfind(marker) :].splitlines()[1:]
-
-    def start(self, timeout: float = READY_TIMEOUT) -> None:
-        if self.alive():
-            raise RuntimeError("daemon already running: stop() it first")
-        self.starts += 1
-        cmd = self.command
-        with open(self.log, "ab") as f:
-            f.write(f"--- start {self.starts}: {' '.join(cmd)}\n".encode())
-            f.flush()
-            self.proc = subprocess.Popen(
-                cmd, stdin=subprocess.DEVNULL, stdout=f, stderr=subprocess.STDOUT
-            )
-        deadline = time.monotonic() + timeout
-        while True:
-            if any(_is_ready_line(line) for line in self._this_run()):
-                return
-            if self.proc.poll() is not None:
-                rc = self.proc.returncode
-                self.proc = None
-                pytest.fail(
-                    f"daemon exited with {rc} before it was ready:\n{self.log.read_text()}",
-                    pytrace=False,
-                )
-            if time.monotonic() > deadline:
-                self.stop()
-                pytest.fail(
-                    f"daemon not ready after {timeout} s:\n{self.log.read_text()}", pytrace=False
-                )
-            time.sleep(0.02)
-
-    def alive(self) -> bool:
-        return self.proc is not None and self.proc.poll() is None
-
-    @property
-    def pid(self) -> int | None:
-        return None if self.proc is None else self.proc.pid
-
-    def stop(self, timeout: float = STOP_TIMEOUT) -> int | None:
-        """SIGTERM, wait up to ``timeout`` s, then SIGKILL. The exit status, or None if it
-        was not started. A status < 0 is the signal that ended it (-9: it had to be killed).
-        """
-        if self.proc is None:
-            return None
-        proc = self.proc
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGTERM)
-            try:
-                proc.wait(timeout)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait(timeout)
-        self.proc = None
-        if proc.returncode != 0 or "--user" in self.args:
-            self._remove_left_socket()  # a clean exit as root removes its own
-        return proc.returncode
-
-    def _remove_left_socket(self) -> None:
-        """A daemon killed with SIGKILL, or one that dropped root (--user) and so may not
-        write /run/ecatsim, leaves its control socket behind; the next daemon on the link
-        would replace it, but a test run leaves nothing behind."""
-        from ecatsim.ctl.server import default_path, run_dir
-
-        for lock in run_dir().glob(f"iface-{self.pair.slave_if}@*.lock"):
-            lock.unlink(missing_ok=True)  # the link's lock file (decision O1)
-        if "--ctl" in self.args:
-            return  # the test chose the path (under its tmp_path)
-        default_path(self.pair.slave_if).unlink(missing_ok=True)
-
-    def restart(self, timeout: float = READY_TIMEOUT) -> None:
-        self.stop()
-        self.start(timeout)
+    def fail(self, message: str) -> None:
+        pytest.fail(message, pytrace=False)
 
 
 class ExtraNetns:
@@ -333,18 +71,14 @@ class ExtraNetns:
     def __init__(self) -> None:
         if not is_root():
             raise PermissionError("ExtraNetns needs root (ip netns add, veth)")
-        self.ns = f"ecs-{os.getpid()}-{next(_counter)}-x"
+        self.ns = f"ecs-{os.getpid()}-{NAMES.next()}-x"
 
     def __enter__(self) -> ExtraNetns:
-        with _lock:
-            _live.add(self.ns)
         try:
-            _run("ip", "netns", "add", self.ns)
-            _sysctl_in(self.ns, "net.ipv6.conf.default.disable_ipv6", "1")
-            _sysctl_in(self.ns, "net.ipv6.conf.all.disable_ipv6", "1")
-            _run("ip", "-n", self.ns, "link", "set", "lo", "up")
+            NAMES.add(self.ns)
+            ip("-n", self.ns, "link", "set", "lo", "up")
         except BaseException:
-            _del_ns(self.ns)
+            NAMES.remove(self.ns)
             raise
         return self
 
@@ -354,7 +88,7 @@ class ExtraNetns:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
-        _del_ns(self.ns)
+        NAMES.remove(self.ns)
 
     def veth(self, other_ns: str) -> tuple[str, str]:
         """A veth pair, one end here and one in ``other_ns``, both up: (here, there)."""
@@ -364,14 +98,12 @@ class ExtraNetns:
 def add_veth(ns_a: str, ns_b: str) -> tuple[str, str]:
     """A veth pair between two namespaces this process made, both ends up (removed with
     the namespaces): the names of its ends in ``ns_a`` and ``ns_b``."""
-    tag = f"{(os.getpid() * 4099 + next(_counter) * 40503) & 0xFFFFFF:06x}"
+    tag = unique_tag()
     a, b = f"vx{tag}", f"vy{tag}"
-    _run(
-        "ip", "link", "add", a, "netns", ns_a, "type", "veth", "peer", "name", b, "netns", ns_b,
-    )  # fmt: skip
+    ip("link", "add", a, "netns", ns_a, "type", "veth", "peer", "name", b, "netns", ns_b)
     for ns, dev in ((ns_a, a), (ns_b, b)):
-        _sysctl_in(ns, f"net.ipv6.conf.{dev}.disable_ipv6", "1")
-        _run("ip", "-n", ns, "link", "set", dev, "up")
+        sysctl_in(ns, f"net.ipv6.conf.{dev}.disable_ipv6", "1")
+        ip("-n", ns, "link", "set", dev, "up")
     return a, b
 
 

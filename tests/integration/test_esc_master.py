@@ -19,7 +19,7 @@ from tests.integration.netns import in_netns
 
 pytestmark = pytest.mark.integration
 #: Receive timeout for functional tests: a reply must come and carry the exact WKC, but
-#: latency is the benchmark's subject (tools/bench, docs/performance.md), not these tests'.
+#: latency is the benchmark's subject (ecatsim bench, docs/performance.md), not these tests'.
 RX_TIMEOUT_US = 50_000
 
 VENDOR = 0x286

@@ -6,24 +6,20 @@ nap can end after its deadline, and it does not look once more. The daemon there
 on the CPU the master's frames come from (decision K5), so the reply is queued before
 KickCAT's first poll. The daemon's own part is checked on every run as well: every request
 a kernel timestamp sees arrive at the daemon's interface gets its reply at the master's
-interface (tools/reply_time.py), on an idle machine every one well inside the 2 ms. The
+interface (ecatsim/bench/capture.py), on an idle machine every one well inside the 2 ms. The
 figure over 20 runs is in bench/results (tools/kickcat_load.py).
 Ref: ETG.1000.6 §6.4 (AL state machine) as a second, independent master implements it."""
 
 from __future__ import annotations
 
 import os
-import sys
-from pathlib import Path
 from typing import Any
 
 import pytest
 
+from ecatsim.bench.capture import Capture
 from tests.integration.netns import NetnsPair
 from tests.support.kickcat import busy_cpus, kickcat_trial
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tools"))
-from reply_time import ReplyTimer
 
 pytestmark = pytest.mark.integration
 
@@ -34,7 +30,7 @@ LOADED_P99_US = 1000
 
 
 def timed_trial(pair: NetnsPair) -> tuple[dict[str, Any], dict[str, Any]]:
-    with ReplyTimer((pair.master_ns, pair.master_if), (pair.slave_ns, pair.slave_if)) as rt:
+    with Capture.both_ends((pair.master_ns, pair.master_if), (pair.slave_ns, pair.slave_if)) as rt:
         result = kickcat_trial(pair)
     return result, rt.stats()
 

@@ -1,17 +1,30 @@
-"""``ecatsim bench`` is a click command with help for every option; reply times pair up."""
+"""``ecatsim bench`` is a click command with help for every option, shipped whole in the
+package (no import of tools/ or tests/, its C floor as package data, pysoem optional);
+the daemon's reply times pair up."""
 
 from __future__ import annotations
 
+import ast
+import subprocess
 import sys
+import tomllib
+from importlib import resources
 from pathlib import Path
 
 from click.testing import CliRunner
 
-from ecatsim.bench_cli import bench
+import ecatsim
+from ecatsim.bench.capture import Capture, Frame, percentile, reply_stats
+from ecatsim.bench.cli import NO_PYSOEM, bench
+from ecatsim.bench.floor import SOURCE, echo_source
+from ecatsim.bench.master import wkc_seen_text
+from ecatsim.bench.roundtrip import repeated
 from ecatsim.cli import cli
+from ecatsim.wire import datagram as dg
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tools"))
-from reply_time import ReplyTimer, percentile
+PACKAGE = Path(ecatsim.__file__).parent
+ROOT = PACKAGE.parent
+BENCH_MODULES = sorted(f"ecatsim.bench.{p.stem}" for p in (PACKAGE / "bench").glob("*.py"))
 
 
 def test_every_option_has_help() -> None:
@@ -21,22 +34,44 @@ def test_every_option_has_help() -> None:
     assert r.exit_code == 0
     assert r.output.startswith("Usage: cli bench [OPTIONS]")
     assert "p99.99" in r.output
+    for option in ("--bringup", "--cycles", "--overlap", "--repeat", "--results"):
+        assert option in r.output
+
+
+def frame(t_ns: int, idx: int, reply: bool) -> Frame:
+    return Frame(t_ns, reply, idx, 12, 0, 0, 2, b"")
 
 
 def test_reply_times_pair_requests_and_replies_by_index() -> None:
-    rt = ReplyTimer((None, "lo"), (None, "lo"))
-    # (stamp ns, is_reply, idx): two requests in flight, one reply lost, one stray reply
-    rt.events = [
-        (1_000, False, 7),
-        (1_500, False, 8),
-        (21_000, True, 7),
-        (41_500, True, 8),
-        (50_000, False, 9),
-        (60_000, True, 3),
+    # two requests in flight, one reply lost, one stray reply
+    frames = [
+        frame(1_000, 7, False),
+        frame(1_500, 8, False),
+        frame(21_000, 7, True),
+        frame(41_500, 8, True),
+        frame(50_000, 9, False),
+        frame(60_000, 3, True),
     ]
-    assert rt.reply_us() == ([20.0, 40.0], 2)
-    st = rt.stats()
+    st = reply_stats(frames)
     assert (st["frames"], st["unpaired"], st["median"], st["max"]) == (2, 2, 20.0, 40.0)
+
+
+def test_a_capture_parses_what_its_taps_read() -> None:
+    """The taps keep (kernel time, direction, bytes); the frames are parsed afterwards,
+    EtherCAT only, a reply told by the end it was seen on, not by the source MAC (KickCAT
+    sets bit 1 in its own requests)."""
+    request = bytearray(
+        dg.ethernet_frame([dg.build(dg.Cmd.FPRD, 0x1001, 0x0130, bytes(2), idx=0x21)])
+    )
+    request[6] |= 0x02
+    cap = Capture.both_ends((None, "lo"), (None, "lo"))
+    cap.raw = [(10_000, False, bytes(request)),
+               (12_000, True, b"\x00" * 12 + b"\x08\x00" + bytes(40)),
+               (35_000, True, bytes(request))]  # fmt: skip
+    assert [(f.t_ns, f.reply, f.idx) for f in cap.frames()] == [(10_000, False, 0x21),
+                                                                (35_000, True, 0x21)]  # fmt: skip
+    st = cap.stats()
+    assert (st["frames"], st["unpaired"], st["median"], st["max"]) == (1, 0, 25.0, 25.0)
 
 
 def test_percentile_is_nearest_rank() -> None:
@@ -49,8 +84,6 @@ def test_percentile_is_nearest_rank() -> None:
 
 
 def test_repeated_runs_report_the_median_ratio_per_size() -> None:
-    from bench import repeated
-
     def run(n: int, ratio: float, rtt: float) -> dict[str, object]:
         return {"mode": "blocking", "placement": "same-cpu", "slaves": n,
                 "ratio_median": ratio, "rtt_us": {"median": rtt},
@@ -65,8 +98,82 @@ def test_repeated_runs_report_the_median_ratio_per_size() -> None:
 
 
 def test_wkc_mismatches_are_named_with_their_wkc_and_time() -> None:
-    from bench import wkc_seen_text
-
     run = {"expected_wkc": 192, "wkc_error_seen": [(96, 6387), (0, 2100)]}
     assert wkc_seen_text(run) == " wkc seen 96/192 after 6387 us wkc seen 0/192 after 2100 us"
     assert wkc_seen_text({"expected_wkc": 3, "wkc_error_seen": []}) == ""
+
+
+def _imports(path: Path) -> set[str]:
+    out: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            out.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            out.add(node.module)
+    return out
+
+
+def test_no_module_of_the_package_imports_tools_or_tests() -> None:
+    """A wheel holds ecatsim/ only: nothing in it may reach into tools/ or tests/ (by
+    import or by a path added to sys.path)."""
+    offenders = []
+    for f in sorted(PACKAGE.rglob("*.py")):
+        text = f.read_text()
+        for mod in _imports(f):
+            if mod.split(".")[0] in ("tests", "tools"):
+                offenders.append(f"{f.relative_to(ROOT)} imports {mod}")
+        if "sys.path" in text or '"tools"' in text:
+            offenders.append(f"{f.relative_to(ROOT)} changes sys.path or names tools/")
+    assert offenders == []
+
+
+def test_the_bench_imports_with_tools_and_tests_out_of_reach(tmp_path: Path) -> None:
+    """In a fresh interpreter run from elsewhere, with ``tests`` unimportable and neither
+    the source tree's root nor tools/ on sys.path, every bench module imports and
+    ``ecatsim bench --help`` runs."""
+    code = (
+        "import sys\n"
+        "sys.modules['tests'] = None\n"
+        f"root = {str(ROOT)!r}\n"
+        "sys.path[:] = [p for p in sys.path if p not in ('', '.', root, root + '/tools')]\n"
+        "import importlib\n"
+        f"for m in {BENCH_MODULES!r}:\n"
+        "    importlib.import_module(m)\n"
+        "assert not any(m == 'tests' or m.startswith(('tests.', 'tools')) for m in sys.modules"
+        " if sys.modules[m] is not None)\n"
+        "from ecatsim.cli import main\n"
+        "sys.argv = ['ecatsim', 'bench', '--help']\n"
+        "main()\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True,
+                       text=True, timeout=60)  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert "--bringup" in r.stdout
+
+
+def test_the_c_floor_is_package_data() -> None:
+    """The floor's C source is read from the installed package, and pyproject.toml lists
+    it as package data, so a wheel carries it."""
+    src = resources.files("ecatsim.bench").joinpath(SOURCE)
+    assert src.is_file()
+    assert echo_source() == src.read_text()
+    assert "socket(AF_PACKET, SOCK_RAW, htons(0x88A4))" in echo_source()
+    conf = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    assert "ecatsim.bench" in conf["tool"]["setuptools"]["packages"]
+    assert conf["tool"]["setuptools"]["package-data"]["ecatsim.bench"] == [SOURCE]
+    assert conf["project"]["optional-dependencies"]["bench"] == ["pysoem>=1.1.13"]
+
+
+def test_without_pysoem_the_bench_says_so_in_one_line() -> None:
+    code = (
+        "import sys\n"
+        "sys.modules['pysoem'] = None\n"
+        "from ecatsim.cli import main\n"
+        "sys.argv = ['ecatsim', 'bench', '--slaves', '1', '--seconds', '1']\n"
+        "main()\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       timeout=60)  # fmt: skip
+    assert (r.returncode, r.stdout) == (2, "")
+    assert r.stderr == f"ecatsim: error: {NO_PYSOEM}\n"
+    assert NO_PYSOEM == "ecatsim bench needs pysoem: pip install 'ecatsim[bench]'"

@@ -1,17 +1,13 @@
-"""The capture of ``ecatsim bench --bringup`` (tools/capture.py): frames parsed from the
+"""The capture of ``ecatsim bench --bringup`` (ecatsim/bench/capture.py): frames parsed from the
 wire, requests paired with replies by index and direction, resends and unanswered frames
 counted, the figures per phase, on synthetic time stamps."""
 
 from __future__ import annotations
 
 import struct
-import sys
-from pathlib import Path
 
+from ecatsim.bench.capture import Frame, analyse, parse
 from ecatsim.wire import datagram as dg
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tools"))
-from capture import Frame, analyse, parse
 
 MS = 1_000_000
 

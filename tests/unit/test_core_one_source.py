@@ -36,7 +36,7 @@ for i in range(400):
     for esc in c.seg.escs:
         h.update(esc.peek(0x0900, 0xA0))  # receive times, system time, loop, SYNC unit
         h.update(esc.peek(0x0220, 4))  # AL event request
-print(core.__file__.endswith(".py"), c.seg.sync0_ticks, c.daemon.failures, h.hexdigest())
+print(core.__file__.endswith(".py"), c.seg.schedule.sync0_ticks, c.daemon.failures, h.hexdigest())
 """
 
 

@@ -34,7 +34,7 @@ def test_sleeps_until_the_sync0_deadline_exactly(
     monkeypatch: pytest.MonkeyPatch, before_ns: int
 ) -> None:
     c = CspCycle(1)
-    deadline = c.seg.next_deadline()
+    deadline = c.seg.schedule.next_deadline()
     assert deadline is not None
     c.clock.t = deadline - before_ns
     assert sleeps(monkeypatch, c)[0] == pytest.approx(before_ns * 1e-9, abs=1e-12)
@@ -42,7 +42,7 @@ def test_sleeps_until_the_sync0_deadline_exactly(
 
 def test_a_due_pulse_means_no_sleep(monkeypatch: pytest.MonkeyPatch) -> None:
     c = CspCycle(1)
-    deadline = c.seg.next_deadline()
+    deadline = c.seg.schedule.next_deadline()
     assert deadline is not None
     c.clock.t = deadline + MS // 10
     assert sleeps(monkeypatch, c)[0] == 0.0

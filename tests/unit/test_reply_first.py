@@ -35,18 +35,18 @@ def test_the_work_after_a_reply_stops_for_a_waiting_frame_and_goes_on_after_it()
     seg = m.seg
     assert al_status(m, 4) == [8, 8, 8, 8]
     waiting = [True]
-    seg.frame_waiting = lambda: waiting[0]
-    seg.probe_ns = 0  # look after every slave
+    seg.schedule.frame_waiting = lambda: waiting[0]
+    seg.schedule.probe_ns = 0  # look after every slave
     assert bwr_only(m, 0x0120, b"\x02\x00") == 4  # PREOP
     seg.service()  # the first slave acts, then the waiting frame comes first
-    assert seg.yielded == 1
+    assert seg.schedule.yielded == 1
     assert al_status(m, 4) == [2, 8, 8, 8]
     # the frame that waited: a polling master sees the slaves that have acted
     assert brd_only(m, AL_STATUS, 2) == (b"\x0a\x00", 4)  # 2 | 8: ORed over the slaves
     assert [bool(seg.escs[i].mem[AL_EVENT] & 0x01) for i in range(4)] == [False, True, True, True]
     waiting[0] = False
     seg.service()  # after that frame's reply: the rest
-    assert seg.yielded == 1
+    assert seg.schedule.yielded == 1
     assert al_status(m, 4) == [2, 2, 2, 2]
     assert [seg.escs[i].mem[AL_EVENT] & 0x01 for i in range(4)] == [0, 0, 0, 0]
     assert m.brd(AL_STATUS, 2).data == b"\x02\x00"
@@ -54,11 +54,11 @@ def test_the_work_after_a_reply_stops_for_a_waiting_frame_and_goes_on_after_it()
 
 def test_without_a_waiting_frame_the_work_runs_to_its_end() -> None:
     m, _, _ = op_segment(3)
-    m.seg.frame_waiting = lambda: False
-    m.seg.probe_ns = 0
+    m.seg.schedule.frame_waiting = lambda: False
+    m.seg.schedule.probe_ns = 0
     m.bwr(0x0120, b"\x01\x00")
     assert al_status(m, 3) == [1, 1, 1]
-    assert m.seg.yielded == 0
+    assert m.seg.schedule.yielded == 0
 
 
 def test_clearing_the_fmmus_by_broadcast_clears_the_maps() -> None:

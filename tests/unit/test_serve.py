@@ -21,6 +21,7 @@ from ecatsim.clock import MonotonicClock
 from ecatsim.ethercat import daemon as daemon_mod
 from ecatsim.ethercat.assembly import build_segment
 from ecatsim.ethercat.daemon import Daemon
+from ecatsim.ethercat.prefetch import hot_lines
 from ecatsim.ethercat.recorder import FrameRecorder
 from ecatsim.ethercat.segment import Segment
 from ecatsim.ethercat.segment_file import SegmentConfig, SlaveConfig
@@ -187,7 +188,7 @@ def state(c: CspCycle) -> tuple[object, ...]:
         seg.ctx.frame_no,
         seg.ctx.t_ns,
         seg._dc_pending,
-        seg.sync0_ticks,
+        seg.schedule.sync0_ticks,
         bytes(seg.escs[0].mem),
     )
 
@@ -318,7 +319,7 @@ def test_the_responder_runs_the_segments_timers(
     d = c.daemon
     python_timers: list[int] = []
     monkeypatch.setattr(d, "_service_timers", lambda: python_timers.append(1))
-    ticks, replies = c.seg.sync0_ticks, d.replies
+    ticks, replies = c.seg.schedule.sync0_ticks, d.replies
     frame = c.frame(0x00)
     sender = threading.Timer(0.02, c.link.master_send, (frame,))
     t0 = time.monotonic_ns()
@@ -330,7 +331,7 @@ def test_the_responder_runs_the_segments_timers(
     assert code == TIMEOUT
     assert time.monotonic_ns() - t0 >= 50 * MS
     # about 48 pulses of 1 ms from 2 ms on; a wide guard, not a timing test
-    assert c.seg.sync0_ticks - ticks >= 20
+    assert c.seg.schedule.sync0_ticks - ticks >= 20
     assert (d.replies - replies, d.compiled_replies - replies) == (1, 1)
     reply = c.link.master_recv()
     assert reply is not None and reply[6] & 0x02  # processed
@@ -463,12 +464,12 @@ def test_the_cpu_following_runs_only_when_its_descriptor_or_time_says_so(
 
 
 def test_hot_lines_name_what_a_cyclic_frame_reads() -> None:
-    """Segment.hot_lines (the responder's prefetch at each wake-up, decision P18): each
+    """hot_lines (the responder's prefetch at each wake-up, decision P18): each
     ESC with its DC unit, watchdog and FMMU maps, the SMs they map with their three buffers,
     and the event, AL event, SM and DC register lines, every range inside the memory."""
     c = CspCycle(2)
     c.step()
-    objs, ranges = c.seg.hot_lines()
+    objs, ranges = hot_lines(c.seg)
     for esc in c.seg.escs:
         assert all(any(o is x for o in objs) for x in (esc, esc.dc, esc.wd, esc.mem))
         mapped = [f.sm for f in esc.fmmus if f.sm is not None]

@@ -1,45 +1,23 @@
-"""``ecatsim bench``: the options of the benchmark (tools/bench.py runs it; root).
+"""``ecatsim bench``: the command and its options (root; pysoem, the bench extra).
 
-The benchmark ships with the source tree, not the wheel: it builds a C echo (the floor),
-runs a pysoem master in one network namespace against the daemon in another, and writes a
-table and bench/results/bench-<time>.json. See docs/performance.md "How to measure".
+It builds a C echo (the floor), runs a pysoem master in one network namespace against the
+daemon in another, and writes a table and <results>/bench-<time>.json; with ``--bringup``
+it times every frame of a bring-up instead. See docs/performance.md "How to measure".
 """
 
 from __future__ import annotations
 
-import importlib.util
-from dataclasses import dataclass
+import os
 from pathlib import Path
 
 import click
 
+from ecatsim.bench.options import BenchOptions
+from ecatsim.bench.results import DEFAULT_DIR
 from ecatsim.errors import UserError
 
-TOOL = Path(__file__).resolve().parents[1] / "tools" / "bench.py"
-
-
-@dataclass(frozen=True, slots=True)
-class BenchOptions:
-    """What one benchmark run measures."""
-
-    slaves: tuple[int, ...]
-    seconds: float
-    period_us: int
-    modes: tuple[str, ...]
-    placements: tuple[str, ...]
-    cpu: int | None
-    rt_priority: int | None
-    no_rt: bool
-    no_follow_master_cpu: bool
-    master_spin: bool
-    max_rate: bool
-    hold: float
-    rates: tuple[int, ...]
-    hold_floor: bool
-    repeat: int
-    bringup: tuple[int, ...] = ()
-    cycles: int = 2000
-    overlap: bool = False
+#: the one line ``ecatsim bench`` gives where pysoem is not installed
+NO_PYSOEM = "ecatsim bench needs pysoem: pip install 'ecatsim[bench]'"
 
 
 @click.command("bench")
@@ -148,6 +126,13 @@ class BenchOptions:
     help="--bringup: the master maps the process data overlapped (config_overlap_map), so "
     "its IO map holds more drives.",
 )
+@click.option(
+    "--results",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=DEFAULT_DIR,
+    show_default=True,
+    help="Directory the run's JSON is written to (relative to the current directory).",
+)
 def bench(**kw: object) -> None:
     """Measure the daemon against a real master and a C echo floor. Root.
 
@@ -159,11 +144,16 @@ def bench(**kw: object) -> None:
     over 1 ms and 2 ms, resends, unanswered, the slowest frames) and the cycles' WKC.
     """
     opts = BenchOptions(**kw)  # type: ignore[arg-type]
-    if not TOOL.exists():
-        raise UserError(f"bench: {TOOL} not found: the benchmark ships with the source tree")
-    spec = importlib.util.spec_from_file_location("ecatsim_bench_tool", TOOL)
-    if spec is None or spec.loader is None:  # pragma: no cover - a file that exists loads
-        raise UserError(f"bench: cannot load {TOOL}")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    raise SystemExit(module.run(opts))
+    try:
+        import pysoem  # noqa: F401
+    except ImportError:
+        raise UserError(NO_PYSOEM) from None
+    if os.geteuid() != 0:
+        raise UserError("ecatsim bench needs root (network namespaces, raw sockets): use sudo")
+    if opts.bringup:
+        from ecatsim.bench import bringup
+
+        raise SystemExit(bringup.run(opts))
+    from ecatsim.bench import roundtrip
+
+    raise SystemExit(roundtrip.run(opts))

@@ -2,21 +2,20 @@
 timed at the master's end of the link.
 
 A pysoem master in its own network namespace brings N TMC8670 drives to OP with DC (SYNC0
-every cycle), as tools/bench.py does: config_init, config_dc with SYNC0 on every slave,
-csp by SDO, config_map (or config_overlap_map, ``--overlap``: SOEM's IO map then holds
-inputs and outputs of a slave in the same bytes), SAFEOP, OP; then K cycles at the period
-with every drive enabled and moving. A packet socket on the master's interface
-(tools/capture.py) stamps every request and reply; each is paired and timed, per phase
-and overall: p50, p99.9, max, how many over 1 ms and over 2 ms (SOEM's, pysoem's and
-KickCAT's default timeout), resends, unanswered frames and the slowest frames by command
-and address. The cycles add lost frames and cycles whose WKC fell short of the expected
-one. Results: a summary on stdout and bench/results/bringup-<N>-<time>.json.
-Ref: docs/performance.md (targets 9-11).
+every cycle), as the round-trip bench does: config_init, config_dc with SYNC0 on every
+slave, csp by SDO, config_map (or config_overlap_map, ``--overlap``: SOEM's IO map then
+holds inputs and outputs of a slave in the same bytes), SAFEOP, OP; then K cycles at the
+period with every drive enabled and moving. A packet socket on the master's interface
+(:meth:`ecatsim.bench.capture.Capture.master_end`) stamps every request and reply; each
+is paired and timed, per phase and overall: p50, p99.9, max, how many over 1 ms and over
+2 ms (SOEM's, pysoem's and KickCAT's default timeout), resends, unanswered frames and the
+slowest frames by command and address. The cycles add lost frames and cycles whose WKC
+fell short of the expected one. Results: a summary on stdout and bringup-<N>-<time>.json
+in the results directory. Ref: docs/performance.md "How to measure".
 """
 
 from __future__ import annotations
 
-import json
 import os
 import platform
 import tempfile
@@ -24,13 +23,14 @@ import time
 from pathlib import Path
 from typing import Any
 
-from capture import MasterCapture, analyse
+from ecatsim.bench import results
+from ecatsim.bench.capture import Capture, analyse
+from ecatsim.bench.master import CSP, cycles
+from ecatsim.bench.netns import Daemon, NetnsPair, in_netns
+from ecatsim.bench.options import BenchOptions
 
-from bench import CSP, ROOT, cycles
-from tests.integration.netns import Daemon, NetnsPair, in_netns
 
-
-def bring_up(m: Any, cap: MasterCapture, pair: NetnsPair, n: int, period_us: int,
+def bring_up(m: Any, cap: Capture, pair: NetnsPair, n: int, period_us: int,
              overlap: bool) -> None:  # fmt: skip
     """The bring-up, each phase marked in the capture."""
     import pysoem
@@ -71,7 +71,7 @@ def bring_up(m: Any, cap: MasterCapture, pair: NetnsPair, n: int, period_us: int
 
 
 def run_bringup(n: int, cycles_k: int, period_us: int, overlap: bool,
-                extra: tuple[str, ...]) -> dict[str, Any]:  # fmt: skip
+                extra: tuple[str, ...], spin: bool = False) -> dict[str, Any]:  # fmt: skip
     """One bring-up of ``n`` drives and ``cycles_k`` cycles on a fresh daemon."""
     import pysoem
 
@@ -81,19 +81,19 @@ def run_bringup(n: int, cycles_k: int, period_us: int, overlap: bool,
         d.start(timeout=120)
         m = pysoem.Master()
         try:
-            with MasterCapture(pair.master_ns, pair.master_if) as cap:
+            with Capture.master_end(pair.master_ns, pair.master_if) as cap:
                 t0 = time.perf_counter()
                 bring_up(m, cap, pair, n, period_us, overlap)
                 bring_up_s = time.perf_counter() - t0
                 cap.mark("cycles")
                 assert d.pid is not None
-                cyc = cycles(m, cycles_k * period_us / 1e6, period_us, d.pid)
+                cyc = cycles(m, cycles_k * period_us / 1e6, period_us, d.pid, spin=spin)
                 cap.mark("end")
                 time.sleep(0.05)
         finally:
             m.close()
             d.stop()
-    frames = analyse(cap.frames, cap.marks)
+    frames = analyse(cap.frames(), cap.marks)
     frames.get("phases", {}).pop("end", None)
     return {"slaves": n, "overlap": overlap, "period_us": period_us,
             "bring_up_s": round(bring_up_s, 2), "frames": frames,
@@ -104,6 +104,7 @@ def run_bringup(n: int, cycles_k: int, period_us: int, overlap: bool,
 
 
 def summary(r: dict[str, Any]) -> str:
+    """One bring-up's figures: the totals, each phase, the five slowest frames."""
     f, c = r["frames"], r["cycles"]
     lines = [f"N={r['slaves']} ({'overlap map' if r['overlap'] else 'map'}) bring-up "
              f"{r['bring_up_s']} s, {c['cycles']} cycles: {f['frames']} frames, reply p50 "
@@ -122,24 +123,18 @@ def summary(r: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def main(sizes: tuple[int, ...], cycles_k: int, period_us: int, overlap: bool,
-         extra: tuple[str, ...], repeat: int = 1) -> int:  # fmt: skip
-    """Each size ``repeat`` times; prints and writes bench/results/bringup-*.json."""
-    if os.geteuid() != 0:
-        print("bench: needs root (namespaces, raw sockets)")
-        return 2
+def run(args: BenchOptions) -> int:
+    """Each size of ``--bringup`` ``--repeat`` times; prints and writes bringup-*.json."""
+    extra = args.scheduling_flags()
+    if args.cpu is not None:
+        extra = (*extra, "--cpu", str(args.cpu))
     out: dict[str, Any] = {"when": time.strftime("%Y-%m-%d %H:%M:%S %Z"),
                            "machine": platform.node(), "cpus": os.cpu_count(),
                            "load_1min": os.getloadavg()[0],
                            "python": platform.python_version(), "runs": []}  # fmt: skip
-    for n in [n for n in sizes for _ in range(repeat)]:
-        r = run_bringup(n, cycles_k, period_us, overlap, extra)
+    for n in [n for n in args.bringup for _ in range(args.repeat)]:
+        r = run_bringup(n, args.cycles, args.period_us, args.overlap, extra, args.master_spin)
         out["runs"].append(r)
         print(summary(r), flush=True)
-    res = ROOT / "bench" / "results"
-    res.mkdir(parents=True, exist_ok=True)
-    tag = "-".join(str(n) for n in sizes)
-    path = res / f"bringup-{tag}-{time.strftime('%Y%m%d-%H%M%S')}.json"
-    path.write_text(json.dumps(out, indent=2) + "\n")
-    print(f"written {path.relative_to(ROOT)}")
+    results.write(args.results, f"bringup-{'-'.join(str(n) for n in args.bringup)}", out)
     return 0

@@ -1,0 +1,45 @@
+"""What one ``ecatsim bench`` run measures (the command's options, :mod:`ecatsim.bench.cli`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from ecatsim.bench.results import DEFAULT_DIR
+
+
+@dataclass(frozen=True, slots=True)
+class BenchOptions:
+    """What one benchmark run measures."""
+
+    slaves: tuple[int, ...]
+    seconds: float
+    period_us: int
+    modes: tuple[str, ...]
+    placements: tuple[str, ...]
+    cpu: int | None
+    rt_priority: int | None
+    no_rt: bool
+    no_follow_master_cpu: bool
+    master_spin: bool
+    max_rate: bool
+    hold: float
+    rates: tuple[int, ...]
+    hold_floor: bool
+    repeat: int
+    bringup: tuple[int, ...] = ()
+    cycles: int = 2000
+    overlap: bool = False
+    results: Path = DEFAULT_DIR
+
+    def scheduling_flags(self) -> tuple[str, ...]:
+        """The daemon's scheduling options: ``--no-rt`` or ``--rt-priority N``, and
+        ``--no-follow-master-cpu`` (its CPU is the placement's, added by the caller)."""
+        flags: tuple[str, ...] = ()
+        if self.no_rt:
+            flags = ("--no-rt",)
+        elif self.rt_priority:
+            flags = ("--rt-priority", str(self.rt_priority))
+        if self.no_follow_master_cpu:
+            flags = (*flags, "--no-follow-master-cpu")
+        return flags

@@ -1,0 +1,32 @@
+# The compiled core's declarations for schedule.py (Cython, pure-Python mode): the work
+# after the replies as C calls and its state as typed fields. schedule.py stays the one
+# source of the behaviour. Decisions P2, P12, P19.
+cimport cython
+
+from ecatsim.esc.core cimport Esc, FrameContext
+from ecatsim.esc.dc cimport DcUnit
+
+cdef long long NO_DEADLINE, MAX_SYNC0_CATCHUP, PULSE_HINT_MARGIN_NS, PROBE_NS
+
+
+cdef class Schedule:
+    cdef public long long _next_sync, _pulse_hint
+    cdef public list _sync_escs
+    cdef public object awake
+    cdef public FrameContext ctx
+    cdef public list escs, firmware
+    cdef public object frame_waiting
+    cdef public object persist
+    cdef public long long probe_ns, resume_pos, yielded
+    cdef public long long sync0_late_ns, sync0_ticks
+
+    @cython.locals(ctx=FrameContext, esc=Esc, d="long long", look="long long", pos="long long")
+    cpdef void service_at(self, long long t) except *
+    cpdef void pulses_due(self, long long t) except *
+    @cython.locals(ctx=FrameContext, esc=Esc, dc=DcUnit, k="long long", nxt="long long",
+                   d="long long", d1="long long")
+    cpdef void sync_until(self, long long t) except *
+    @cython.locals(best="long long")
+    cpdef object next_deadline(self)
+    @cython.locals(best="long long", d="long long", e=Esc)
+    cpdef long long next_deadline_ns(self) except? -1

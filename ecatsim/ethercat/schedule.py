@@ -1,0 +1,212 @@
+"""What runs after a reply: the SYNC pulses, the ESCs' timers and the firmware behind the
+PDI of each slave with a raised interrupt, then the EEPROM images to persist.
+
+The silicon answers a frame at once and its firmware reacts later, over the PDI, to the
+events the frame latched (decision P19). The segment's walk (ecatsim/ethercat/segment.py)
+only latches; this schedule runs the reactions, at most every ``probe_ns`` of work looking
+whether a frame waits, and stopping for it. SYNC0 pulses due before a frame's arrival run
+before its walk, each at its own time (decision DC2).
+Ref: TMC8460 §5.50.4 (SYNC0 generation), §5.42 (process-data watchdog); ETG.1000.6 §5.3
+(DC synchronous mode), §6.4 (AL state machine run by the firmware).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from typing import Protocol
+
+from ecatsim.esc.core import Esc, FrameContext
+
+#: overdue SYNC0 pulses fired one by one before the rest are skipped (a stall this long,
+#: or a forward jump of the system time, is not caught up). Decision DC2.
+MAX_SYNC0_CATCHUP = 64
+#: frames arriving this long before the earliest SYNC deadline skip the per-slave check;
+#: larger than any clock correction that does not mark the timers dirty (dc.MOVE_NS)
+PULSE_HINT_MARGIN_NS = 200_000
+#: "no deadline" in the comparisons of deadlines
+NO_DEADLINE = 1 << 62
+#: the work after a reply looks whether a frame is waiting (``Schedule.frame_waiting``)
+#: once per this many ns of firmware work, and leaves the rest for after that frame
+#: (decision P19)
+PROBE_NS = 50_000
+
+
+class Serviceable(Protocol):
+    """What runs behind an ESC's PDI: the slave's firmware."""
+
+    def service(self, now_ns: int) -> None: ...
+
+    def reset(self) -> None: ...
+
+
+class Schedule:
+    """The work after the replies of one segment's ESCs (``escs`` in wire position order,
+    ``firmware`` by the same position)."""
+
+    #: fixed attributes (the compiled core declares them in schedule.pxd)
+    __slots__ = (
+        "_next_sync",
+        "_pulse_hint",
+        "_sync_escs",
+        "awake",
+        "ctx",
+        "escs",
+        "firmware",
+        "frame_waiting",
+        "persist",
+        "probe_ns",
+        "resume_pos",
+        "sync0_late_ns",
+        "sync0_ticks",
+        "yielded",
+    )
+
+    def __init__(
+        self,
+        escs: Sequence[Esc],
+        ctx: FrameContext,
+        firmware: Sequence[Serviceable] = (),
+        persist: Callable[[int], None] | None = None,
+    ) -> None:
+        self.escs = list(escs)
+        self.ctx = ctx
+        #: the firmware by position (the segment's list itself, not a copy)
+        self.firmware = firmware if isinstance(firmware, list) else list(firmware)
+        self.persist = persist
+        #: True when a frame waits to be received (the daemon's link): the firmware's work
+        #: after a reply stops for it and goes on after that frame's reply (decision P19);
+        #: None: the work runs to its end
+        self.frame_waiting: Callable[[], bool] | None = None
+        #: times the work after a reply stopped for a waiting frame
+        self.yielded = 0
+        #: the position the next round of firmware work starts at (0: the first)
+        self.resume_pos = 0
+        #: how often (ns of work) the work after a reply looks for a waiting frame
+        self.probe_ns = PROBE_NS
+        #: positions whose service runs after every frame, interrupt or not: the TMC8460
+        #: MFCIO blocks, which watch the memory blocks and the frames continuously
+        self.awake: frozenset[int] = frozenset()
+        self._sync_escs: list[Esc] = []
+        self.sync0_ticks = 0
+        self.sync0_late_ns = 0
+        #: host time before which no SYNC pulse can be due (recomputed by sync_until)
+        self._pulse_hint = 0
+        #: host time of the earliest SYNC0/SYNC1 pulse (NO_DEADLINE: none)
+        self._next_sync = 0
+
+    def service_at(self, t: int) -> None:
+        """Fire the SYNC0 pulses due by host time ``t``, run the timers due, the firmware
+        of every slave with a raised PDI interrupt (stopping for a waiting frame), then
+        persist the EEPROM images that changed. Never called between receive and reply."""
+        self.pulses_due(t)  # first: each pulse is handled at its own, earlier, time
+        for esc in self.escs:
+            d = esc.wd.deadline_ns
+            if d and t >= d:  # due (the running watchdogs of a cyclic bus are not)
+                esc.check_timers(t)
+        ctx = self.ctx
+        if (ctx.pending or self.awake) and self.firmware:
+            probe = self.frame_waiting
+            look = time.monotonic_ns() + self.probe_ns if probe is not None else NO_DEADLINE
+            order = sorted(ctx.pending | self.awake)
+            first = self.resume_pos
+            if first:  # where the last round stopped: every slave gets its turn (P19)
+                order = [p for p in order if p >= first] + [p for p in order if p < first]
+            for pos in order:
+                ctx.pdi_ns = t
+                self.firmware[pos].service(t)
+                if look != NO_DEADLINE and time.monotonic_ns() >= look:
+                    if probe is not None and probe():
+                        # the silicon answers while its firmware works: the frame first,
+                        # the slaves not served yet keep their raised interrupt (P19)
+                        self.yielded += 1
+                        self.resume_pos = pos + 1
+                        return
+                    look = time.monotonic_ns() + self.probe_ns
+            self.resume_pos = 0
+        if ctx.flush and self.persist is not None:
+            for pos in sorted(ctx.flush):
+                self.persist(pos)
+            ctx.flush.clear()
+
+    def pulses_due(self, t: int) -> None:
+        """sync_until(t), unless no pulse can be due by ``t`` (the per-frame fast path)."""
+        if t >= self._pulse_hint or self.ctx.timers_dirty:
+            self.sync_until(t)
+
+    def sync_until(self, t: int) -> None:
+        """Fire every SYNC0 pulse due by ``t`` in time order, each handled by the firmware
+        at the pulse's own time: outputs received before the pulse are applied and inputs
+        captured as of that instant, however late the host gets to it. Called before a
+        frame that arrived at ``t`` is processed, and from the timers.
+        Ref: TMC8460 §5.50.4 (SYNC0 generation); ETG.1000.6 §5.3 (DC synchronous mode).
+        """
+        ctx = self.ctx
+        nxt = NO_DEADLINE
+        for esc in self.sync_escs:
+            dc = esc.dc
+            fw = self.firmware[esc.position] if self.firmware else None
+            for k in range(MAX_SYNC0_CATCHUP + 1):
+                # NO_DEADLINE: no pulse scheduled (later than any host time t)
+                d1 = dc.sync1_deadline_or(NO_DEADLINE)
+                d = dc.sync0_deadline_or(NO_DEADLINE)
+                if d1 <= t and d1 < d:
+                    esc.sync1_tick()  # registers only: the firmware acts on SYNC0
+                    continue
+                if d > t:
+                    break
+                if k == MAX_SYNC0_CATCHUP:
+                    d = t  # too far behind: fire once now, the missed pulses are skipped
+                esc.sync0_tick(d)
+                self.sync0_ticks += 1
+                if t - d > self.sync0_late_ns:
+                    self.sync0_late_ns = t - d
+                if fw is not None and esc.position in ctx.pending:
+                    ctx.pdi_ns = d
+                    fw.service(d)
+            else:
+                d = dc.sync0_deadline_or(NO_DEADLINE)
+                d1 = dc.sync1_deadline_or(NO_DEADLINE)
+            nxt = min(nxt, d, d1)
+        self._set_next_sync(nxt)
+
+    def _set_next_sync(self, nxt: int) -> None:
+        self._next_sync = nxt
+        self._pulse_hint = nxt - PULSE_HINT_MARGIN_NS
+
+    def _refresh_next_sync(self) -> None:
+        """Recompute the earliest SYNC deadline (after a DC register change)."""
+        nxt = NO_DEADLINE
+        for esc in self.sync_escs:
+            for d in (esc.dc.sync0_deadline(), esc.dc.sync1_deadline()):
+                if d is not None and d < nxt:
+                    nxt = d
+        self._set_next_sync(nxt)
+
+    @property
+    def sync_escs(self) -> list[Esc]:
+        """ESCs whose SYNC unit runs (recomputed when an activation changes)."""
+        if self.ctx.timers_dirty:
+            self.ctx.timers_dirty = False
+            self._sync_escs = [e for e in self.escs if e.dc.next_sync0 is not None]
+        return self._sync_escs
+
+    def next_deadline(self) -> int | None:
+        """The earliest timer deadline (ns), for the daemon's poll timeout, None if there
+        is none. SYNC deadlines are those computed when the pulses last ran or a DC
+        register last changed; the time loop moves them by less than the ESC's MOVE_NS
+        until it marks them stale."""
+        best = self.next_deadline_ns()
+        return None if best == NO_DEADLINE else best
+
+    def next_deadline_ns(self) -> int:
+        """:meth:`next_deadline` as an integer, ``NO_DEADLINE`` if there is none (the
+        compiled responder's call after each frame: a C integer)."""
+        if self.ctx.timers_dirty:
+            self._refresh_next_sync()
+        best = self._next_sync
+        for e in self.escs:
+            d = e.wd.deadline_ns
+            if d and d < best:
+                best = d
+        return best
