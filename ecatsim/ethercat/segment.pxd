@@ -8,7 +8,7 @@ from ecatsim.esc.dc cimport DcUnit
 from ecatsim.ethercat.schedule cimport Schedule
 
 
-cdef long long NOP, APRD, APWR, APRW, FPRD, FPWR, FPRW, BRD, BWR, BRW, LRD, LWR, LRW, ARMW, FRMW
+cdef long long APRD, APWR, APRW, FPRD, FPWR, FPRW, BRD, BWR, BRW, LRD, LWR, LRW, ARMW, FRMW
 cdef long long CIRCULATING, LEN_MASK, MORE_FOLLOWS, _DC_SYSTEM_TIME
 
 
