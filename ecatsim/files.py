@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 import tempfile
 from pathlib import Path
+from typing import IO
 
 from ecatsim.errors import UserError
 
@@ -70,3 +71,12 @@ def write_output(path: Path, data: bytes, option: str = "-o") -> None:
         atomic_write(path, data)
     except OSError as exc:
         raise UserError(f"{option} {path}: cannot write ({exc.strerror or exc})") from exc
+
+
+def open_trace(path: Path, option: str = "--trace") -> IO[str]:
+    """A CSV trace file opened for writing (the caller closes it); a path that cannot be
+    written is one line naming the option and the path."""
+    try:
+        return open(path, "w", newline="")
+    except OSError as exc:
+        raise UserError(f"{option} {path}: cannot write ({exc.strerror})") from exc

@@ -19,6 +19,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from ecatsim.bench.capture import Capture  # noqa: E402
+from ecatsim.bench.master import request_op  # noqa: E402
 from ecatsim.bench.netns import Daemon, NetnsPair, in_netns  # noqa: E402
 from ecatsim.link.pcap import PcapWriter  # noqa: E402
 
@@ -40,16 +41,7 @@ def bring_up(iface: str, slaves: int, cycles: int) -> None:
         m.config_dc()
         m.config_map()
         m.state_check(pysoem.SAFEOP_STATE, 2_000_000)
-        m.state = pysoem.OP_STATE
-        m.send_processdata()
-        m.receive_processdata(50_000)
-        m.write_state()
-        for _ in range(cycles):
-            m.send_processdata()
-            m.receive_processdata(50_000)
-            if m.state_check(pysoem.OP_STATE, 2000) == pysoem.OP_STATE:
-                break
-        if m.read_state() != pysoem.OP_STATE:
+        if not request_op(m, cycles, 50_000, 2000):
             raise SystemExit("record: the slaves did not reach OP")
         for _ in range(cycles):
             m.send_processdata()

@@ -25,7 +25,7 @@ from typing import Any
 
 from ecatsim.bench import results
 from ecatsim.bench.capture import Capture, analyse
-from ecatsim.bench.master import CSP, cycles
+from ecatsim.bench.master import CSP, cycles, request_op
 from ecatsim.bench.netns import Daemon, NetnsPair, in_netns
 from ecatsim.bench.options import BenchOptions
 
@@ -57,16 +57,7 @@ def bring_up(m: Any, cap: Capture, pair: NetnsPair, n: int, period_us: int,
     if m.state_check(pysoem.SAFEOP_STATE, 5_000_000) != pysoem.SAFEOP_STATE:
         raise SystemExit("bench: the segment did not reach SAFEOP")
     cap.mark("op")
-    m.state = pysoem.OP_STATE
-    m.send_processdata()
-    m.receive_processdata(2000)
-    m.write_state()
-    for _ in range(5000):
-        m.send_processdata()
-        m.receive_processdata(2000)
-        if m.state_check(pysoem.OP_STATE, 2000) == pysoem.OP_STATE:
-            break
-    if m.read_state() != pysoem.OP_STATE:
+    if not request_op(m, 5000, 2000, 2000):
         raise SystemExit("bench: the segment did not reach OP")
 
 

@@ -51,6 +51,24 @@ def steal_seconds() -> list[float]:
             if ln.startswith("cpu") and ln[3:4].isdigit()]  # fmt: skip
 
 
+def request_op(m: Any, tries: int, recv_us: int, check_us: int) -> bool:
+    """Request OP from SAFEOP as a master does (ETG.1000.6 §6.4: the slaves take OP once
+    valid outputs arrive): one exchange, the AL control write, then exchanges until every
+    slave reports OP or ``tries`` run out. ``m``: a pysoem master; True if they are in OP."""
+    import pysoem
+
+    m.state = pysoem.OP_STATE
+    m.send_processdata()
+    m.receive_processdata(recv_us)
+    m.write_state()
+    for _ in range(tries):
+        m.send_processdata()
+        m.receive_processdata(recv_us)
+        if m.state_check(pysoem.OP_STATE, check_us) == pysoem.OP_STATE:
+            break
+    return bool(m.read_state() == pysoem.OP_STATE)
+
+
 def pysoem_master(pair: NetnsPair, n: int, period_us: int) -> Any:
     """A pysoem master with the segment in OP, DC active (SYNC0 every cycle)."""
     import pysoem
@@ -68,16 +86,7 @@ def pysoem_master(pair: NetnsPair, n: int, period_us: int) -> Any:
         s.sdo_write(0x6060, 0, bytes([CSP]))  # cyclic synchronous position
     m.config_map()
     m.state_check(pysoem.SAFEOP_STATE, 5_000_000)
-    m.state = pysoem.OP_STATE
-    m.send_processdata()
-    m.receive_processdata(50_000)
-    m.write_state()
-    for _ in range(500):
-        m.send_processdata()
-        m.receive_processdata(50_000)
-        if m.state_check(pysoem.OP_STATE, 5000) == pysoem.OP_STATE:
-            break
-    if m.read_state() != pysoem.OP_STATE:
+    if not request_op(m, 500, 50_000, 5000):
         m.close()
         raise SystemExit("bench: the segment did not reach OP")
     return m

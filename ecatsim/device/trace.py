@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from ecatsim.errors import UserError
+from ecatsim.files import open_trace
 
 COLUMNS = (
     "time_s",
@@ -32,10 +33,7 @@ class TraceWriter:
     """Appends rows to a CSV file; flushed on close."""
 
     def __init__(self, path: Path) -> None:
-        try:
-            self._f: IO[str] = open(path, "w", newline="")  # noqa: SIM115 - closed in close()
-        except OSError as exc:
-            raise UserError(f"--trace {path}: cannot write ({exc.strerror})") from exc
+        self._f: IO[str] = open_trace(path)
         self._w = csv.writer(self._f)
         self._w.writerow(COLUMNS)
         self.t0: int | None = None

@@ -24,7 +24,7 @@ from typing import Any
 import structlog
 
 from ecatsim.errors import UserError
-from ecatsim.link.tap import IFF_NO_PI, IFF_TAP, TUNSETIFF
+from ecatsim.link.tap import open_tap
 from ecatsim.slave.eoe import EoeService
 from ecatsim.wire.eoe import IpParams
 
@@ -59,21 +59,7 @@ class EoeTap:
         self.eoe = service
         self.position = position
         self.read_errors = 0
-        try:
-            fd = os.open("/dev/net/tun", os.O_RDWR | os.O_NONBLOCK | os.O_CLOEXEC)
-        except OSError as exc:
-            raise UserError(
-                f"{what}: cannot open /dev/net/tun ({exc.strerror}): load the tun module "
-                "and run as root (CAP_NET_ADMIN)"
-            ) from exc
-        try:
-            fcntl.ioctl(fd, TUNSETIFF, struct.pack("16sH", name.encode(), IFF_TAP | IFF_NO_PI))
-        except OSError as exc:
-            os.close(fd)
-            raise UserError(
-                f"{what}: cannot create TAP device {name} ({exc.strerror}): run as root and "
-                "pick a name no other interface has"
-            ) from exc
+        fd = open_tap(name, UserError, f"{what}: ")
         self.fd = fd
         try:
             self.apply(service.params)

@@ -37,6 +37,28 @@ def is_ecat_frame(buf: bytearray | memoryview, n: int) -> bool:
     return etype == ETH_P_8021Q and n >= 20 and ((buf[16] << 8) | buf[17]) == ETH_P_ECAT
 
 
+
+def open_tap(name: str, error: type[Exception], what: str) -> int:
+    """A non-blocking descriptor of the TAP device ``name`` (made if it does not exist),
+    frames without a packet-info prefix; a failure is ``error`` with one line (prefixed
+    by ``what``) naming the cause and the fix."""
+    try:
+        fd = os.open("/dev/net/tun", os.O_RDWR | os.O_NONBLOCK | os.O_CLOEXEC)
+    except OSError as exc:
+        raise error(
+            f"{what}cannot open /dev/net/tun ({exc.strerror}): load the tun module "
+            "(modprobe tun) and run as root (CAP_NET_ADMIN)"
+        ) from exc
+    try:
+        fcntl.ioctl(fd, TUNSETIFF, _IFREQ.pack(name.encode(), IFF_TAP | IFF_NO_PI))
+    except OSError as exc:
+        os.close(fd)
+        raise error(
+            f"{what}cannot create TAP device {name} ({exc.strerror}): run as root "
+            "(CAP_NET_ADMIN) and pick a name that is not another kind of interface"
+        ) from exc
+    return fd
+
 class TapLink:
     """A TAP device created (or attached to, if it is persistent) under ``name``."""
 
@@ -46,21 +68,7 @@ class TapLink:
     def __init__(self, name: str) -> None:
         if not name or len(name) > 15:
             raise LinkError(f"TAP name {name!r}: use 1..15 characters, e.g. --tap ecattap0")
-        try:
-            fd = os.open("/dev/net/tun", os.O_RDWR | os.O_NONBLOCK | os.O_CLOEXEC)
-        except OSError as exc:
-            raise LinkError(
-                f"cannot open /dev/net/tun ({exc.strerror}): load the tun module "
-                "(modprobe tun) and run as root (CAP_NET_ADMIN)"
-            ) from exc
-        try:
-            fcntl.ioctl(fd, TUNSETIFF, _IFREQ.pack(name.encode(), IFF_TAP | IFF_NO_PI))
-        except OSError as exc:
-            os.close(fd)
-            raise LinkError(
-                f"cannot create TAP device {name} ({exc.strerror}): run as root "
-                "(CAP_NET_ADMIN) and pick a name that is not another kind of interface"
-            ) from exc
+        fd = open_tap(name, LinkError, "")
         self.fd = fd
         self.name = name
         try:

@@ -11,7 +11,7 @@ import csv
 from pathlib import Path
 from typing import IO
 
-from ecatsim.errors import UserError
+from ecatsim.files import open_trace
 from ecatsim.mfcio.block import MfcioBlock
 
 COLUMNS = (
@@ -53,10 +53,7 @@ class MfcioTrace:
     """Writes the rows of every MFCIO block of a segment; flushed on close."""
 
     def __init__(self, path: Path) -> None:
-        try:
-            self._f: IO[str] = open(path, "w", newline="")  # noqa: SIM115 - closed in close()
-        except OSError as exc:
-            raise UserError(f"--trace {path}: cannot write ({exc.strerror})") from exc
+        self._f: IO[str] = open_trace(path)
         self.path = path
         self._w = csv.writer(self._f)
         self._w.writerow(COLUMNS)
