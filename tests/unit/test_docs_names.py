@@ -101,3 +101,13 @@ def test_the_table_names_every_package_and_top_level_module() -> None:
     table = text.split("## Packages and modules", 1)[1].split("\n## ", 1)[0]
     rows = [i for i, line in enumerate(table.splitlines()) if line.startswith("|")]
     assert rows == list(range(rows[0], rows[-1] + 1)), "a blank line breaks the table"
+
+
+def test_every_result_cited_is_stored() -> None:
+    """performance.md's table names its runs' JSON files by name: each is in bench/results
+    (a bench run writes new ones there too, so the reverse is not asserted)."""
+    text = (REPO / "docs/performance.md").read_text()
+    cited = set(re.findall(r"`([\w-]+\.json)`", text))
+    stored = {p.name for p in (REPO / "bench/results").iterdir() if p.suffix == ".json"}
+    assert cited, "performance.md cites no run"
+    assert not cited - stored, f"not in bench/results: {sorted(cited - stored)}"
