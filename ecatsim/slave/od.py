@@ -29,7 +29,7 @@ class ObjectCode(IntEnum):
 #: Ref: CiA 301 §7.4.4 Table 44 (complex data types); ETG.1000.6 §5.6.7.
 PDO_MAPPING_TYPE = 0x0021
 IDENTITY_TYPE = 0x0023
-#: any other record (a manufacturer's structure without its own type index): decision C16
+#: any other record (a manufacturer's structure without its own type index): decision C17
 RECORD_TYPE = 0x002A
 
 # SDO abort codes used here. Ref: ETG.1000.6 Table 41.
