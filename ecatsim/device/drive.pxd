@@ -67,7 +67,8 @@ cdef class Drive:
     @cython.locals(hits=tuple)
     cpdef tuple _controls(self)
 
-    @cython.locals(target=double, dt=double)
+    @cython.locals(target=double, dt=double, now="long long", then="long long", prev=double,
+                   ppr=double)
     cpdef outputs_applied(self, now_ns)
 
     cpdef update_inputs(self, now_ns)

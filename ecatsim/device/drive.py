@@ -262,10 +262,17 @@ class Drive:
         self.advance(now_ns)
         if self.mode == CSP:
             target = float(_int_of(self._controls()[2]))  # 607Ah
-            if self.last_target is not None and self.last_t_ns is not None:
-                dt = (now_ns - self.last_t_ns) * 1e-9
+            last_target = self.last_target
+            last_t_ns = self.last_t_ns
+            if last_target is not None and last_t_ns is not None:
+                # C integers and doubles in the compiled core, Python's results (P23)
+                now = now_ns
+                then = last_t_ns
+                dt = (now - then) * 1e-9
                 if dt > 0:
-                    self.v_ff_rpm = (target - self.last_target) / dt * 60.0 / self.params.ppr
+                    prev = last_target
+                    ppr = self.params.ppr
+                    self.v_ff_rpm = (target - prev) / dt * 60.0 / ppr
             self.last_target = target
             self.last_t_ns = now_ns
         self._controlword()
