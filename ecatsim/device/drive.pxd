@@ -18,6 +18,10 @@ cdef long long SW_OMS12, SW_OMS13, SW_MOTOR_ACTIVE, SW_DIRECTION
 cdef object _round(double x)
 
 
+cdef bint _powered(object st)
+cdef bint _no_voltage(object st)
+
+
 @cython.locals(e=Entry)
 cdef long long _int_of(tuple hit) except? -1
 
@@ -63,12 +67,14 @@ cdef class Drive:
     @cython.locals(hits=tuple)
     cpdef tuple _controls(self)
 
-    @cython.locals(target=double, dt=double)
+    @cython.locals(target=double, dt=double, now="long long", then="long long", prev=double,
+                   ppr=double)
     cpdef outputs_applied(self, now_ns)
 
     cpdef update_inputs(self, now_ns)
 
     @cython.locals(dt_ns="long long", n="long long", left="long long", t="long long",
+                   now="long long", start="long long",
                    done="long long", more="long long", steps="long long", why=int,
                    kind=int, ref=double, v_ff=double, window=double, s=Servo)
     cpdef advance(self, now_ns)

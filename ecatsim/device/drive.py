@@ -67,6 +67,7 @@ _FRA = PdsState.FAULT_REACTION_ACTIVE
 _FAULT = PdsState.FAULT
 _SOD = PdsState.SWITCH_ON_DISABLED
 _SO = PdsState.SWITCHED_ON
+_NRTSO = PdsState.NOT_READY_TO_SWITCH_ON
 _NO_VOLTAGE = (PdsState.NOT_READY_TO_SWITCH_ON, PdsState.SWITCH_ON_DISABLED, PdsState.FAULT)
 _AL_OP = AlState.OP
 _POWERED = cia402.POWERED
@@ -99,6 +100,17 @@ def _round(x: float) -> int:
     elif f < -0.5 or (f == -0.5 and k & 1):
         k -= 1
     return k
+
+
+def _powered(st: PdsState) -> bool:
+    """``st in cia402.POWERED``: the drive's state is always one of PdsState's members
+    (singletons), so identity decides, without a set lookup per test (decision P23)."""
+    return st is _OE or st is _QSA or st is _FRA
+
+
+def _no_voltage(st: PdsState) -> bool:
+    """``st in _NO_VOLTAGE`` by identity (see _powered)."""
+    return st is _NRTSO or st is _SOD or st is _FAULT
 
 
 def _int_of(hit: tuple[Entry, int, int] | None) -> int:
@@ -250,10 +262,17 @@ class Drive:
         self.advance(now_ns)
         if self.mode == CSP:
             target = float(_int_of(self._controls()[2]))  # 607Ah
-            if self.last_target is not None and self.last_t_ns is not None:
-                dt = (now_ns - self.last_t_ns) * 1e-9
+            last_target = self.last_target
+            last_t_ns = self.last_t_ns
+            if last_target is not None and last_t_ns is not None:
+                # C integers and doubles in the compiled core, Python's results (P23)
+                now = now_ns
+                then = last_t_ns
+                dt = (now - then) * 1e-9
                 if dt > 0:
-                    self.v_ff_rpm = (target - self.last_target) / dt * 60.0 / self.params.ppr
+                    prev = last_target
+                    ppr = self.params.ppr
+                    self.v_ff_rpm = (target - prev) / dt * 60.0 / ppr
             self.last_target = target
             self.last_t_ns = now_ns
         self._controlword()
@@ -290,7 +309,7 @@ class Drive:
         """Leaving OP stops the motor (TMC8670 §3.2): quick-stop ramp, voltage off."""
         self.advance(now_ns)
         if self.al_state == _AL_OP and state != _AL_OP:
-            if self.state in _POWERED:
+            if _powered(self.state):
                 self._enter(_SOD, "al_left_op")
             self.prev_cw = 0
         self.al_state = state
@@ -354,7 +373,7 @@ class Drive:
     def _enter(self, nxt: PdsState, why: str) -> None:
         if nxt == _OE and self.state != _QSA:
             self._hold_here()
-        if nxt not in _POWERED:
+        if not _powered(nxt):
             self.servo.reset_integrators()
         log.info("pds_state", state=nxt.name, why=why)
         self.state = nxt
@@ -381,26 +400,30 @@ class Drive:
     # ----------------------------------------------------------------- time
     def advance(self, now_ns: int) -> None:
         """Integrate on fixed substeps up to ``now_ns`` (never per frame)."""
-        if self.t_ns is None:
+        t0 = self.t_ns
+        if t0 is None:
             self.t_ns = now_ns
             return
+        # the times as C integers in the compiled core (decision P23)
+        now = now_ns
+        start = t0
         dt_ns = self.substep_ns
-        n = (now_ns - self.t_ns) // dt_ns
+        n = (now - start) // dt_ns
         if n <= 0:
             return
         s = self.servo
         if (
-            self.state not in _POWERED
+            not _powered(self.state)
             and s.omega == 0.0
             and s.iq_ma == 0.0
             and abs(self.params.load) <= self.params.coulomb
         ):
-            self.t_ns += n * dt_ns  # de-energised at rest: nothing moves, skip exactly
+            self.t_ns = start + n * dt_ns  # de-energised at rest: nothing moves, skip exactly
             return
         n = min(n, 200_000)  # a long pause is caught up at most 20 s
         self._snapshot()
         index = self.index_output
-        t = self.t_ns
+        t = start
         left = n
         while left > 0:
             demand = self._steady_demand()
@@ -422,11 +445,11 @@ class Drive:
                 self._index_pulse(index, t)
         if self.state == _OE and self.mode not in (PP, CSP):
             self.p_demand = s.angle / TWO_PI * self.params.ppr  # follows the actual
-        self.t_ns += n * dt_ns if n < 200_000 else now_ns - self.t_ns
+        self.t_ns = start + n * dt_ns if n < 200_000 else now
 
     def _trip(self) -> float:
         """The current above which a substep ends in an overcurrent fault."""
-        return self.overcurrent_ma if self.state in _POWERED else math.inf
+        return self.overcurrent_ma if _powered(self.state) else math.inf
 
     def _index_pulse(self, index: Callable[[bool, int], None], t_ns: int) -> None:
         """The encoder's index (N) pulse, once per revolution at angle 0, as wide as one
@@ -458,7 +481,7 @@ class Drive:
         """The servo demand if it stays the same over the substeps to come (the OD values
         are fixed until the next advance), else None. Ref: CiA 402-2 §10-§12."""
         st = self.state
-        if st not in _POWERED:
+        if not _powered(st):
             return (TORQUE, 0.0, 0.0, 0.0)  # voltage off: the motor coasts
         if st != _OE:
             return None  # quick stop / fault reaction ramps
@@ -586,7 +609,7 @@ class Drive:
         s = self.servo
         st = self.state
         sw = _STATUS_BITS[st]
-        if st not in _NO_VOLTAGE:
+        if not _no_voltage(st):
             sw |= SW_VOLTAGE
         if self.al_state == _AL_OP:
             sw |= SW_REMOTE
@@ -617,7 +640,7 @@ class Drive:
                     sw |= SW_TARGET_REACHED | SW_OMS12
             elif mode in (CSP, CSV, CST):
                 sw |= SW_OMS12  # drive follows the command value
-        if abs(s.iq_ref_ma) >= s.i_limit_ma - 1e-6 and st in _POWERED:
+        if abs(s.iq_ref_ma) >= s.i_limit_ma - 1e-6 and _powered(st):
             sw |= SW_INTERNAL_LIMIT
         if "following_error" in self.active_faults:
             sw |= SW_OMS13

@@ -31,7 +31,7 @@ cdef class Firmware:
 
     @cython.locals(p=Pdi, ev="long long", pd_events="long long", dc=bint)
     cpdef void service(self, long long now_ns) except *
-    @cython.locals(want="long long")
+    @cython.locals(want="long long", pending=bint)
     cpdef void service_mailbox(self, long long ev, long long now_ns) except *
     cpdef void _outputs_received(self, long long now_ns) except *
     cpdef void _write_inputs(self, long long now_ns) except *

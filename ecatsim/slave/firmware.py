@@ -219,9 +219,11 @@ class Firmware:
         else:
             if ev & (EV_SM0 << SM_MBX_OUT):
                 mbx.receive()
-            if ev & EV_SM1 or mbx.pending():
+            pending = mbx.pending()  # asked once where nothing is flushed (decision P22)
+            if ev & EV_SM1 or pending:
                 mbx.flush()  # SM1 read, or replies (EoE frames) waiting for it
-            if mbx.pending():
+                pending = mbx.pending()
+            if pending:
                 want |= EV_SM1
         if self.pd_masked:
             want &= ~PD_EVENTS

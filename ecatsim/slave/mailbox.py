@@ -107,8 +107,14 @@ class MailboxEngine:
         self.sources.append(src)
 
     def pending(self) -> bool:
-        """Replies wait for SM1 (the firmware then wants the SM1 event)."""
-        return bool(self.out) or self.held is not None or any(s.pending() for s in self.sources)
+        """Replies wait for SM1 (the firmware then wants the SM1 event). Asked at every
+        firmware service: a plain loop, not ``any()`` over a generator (decision P22)."""
+        if self.out or self.held is not None:
+            return True
+        for src in self.sources:  # noqa: SIM110 (a generator per call costs 3 k instructions)
+            if src.pending():
+                return True
+        return False
 
     # ----------------------------------------------------------------- receive
 
