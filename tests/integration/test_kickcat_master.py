@@ -6,8 +6,14 @@ nap can end after its deadline, and it does not look once more. The daemon there
 on the CPU the master's frames come from (decision K5), so the reply is queued before
 KickCAT's first poll. The daemon's own part is checked on every run as well: every request
 a kernel timestamp sees arrive at the daemon's interface gets its reply at the master's
-interface (ecatsim/bench/capture.py), on an idle machine every one well inside the 2 ms. The
-figure over 20 runs is in bench/results (tools/kickcat_load.py).
+interface (ecatsim/bench/capture.py), on an idle machine every one well inside the 2 ms.
+The figure over 20 runs is in bench/results (tools/kickcat_load.py).
+
+The single run pins KickCAT to one CPU, as real-time masters run (decision K6): a master the
+scheduler moves to another CPU sends its next frame from a CPU the daemon has not followed
+to yet, naps for the reply, and a nap that another process ends late loses a reply that
+came in time ("Bus.cc:802: Error while fetching eeprom data" with the reply 244 us after
+the request). The runs under load leave KickCAT where the scheduler puts it.
 Ref: ETG.1000.6 §6.4 (AL state machine) as a second, independent master implements it."""
 
 from __future__ import annotations
@@ -29,16 +35,18 @@ KICKCAT_TIMEOUT_US = 2000
 LOADED_P99_US = 1000
 
 
-def timed_trial(pair: NetnsPair) -> tuple[dict[str, Any], dict[str, Any]]:
+def timed_trial(
+    pair: NetnsPair, master_cpu: int | None = None
+) -> tuple[dict[str, Any], dict[str, Any]]:
     with Capture.both_ends((pair.master_ns, pair.master_if), (pair.slave_ns, pair.slave_if)) as rt:
-        result = kickcat_trial(pair)
+        result = kickcat_trial(pair, master_cpu=master_cpu)
     return result, rt.stats()
 
 
 def test_kickcat_reaches_op_and_runs_500_cycles(netns_pair: NetnsPair, daemon_factory: Any) -> None:
     daemon_factory()
-    result, replies = timed_trial(netns_pair)
-    assert result == {"ok": True, "stage": "done", "slaves": 1, "cycles": 500}
+    result, replies = timed_trial(netns_pair, master_cpu=max(os.sched_getaffinity(0)))
+    assert result == {"ok": True, "stage": "done", "slaves": 1, "cycles": 500}, replies
     assert replies["unpaired"] == 0 and replies["frames"] > 1000, replies
     assert replies["max"] < KICKCAT_TIMEOUT_US, replies
 

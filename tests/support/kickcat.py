@@ -16,12 +16,17 @@ TOOL = Path(__file__).resolve().parents[2] / "tools" / "kickcat_master.py"
 
 
 def kickcat_trial(
-    pair: NetnsPair, cycles: int = 500, master_rt: int | None = None
+    pair: NetnsPair,
+    cycles: int = 500,
+    master_rt: int | None = None,
+    master_cpu: int | None = None,
 ) -> dict[str, Any]:
     """One KickCAT run (INIT scan to OP, then ``cycles`` cycles): its JSON result.
-    ``master_rt``: run the master SCHED_FIFO at this priority, as real-time masters run."""
+    ``master_rt``: run the master SCHED_FIFO at this priority, as real-time masters run.
+    ``master_cpu``: pin the master to this CPU (``taskset``), as real-time masters run."""
     rt = ["chrt", "-f", str(master_rt)] if master_rt else []
-    cmd = ["ip", "netns", "exec", pair.master_ns, *rt, sys.executable, str(TOOL)]
+    pin = ["taskset", "-c", str(master_cpu)] if master_cpu is not None else []
+    cmd = ["ip", "netns", "exec", pair.master_ns, *pin, *rt, sys.executable, str(TOOL)]
     cmd += ["--iface", pair.master_if, "--cycles", str(cycles)]
     r = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
     lines = [ln for ln in r.stdout.splitlines() if ln.startswith("{")]
