@@ -107,6 +107,8 @@ def compile_tables(classes: Mapping[str, type]) -> Tables:
             continue
         unit, _, name = r.side_effect.partition(".")
         slot = SLOTS[unit] + (r.index if unit == "sm" else 0)
+        if hasattr(classes[unit], "_ew_" + name) and hasattr(classes[unit], "_ec_" + name):
+            raise SpecError(f"{r.side_effect}: _ew_ (every write) or _ec_ (a change), not both")
         for prefix in PREFIXES:
             fn = getattr(classes[unit], prefix + name, None)
             if fn is None:

@@ -9,9 +9,9 @@ import itertools
 
 import pytest
 
-from ecatsim.esc.core import Esc, FrameContext, hook_names, tables
+from ecatsim.esc.core import Esc, FrameContext, hook_names, tables, unit_classes
 from ecatsim.esc.dc import DcUnit
-from ecatsim.esc.dispatch import PASSIVE_SIDE_EFFECTS
+from ecatsim.esc.dispatch import PASSIVE_SIDE_EFFECTS, compile_tables
 from ecatsim.esc.regs import DC_SYSTEM_TIME
 from ecatsim.spec.tables import UNITS, SpecError, load_registers, parse_registers
 
@@ -109,3 +109,16 @@ def test_malformed_rows_are_named(text: str, fragment: str) -> None:
     with pytest.raises(SpecError) as e:
         parse_registers(text)
     assert fragment in str(e.value)
+
+
+def test_an_ecat_write_hook_runs_on_every_write_or_on_a_change_not_both() -> None:
+    """``_ew_<name>`` and ``_ec_<name>`` of one unit would both claim the register's ECAT
+    write: the dispatch refuses the pair (decision U1)."""
+
+    def hook(unit: object, ra: int, rs: int, old: bytes) -> None:
+        pass  # pragma: no cover - never called
+
+    classes = dict(unit_classes())
+    classes["dc"] = type("Dc", (), {"_ew_activation": hook, "_ec_activation": hook})
+    with pytest.raises(SpecError, match=r"dc\.activation"):
+        compile_tables(classes)
