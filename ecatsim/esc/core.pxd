@@ -14,21 +14,14 @@ from libc.stdint cimport int64_t
 
 cdef long long _LRD, _LWR, _LRW
 # the registers, imported from regs.py: C constants here
-cdef long long AL_EVENT_MASK, AL_EVENT_REQUEST, AL_STATUS, CUC_LATCH0_PDI
-cdef long long CUC_SYNC_PDI, DC_ACTIVATION, DC_ACTIVATION_STATUS, DC_CYCLIC_UNIT_CONTROL
-cdef long long DC_ECAT_EVENT_TIME, DC_LATCH0_CONTROL, DC_LATCH0_POS, DC_LATCH0_STATUS
-cdef long long DC_PDI_CHANGE_EVENT_TIME, DC_PDI_START_EVENT_TIME, DC_PULSE_LENGTH, DC_RECV_TIME_P0
-cdef long long DC_SYNC0_STATUS, DC_SYSTEM_TIME, DC_TIME_DIFF_FILTER, DL_CONTROL, DL_STATUS
-cdef long long ECAT_EVENT_MASK, ECAT_EVENT_REQUEST, ECAT_EV_AL_STATUS, ECAT_EV_DC_LATCH
-cdef long long ECAT_EV_DL_STATUS, ECAT_EV_SM0, ECAT_PU_ERROR_COUNTER, EEPROM_CONFIG
-cdef long long ESC_CFG_LATCH_IN, ESC_CFG_SYNC_OUT, ESC_CONFIG, EV_AL_CONTROL
-cdef long long EV_DC_LATCH, EV_SM0, EV_SM_ACTIVATION, EV_SYNC0
-cdef long long EV_SYNC1, EV_WATCHDOG_PD, LOST_LINK_COUNTER, MII_ECAT_ACCESS
-cdef long long MII_PDI_ACCESS, MII_PHY_ADDRESS, N_SM, PDI_ERROR_CODE
-cdef long long PDI_ERROR_COUNTER, PDRAM_END, PDRAM_START, PHY_PORT_STATUS
-cdef long long REGISTER_END, RX_ERROR_COUNTER, SM_ACT_LATCH_ECAT, SM_ACT_LATCH_PDI
-cdef long long SM_BASE, SM_CTRL_WATCHDOG, SM_STRIDE, WD_COUNTER_PD
-cdef long long WD_COUNTER_PDI, WD_STATUS_PD, FMMU_BASE, FMMU_STRIDE, N_FMMU, _FMMU_BLOCK
+cdef long long AL_EVENT_MASK, AL_EVENT_REQUEST, AL_STATUS, DC_ECAT_EVENT_TIME
+cdef long long DC_PDI_CHANGE_EVENT_TIME, DC_PDI_START_EVENT_TIME, DC_SYSTEM_TIME, DL_CONTROL
+cdef long long DL_STATUS, ECAT_EV_AL_STATUS, ECAT_EV_DL_STATUS, ECAT_EV_SM0, ECAT_EVENT_MASK
+cdef long long ECAT_EVENT_REQUEST, ECAT_PU_ERROR_COUNTER, ESC_CONFIG, EV_AL_CONTROL, EV_SM0
+cdef long long EV_SYNC0, EV_SYNC1, EV_WATCHDOG_PD, LOST_LINK_COUNTER, N_SM, PDI_ERROR_CODE
+cdef long long PDI_ERROR_COUNTER, PDRAM_END, PDRAM_START, REGISTER_END, RX_ERROR_COUNTER
+cdef long long SM_ACT_LATCH_ECAT, SM_ACT_LATCH_PDI, SM_CTRL_WATCHDOG, WD_COUNTER_PDI
+cdef long long WD_STATUS_PD
 
 
 @cython.locals(b3="long long")
@@ -58,6 +51,8 @@ cdef class Esc(SmHost):
     cdef public bytes ecat_wmask, pdi_wmask, ecat_w_hooked, pdi_w_hooked, ecat_r_hooked
     cdef public bytes pdi_r_hooked, ecat_w_change
     cdef public tuple ecat_w_hooks, pdi_w_hooks, ecat_r_hooks, pdi_r_hooks
+    # the units whose hooks the register table names (ecatsim/esc/dispatch.py)
+    cdef public tuple units
     cdef public list sm
     cdef public object eeprom
     cdef public DcUnit dc
@@ -118,17 +113,12 @@ cdef class Esc(SmHost):
     cpdef bint _plain_read(self, long long ado, unsigned char[:] out) except -1
     @cython.locals(e="long long", i="long long", k="long long", m="long long",
                    wmask=bytes, hooked=bytes, change=bytes, mem=bytearray, hooks=tuple,
-                   entry=tuple, ra="long long", rs="long long")
+                   entry=tuple, ra="long long", rs="long long", units=tuple)
     cpdef void reg_write(self, long long s, bytes data, bint pdi) except *
     @cython.locals(mem=bytearray, lo="long long", hi="long long", a="long long")
     cpdef bint _changed(self, long long ra, long long rs, bytes old, long long s) except -1
     @cython.locals(lo="long long", hi="long long")
     cpdef bytes old_reg(self, long long ra, long long rs, bytes old, long long s)
     @cython.locals(i="long long", hooked=bytes, hooks=tuple, entry=tuple, ra="long long",
-                   rs="long long")
+                   rs="long long", units=tuple)
     cpdef void reg_read_hooks(self, long long s, long long e, bint pdi) except *
-    cpdef void _er_dc_system_time(self, long long ra, long long rs) except *
-    cpdef void _pr_dc_system_time(self, long long ra, long long rs) except *
-    @cython.locals(value="unsigned long long", lo="unsigned long long", hi="unsigned long long",
-                   nbytes="long long")
-    cpdef void _ew_dc_system_time(self, long long ra, long long rs, object old) except *

@@ -3,9 +3,10 @@
 ECAT face: ``ecat_read``/``ecat_read_or``/``ecat_write``/``ecat_logical`` patch a datagram's
 data in place and return the slave's working-counter increment. PDI face: see
 ``ecatsim.esc.pdi``. Access rights, reset values and side effects come from the register
-table (``ecatsim/spec/registers.yaml``); side effects are methods named after the table's
-``side_effect`` column: ``_ew_<name>`` (ECAT write), ``_er_<name>`` (ECAT read),
-``_pw_<name>`` (PDI write) and ``_pr_<name>`` (PDI read).
+table (``ecatsim/spec/registers.yaml``); a row's ``side_effect: <unit>.<name>`` names the
+hooks of one of the ESC's units (``Esc.units``: the ESC itself, its DC, MII, EEPROM and
+watchdog units and its SyncManagers), methods of that unit's class named ``_ew_<name>``,
+``_ec_<name>``, ``_er_<name>``, ``_pw_<name>``, ``_pr_<name>`` (ecatsim/esc/dispatch.py).
 
 Ref: TMC8460 §4, §5; ETG.1000.4 §6 (DL services and ESC memory).
 """
@@ -14,12 +15,11 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Callable
-from dataclasses import dataclass
 from functools import cache
-from typing import TYPE_CHECKING
 
-from ecatsim.esc import regs
+from ecatsim.esc import dispatch, regs
 from ecatsim.esc.dc import DcUnit
+from ecatsim.esc.dispatch import Tables, compile_tables
 from ecatsim.esc.eeprom import EepromUnit
 from ecatsim.esc.fmmu import FmmuMap, compile_fmmus, copy_bits
 from ecatsim.esc.mii import MiiUnit
@@ -27,125 +27,44 @@ from ecatsim.esc.regs import (
     AL_EVENT_MASK,
     AL_EVENT_REQUEST,
     AL_STATUS,
-    CUC_LATCH0_PDI,
-    CUC_SYNC_PDI,
-    DC_ACTIVATION,
-    DC_ACTIVATION_STATUS,
-    DC_CYCLIC_UNIT_CONTROL,
     DC_ECAT_EVENT_TIME,
-    DC_LATCH0_CONTROL,
-    DC_LATCH0_POS,
-    DC_LATCH0_STATUS,
     DC_PDI_CHANGE_EVENT_TIME,
     DC_PDI_START_EVENT_TIME,
-    DC_PULSE_LENGTH,
-    DC_RECV_TIME_P0,
-    DC_SYNC0_STATUS,
     DC_SYSTEM_TIME,
-    DC_TIME_DIFF_FILTER,
     DL_CONTROL,
     DL_STATUS,
     ECAT_EV_AL_STATUS,
-    ECAT_EV_DC_LATCH,
     ECAT_EV_DL_STATUS,
     ECAT_EV_SM0,
     ECAT_EVENT_MASK,
     ECAT_EVENT_REQUEST,
     ECAT_PU_ERROR_COUNTER,
-    EEPROM_CONFIG,
-    ESC_CFG_LATCH_IN,
-    ESC_CFG_SYNC_OUT,
     ESC_CONFIG,
     EV_AL_CONTROL,
-    EV_DC_LATCH,
     EV_SM0,
-    EV_SM_ACTIVATION,
     EV_SYNC0,
     EV_SYNC1,
     EV_WATCHDOG_PD,
-    FMMU_BASE,
-    FMMU_STRIDE,
     LOST_LINK_COUNTER,
-    MII_ECAT_ACCESS,
-    MII_PDI_ACCESS,
-    MII_PHY_ADDRESS,
-    N_FMMU,
     N_SM,
     PDI_ERROR_CODE,
     PDI_ERROR_COUNTER,
     PDRAM_END,
     PDRAM_START,
-    PHY_PORT_STATUS,
     REGISTER_END,
     RX_ERROR_COUNTER,
     SM_ACT_LATCH_ECAT,
     SM_ACT_LATCH_PDI,
-    SM_BASE,
     SM_CTRL_WATCHDOG,
-    SM_STRIDE,
-    WD_COUNTER_PD,
     WD_COUNTER_PDI,
     WD_STATUS_PD,
 )
 from ecatsim.esc.sm import SmHost, SyncManager
 from ecatsim.esc.watchdog import Watchdog
-from ecatsim.spec.tables import load_registers
 from ecatsim.wire.datagram import Cmd
-
-if TYPE_CHECKING:
-    from ecatsim.spec.tables import Register
 
 _U16 = struct.Struct("<H")
 _U32 = struct.Struct("<I")
-
-#: Side effects whose registers need no hook: the value is maintained by the unit that
-#: owns it, or the function is absent on the TMC8460-BI (masks make it reserved).
-PASSIVE_SIDE_EFFECTS = frozenset(
-    {
-        "write_protect",  # not available with TMC8460-BI (§5.11-5.14)
-        "rw_offset",  # not available with TMC8460-BI (§5.18)
-        "led_override",  # not available with TMC8460-BI (§5.23, 5.24)
-        "al_status_code",  # plain PDI-written value (§5.22)
-        "ecat_event_request",  # maintained by the event logic (§5.31)
-        "al_event_request",  # maintained by the event logic (§5.32)
-        "sm_status",  # maintained by the SyncManager (§5.49 Table 89)
-        "dc_system_time_difference",  # maintained by the time loop (§5.50.2 Table 98)
-        "dc_speed_counter_diff",  # maintained by the time loop (Table 100)
-        "dc_latch_mode",  # plain value (Table 103)
-        "dc_next_sync1",  # maintained by the SYNC unit (Table 111)
-        "dc_latch_status",  # maintained by the latch unit (Tables 116, 117)
-        "dc_event_time",  # maintained by the SM event-time logic (§5.50.6, sm_event_time)
-        "mfcio_parameter_ram",  # plain RAM the MFCIO block reads at its runs (§5.47)
-        "user_ram",  # plain RAM (§5.52)
-    }
-)
-
-#: ECAT-written side effects that act only on a change of their register's value: a write
-#: of the bytes already there runs no hook, so a broadcast that clears what is already
-#: clear costs a copy per slave (decision P20). The others act on every write: AL control,
-#: the EEPROM and MII commands, clear-on-write counters, the DC time loop and latches, the
-#: reset sequence, the start time (auto-activation).
-CHANGE_ONLY_SIDE_EFFECTS = frozenset(
-    {
-        "fmmu",  # recompiles the FMMU maps from memory (§5.48)
-        "sm_config",  # restores the old value while the SM is enabled (§5.49)
-        "sm_activate",  # acts on changed bits only (§5.49 Table 90)
-        "station_address",  # the address map is rebuilt from memory (§5.9)
-        "dl_control",  # DL status is recomputed from memory and links (§5.17)
-        "ecat_event_mask",  # the IRQ field is recomputed (§5.29)
-        "wd_divider",  # the watchdog's times are recomputed (§5.39)
-        "wd_time_pd",  # (§5.41)
-        "wd_time_pdi",  # no action (§5.40)
-        "dc_system_time_offset",  # the SYNC deadlines are recomputed (Table 96)
-        "dc_system_time_delay",  # no action (Table 97)
-        "dc_cyclic_unit_control",  # no action (Table 104)
-        "dc_cycle_time",  # restores the old value for a non-owner (Tables 112, 113)
-        "dc_latch_control",  # restores the old value for a non-owner (Tables 114, 115)
-        "dc_activation",  # acts on a changed value only (Table 105)
-    }
-)
-#: the six FMMUs' registers, one block for the hook: it recompiles them all at once
-_FMMU_BLOCK = N_FMMU * FMMU_STRIDE
 
 #: the logical commands as plain ints (compiled: C constants)
 _LRD = int(Cmd.LRD)
@@ -177,10 +96,6 @@ def _put32(m: bytearray, a: int, v: int) -> None:
     m[a + 1] = (v >> 8) & 0xFF
     m[a + 2] = (v >> 16) & 0xFF
     m[a + 3] = (v >> 24) & 0xFF
-
-
-Hook = Callable[["Esc", int, int, bytes], None]
-ReadHook = Callable[["Esc", int, int], None]
 
 
 class FrameContext:
@@ -218,81 +133,6 @@ class FrameContext:
         self.pending: set[int] = set()
         #: positions of ESCs with an EEPROM image to persist
         self.flush: set[int] = set()
-
-
-@dataclass(frozen=True, slots=True)
-class _Tables:
-    ecat_wmask: bytes
-    pdi_wmask: bytes
-    ecat_w_hooked: bytes
-    ecat_w_change: bytes
-    ecat_r_hooked: bytes
-    pdi_w_hooked: bytes
-    pdi_r_hooked: bytes
-    ecat_w: tuple[tuple[Hook, int, int] | None, ...]
-    ecat_r: tuple[tuple[ReadHook, int, int] | None, ...]
-    pdi_w: tuple[tuple[Hook, int, int] | None, ...]
-    pdi_r: tuple[tuple[ReadHook, int, int] | None, ...]
-    resets: tuple[tuple[int, int, int], ...]
-
-
-def _mask_bytes(rows: tuple[Register, ...], attr: str) -> bytes:
-    out = bytearray(REGISTER_END)
-    for r in rows:
-        if not r.available:
-            continue
-        m = getattr(r, attr)
-        out[r.addr : r.addr + r.size] = m.to_bytes(r.size, "little")
-    return bytes(out)
-
-
-@cache
-def tables() -> _Tables:
-    """Compile the register table into byte masks and per-address hook lists (once)."""
-    rows = load_registers()
-    maps: dict[str, list[tuple[object, int, int] | None]] = {
-        k: [None] * REGISTER_END for k in ("_ew_", "_er_", "_pw_", "_pr_")
-    }
-    bits = {k: bytearray(REGISTER_END) for k in maps}
-    change = bytearray(REGISTER_END)
-    for r in rows:
-        if r.side_effect is None or not r.available:
-            continue
-        for prefix, lst in maps.items():
-            fn = getattr(Esc, prefix + r.side_effect, None)
-            if fn is None:
-                continue
-            # the FMMU hook recompiles all six: one call per write of the block (P20)
-            ra, rs = (FMMU_BASE, _FMMU_BLOCK) if r.side_effect == "fmmu" else (r.addr, r.size)
-            for a in range(r.addr, r.addr + r.size):
-                lst[a] = (fn, ra, rs)
-                bits[prefix][a] = 1
-                if prefix == "_ew_" and r.side_effect in CHANGE_ONLY_SIDE_EFFECTS:
-                    change[a] = 1
-    return _Tables(
-        ecat_wmask=_mask_bytes(rows, "ecat_wmask"),
-        pdi_wmask=_mask_bytes(rows, "pdi_wmask"),
-        ecat_w_hooked=bytes(bits["_ew_"]),
-        ecat_w_change=bytes(change),
-        ecat_r_hooked=bytes(bits["_er_"]),
-        pdi_w_hooked=bytes(bits["_pw_"]),
-        pdi_r_hooked=bytes(bits["_pr_"]),
-        ecat_w=tuple(maps["_ew_"]),  # type: ignore[arg-type]
-        ecat_r=tuple(maps["_er_"]),  # type: ignore[arg-type]
-        pdi_w=tuple(maps["_pw_"]),  # type: ignore[arg-type]
-        pdi_r=tuple(maps["_pr_"]),  # type: ignore[arg-type]
-        resets=tuple((r.addr, r.size, r.reset) for r in rows if r.available and r.reset),
-    )
-
-
-def hook_names() -> set[str]:
-    """Side-effect names that have at least one hook method on Esc."""
-    out = set()
-    for name in dir(Esc):
-        for prefix in ("_ew_", "_er_", "_pw_", "_pr_"):
-            if name.startswith(prefix):
-                out.add(name[len(prefix) :])
-    return out
 
 
 class Esc(SmHost):
@@ -338,6 +178,7 @@ class Esc(SmHost):
         "sm",
         "sm_windows",
         "t",
+        "units",
         "wd",
         "wired",
         "wr_e",
@@ -376,12 +217,15 @@ class Esc(SmHost):
         self.ecat_r_hooks = t.ecat_r
         self.pdi_r_hooks = t.pdi_r
         self.sm = [SyncManager(self, n) for n in range(N_SM)]
-        self.eeprom = EepromUnit(self.mem, sii, self._eeprom_written)
+        self.eeprom = EepromUnit(self, sii, self._eeprom_written)
         self.dc = DcUnit(
-            self.mem, position, start_ns=dc_start_ns, drift_ppm=dc_drift_ppm, hop_ns=dc_hop_ns
+            self, position, start_ns=dc_start_ns, drift_ppm=dc_drift_ppm, hop_ns=dc_hop_ns
         )
-        self.wd = Watchdog(self.mem)
-        self.mii = MiiUnit(self.mem)
+        self.wd = Watchdog(self)
+        self.mii = MiiUnit(self)
+        #: the units whose hooks the register table names, at the slots of
+        #: ecatsim/esc/dispatch.py (SLOTS): the side-effect bitmaps hold slot + 1
+        self.units = (self, self.dc, self.mii, self.eeprom, self.wd, *self.sm)
         self.fmmus: tuple[FmmuMap, ...] = ()
         self.sm_windows: tuple[tuple[int, int, SyncManager], ...] = ()
         self.pdram_ok = False
@@ -648,7 +492,7 @@ class Esc(SmHost):
         of every DC cycle reads (decision P16): the register's one read hook, then its
         bytes, without the search through the hook table. Returns the WKC increment (1).
         Ref: TMC8460 §5.50.2 Table 95."""
-        self._er_dc_system_time(DC_SYSTEM_TIME, 8)
+        self.dc._er_system_time(DC_SYSTEM_TIME, 8)
         mv = self.memv
         for k in range(len(out)):
             out[k] = mv[DC_SYSTEM_TIME + k]
@@ -896,13 +740,15 @@ class Esc(SmHost):
             return
         hooks = self.pdi_w_hooks if pdi else self.ecat_w_hooks
         change = self.ecat_w_change
+        units = self.units
         while i >= 0:
             entry = hooks[i]
             if entry is None:  # pragma: no cover - bitmap and list are built together
                 break
             fn, ra, rs = entry
             if pdi or not change[i] or self._changed(ra, rs, old, s):
-                fn(self, ra, rs, self.old_reg(ra, rs, old, s))
+                # the unit at the slot the bitmap holds (slot + 1), ecatsim/esc/dispatch.py
+                fn(units[hooked[i] - 1], ra, rs, self.old_reg(ra, rs, old, s))
             i = _first(hooked, ra + rs, e) if ra + rs < e else -1
 
     def _changed(self, ra: int, rs: int, old: bytes, s: int) -> bool:
@@ -924,6 +770,7 @@ class Esc(SmHost):
         if i < 0:
             return
         hooks = self.pdi_r_hooks if pdi else self.ecat_r_hooks
+        units = self.units
         while i >= 0:
             entry = hooks[i]
             if entry is None:  # pragma: no cover
@@ -931,11 +778,11 @@ class Esc(SmHost):
             fn, ra, rs = entry
             if ra == DC_SYSTEM_TIME:
                 if not pdi:  # the FRMW of every cycle reads it: a C call when compiled (P14)
-                    self._er_dc_system_time(ra, rs)
+                    self.dc._er_system_time(ra, rs)
                 elif s <= ra:  # PDI: latched when the first byte is read (Table 95)
-                    self._pr_dc_system_time(ra, rs)
+                    self.dc._pr_system_time(ra, rs)
             else:
-                fn(self, ra, rs)
+                fn(units[hooked[i] - 1], ra, rs)
             i = _first(hooked, ra + rs, e) if ra + rs < e else -1
 
     def old_reg(self, ra: int, rs: int, old: bytes, s: int) -> bytes:
@@ -946,9 +793,10 @@ class Esc(SmHost):
         hi = min(ra + rs, s + len(old))
         return bytes(self.mem[ra:lo]) + old[lo - s : hi - s] + bytes(self.mem[hi : ra + rs])
 
-    # ================================================================ ECAT-side hooks
+    # ================================================================ the ESC's own hooks
+    # (side_effect esc.<name>; the other units' hooks are theirs: ecatsim/esc/dispatch.py)
 
-    def _ew_station_address(self, ra: int, rs: int, old: bytes) -> None:
+    def _ec_station_address(self, ra: int, rs: int, old: bytes) -> None:
         """Ref: TMC8460 §5.9: the configured station address used by FPxx commands."""
         self.ctx.addr_dirty = True
 
@@ -993,7 +841,7 @@ class Esc(SmHost):
         if self.on_reset is not None:
             self.on_reset()
 
-    def _ew_dl_control(self, ra: int, rs: int, old: bytes) -> None:
+    def _ec_dl_control(self, ra: int, rs: int, old: bytes) -> None:
         """Loop settings change DL status; bit 24 enables the alias. Ref: TMC8460 §5.17."""
         self.update_dl_status()
         self.ctx.topology_dirty = True
@@ -1030,7 +878,7 @@ class Esc(SmHost):
         """Reading AL status clears ECAT event 0x0210.3. Ref: TMC8460 §5.21 note *."""
         self._clr_ecat_event(ECAT_EV_AL_STATUS)
 
-    def _ew_ecat_event_mask(self, ra: int, rs: int, old: bytes) -> None:
+    def _ec_ecat_event_mask(self, ra: int, rs: int, old: bytes) -> None:
         """Ref: TMC8460 §5.29 (mask for the IRQ field)."""
         self._irq_update()
 
@@ -1051,184 +899,11 @@ class Esc(SmHost):
         """Writing any lost link counter clears 0x0310-0x0313. Ref: TMC8460 §5.38."""
         self.mem[LOST_LINK_COUNTER : LOST_LINK_COUNTER + 4] = bytes(4)
 
-    def _ew_wd_divider(self, ra: int, rs: int, old: bytes) -> None:
-        """Ref: TMC8460 §5.39."""
-        self.wd.reconfigure()
-
-    def _ew_wd_time_pdi(self, ra: int, rs: int, old: bytes) -> None:
-        """Ref: TMC8460 §5.40 (the PDI watchdog is kept reloaded by the firmware)."""
-
-    def _ew_wd_time_pd(self, ra: int, rs: int, old: bytes) -> None:
-        """Ref: TMC8460 §5.41."""
-        self.wd.reconfigure()
-
-    def _pr_wd_status_pd(self, ra: int, rs: int) -> None:
-        """PDI read of 0x0440 clears AL event 0x0220.6. Ref: TMC8460 §5.42 note *."""
-        self.clr_al_event(EV_WATCHDOG_PD)
-
-    def _ew_wd_counter(self, ra: int, rs: int, old: bytes) -> None:
-        """Writing either watchdog counter clears both. Ref: TMC8460 §5.43, §5.44."""
-        self.mem[WD_COUNTER_PD] = 0
-        self.mem[WD_COUNTER_PDI] = 0
-
-    def _ew_eeprom_config(self, ra: int, rs: int, old: bytes) -> None:
-        """Ref: TMC8460 §5.45 Table 60."""
-        self.eeprom.ecat_config_written(self.ctx.frame_no)
-
-    def _pw_eeprom_pdi_access(self, ra: int, rs: int, old: bytes) -> None:
-        """PDI may take the EEPROM only if offered (0x0500.0=1, .1=0). Ref: Table 61."""
-        cfg = self.mem[EEPROM_CONFIG]
-        if not (cfg & 0x01) or cfg & 0x02:
-            self.mem[ra] = old[0]
-        self.eeprom.ownership_changed(self.ctx.frame_no)
-
-    def _eeprom_control(self, ra: int, old: bytes, pdi: bool) -> None:
-        o = old[0] | (old[1] << 8)
-        wrote_cmd = self.wr_s <= ra + 1 < self.wr_e
-        self.eeprom.control_written(o, self.ctx.frame_no, wrote_cmd, pdi)
-        self._esc_config_loaded()
-
-    def _ew_eeprom_control(self, ra: int, rs: int, old: bytes) -> None:
-        """Ref: TMC8460 §5.45 Table 62."""
-        self._eeprom_control(ra, old, False)
-
-    def _pw_eeprom_control(self, ra: int, rs: int, old: bytes) -> None:
-        """The PDI runs the command machine while it has EEPROM control (0x0500.0 or
-        0x0501.0). Ref: TMC8460 §5.45 Tables 59-62."""
-        self._eeprom_control(ra, old, True)
-
-    def _esc_config_loaded(self) -> None:
-        """After an EEPROM reload: a SYNC out unit that 0x0141.2 now disables stops.
-        Ref: TMC8460 §5.26 Table 38 bit 2."""
-        dc = self.dc
-        if not self.mem[ESC_CONFIG] & ESC_CFG_SYNC_OUT and (
-            dc.next_sync0 is not None or dc.next_sync1 is not None
-        ):
-            dc.next_sync0 = dc.next_sync1 = None
-            self.mem[DC_ACTIVATION_STATUS] &= 0xFC
-            self.ctx.timers_dirty = True
-
-    def _er_eeprom_control(self, ra: int, rs: int) -> None:
-        """Ref: TMC8460 §5.45 Table 62 note * (write enable self-clears)."""
-        self.eeprom.ecat_refresh_status(self.ctx.frame_no)
-
-    def _ew_eeprom_address(self, ra: int, rs: int, old: bytes) -> None:
-        """Ref: TMC8460 §5.45 Table 63."""
-        self.eeprom.data_written(ra, old, False)
-
-    def _pw_eeprom_address(self, ra: int, rs: int, old: bytes) -> None:
-        """Ref: TMC8460 §5.45 Table 63."""
-        self.eeprom.data_written(ra, old, True)
-
-    def _ew_eeprom_data(self, ra: int, rs: int, old: bytes) -> None:
-        """Ref: TMC8460 §5.45 Table 64."""
-        self.eeprom.data_written(ra, old, False)
-
-    def _pw_eeprom_data(self, ra: int, rs: int, old: bytes) -> None:
-        """Ref: TMC8460 §5.45 Table 64."""
-        self.eeprom.data_written(ra, old, True)
-
-    # -- MII management interface (TMC8460 §5.46) -----------------------------------------
-
-    def _ew_mii_control(self, ra: int, rs: int, old: bytes) -> None:
-        """ECAT writes 0x0510 only while it has MI control. Ref: §5.46 Table 67 r/(w)."""
-        if self.mii.pdi_owns():
-            self.mem[ra : ra + rs] = old
-            return
-        wrote_cmd = self.wr_s <= ra + 1 < self.wr_e
-        self.mii.control_written(old[0] | (old[1] << 8), wrote_cmd, self.ctx.frame_no, False)
-
-    def _pw_mii_control(self, ra: int, rs: int, old: bytes) -> None:
-        """The PDI writes commands only while it has MI control. Ref: Table 67 r/(w)."""
-        if not self.mii.pdi_owns():
-            self.mem[ra : ra + rs] = old
-            return
-        wrote_cmd = self.wr_s <= ra + 1 < self.wr_e
-        self.mii.control_written(old[0] | (old[1] << 8), wrote_cmd, self.ctx.frame_no, True)
-
-    def _er_mii_control(self, ra: int, rs: int) -> None:
-        """Ref: TMC8460 §5.46 Table 67 note * (write enable self-clears at the next SOF)."""
-        self.mii.refresh_write_enable(self.ctx.frame_no)
-
-    def _pr_mii_control(self, ra: int, rs: int) -> None:
-        """Ref: TMC8460 §5.46 Table 67 note *."""
-        self.mii.refresh_write_enable(self.ctx.frame_no)
-
-    def _ew_mii_phy(self, ra: int, rs: int, old: bytes) -> None:
-        """PHY address, register and data: written by the side with MI control.
-        Ref: TMC8460 §5.46 Tables 68-70 r/(w)."""
-        if self.mii.pdi_owns():
-            self.mem[ra : ra + rs] = old
-        elif ra == MII_PHY_ADDRESS:
-            self.mii.show_address()
-
-    def _pw_mii_phy(self, ra: int, rs: int, old: bytes) -> None:
-        """Ref: TMC8460 §5.46 Tables 68-70 r/(w)."""
-        if not self.mii.pdi_owns():
-            self.mem[ra : ra + rs] = old
-        elif ra == MII_PHY_ADDRESS:
-            self.mii.show_address()
-
-    def _ew_mii_ecat_access(self, ra: int, rs: int, old: bytes) -> None:
-        """ECAT claims or frees MI access only while 0x0517.0 = 0. Ref: Table 71 note."""
-        if self.mem[MII_PDI_ACCESS] & 0x01:
-            self.mem[ra] = old[0]
-
-    def _ew_mii_pdi_access(self, ra: int, rs: int, old: bytes) -> None:
-        """Bit 1 (force PDI access state) resets 0x0517.0. Ref: TMC8460 §5.46 Table 72."""
-        if self.mem[ra] & 0x02:
-            self.mem[ra] &= 0xFE
-        self.mii.ownership_changed()
-
-    def _pw_mii_pdi_access(self, ra: int, rs: int, old: bytes) -> None:
-        """The PDI takes MI access only if ECAT allows it (0x0516.0 = 0, 0x0517.1 = 0) and
-        the EEPROM is loaded (0x0110.0 = 1); it can always give it back. Ref: Table 72."""
-        m = self.mem
-        take = m[ra] & 0x01 and not old[0] & 0x01
-        if take and (m[MII_ECAT_ACCESS] & 0x01 or old[0] & 0x02 or not m[DL_STATUS] & 0x01):
-            m[ra] = old[0]
-        self.mii.ownership_changed()
-
-    def _ew_mii_port_status(self, ra: int, rs: int, old: bytes) -> None:
-        """Writing any PHY port status register clears bits 3 and 5 of all four (by the
-        side with MI control). Ref: TMC8460 §5.46 Table 73."""
-        if not self.mii.pdi_owns():
-            self._clear_port_status()
-
-    def _pw_mii_port_status(self, ra: int, rs: int, old: bytes) -> None:
-        """Ref: TMC8460 §5.46 Table 73 r/(w/clr)."""
-        if self.mii.pdi_owns():
-            self._clear_port_status()
-
-    def _clear_port_status(self) -> None:
-        m = self.mem
-        for a in range(PHY_PORT_STATUS, PHY_PORT_STATUS + 4):
-            m[a] &= ~0x28 & 0xFF
-
-    def _ew_fmmu(self, ra: int, rs: int, old: bytes) -> None:
+    def _ec_fmmu(self, ra: int, rs: int, old: bytes) -> None:
         """Recompile the FMMU maps when any FMMU register changes. Ref: TMC8460 §5.48."""
         self.fmmus = compile_fmmus(self.mem)
         self._route_fmmus()
         self.ctx.logical_dirty = True
-
-    def _ew_sm_config(self, ra: int, rs: int, old: bytes) -> None:
-        """SM start/length/control are writable only while the SM is disabled.
-        Ref: TMC8460 §5.49 Tables 86-88 note r/(w)."""
-        n = (ra - SM_BASE) // SM_STRIDE
-        if self.sm[n].enabled:  # state before this frame's activate byte is applied
-            self.mem[ra : ra + rs] = old
-
-    def _ew_sm_activate(self, ra: int, rs: int, old: bytes) -> None:
-        """Enable/disable an SM, repeat request; a change raises AL event 0x0220.4.
-        Ref: TMC8460 §5.49 Table 90, §5.32 bit 4."""
-        n = (ra - SM_BASE) // SM_STRIDE
-        new = self.mem[ra]
-        if (new ^ old[0]) & 0x01:
-            self._sm_restart(n)
-        elif (new ^ old[0]) & SM_ACT_LATCH_ECAT:
-            self._route_fmmus()  # an SM with ECAT event times is left to the Python path
-        if new != old[0]:
-            self.set_al_event(EV_SM_ACTIVATION)
 
     def _sm_restart(self, n: int) -> None:
         m = self.mem
@@ -1239,17 +914,6 @@ class Esc(SmHost):
             start, length, control, bool(m[base + 6] & 0x01), bool(m[base + 7] & 0x01)
         )
         self._compile_sm_windows()
-
-    def _pr_sm_activate(self, ra: int, rs: int) -> None:
-        """PDI read of an activation register clears AL event 0x0220.4. Ref: Table 90 *."""
-        self.clr_al_event(EV_SM_ACTIVATION)
-
-    def _pw_sm_pdi_control(self, ra: int, rs: int, old: bytes) -> None:
-        """PDI deactivate (bit 0) resets and locks the SM; bit 1 is the repeat ack.
-        Ref: TMC8460 §5.49 Table 91."""
-        n = (ra - SM_BASE) // SM_STRIDE
-        if (self.mem[ra] ^ old[0]) & 0x01:
-            self._sm_restart(n)
 
     def _pr_al_control(self, ra: int, rs: int) -> None:
         """PDI read of AL control clears AL event 0x0220.0 and unlocks the register.
@@ -1270,86 +934,6 @@ class Esc(SmHost):
         """Ref: TMC8460 §5.30 (mask for the PDI interrupt)."""
         self._pdi_irq_update()
 
-    def _ew_dc_receive_time(self, ra: int, rs: int, old: bytes) -> None:
-        """A write to 0x0900 latches the receive times. Ref: TMC8460 §5.50.1 Table 92."""
-        if ra == DC_RECV_TIME_P0:
-            self.dc.latch_receive_times(self.ctx.t_ns)
-            if self.dc.latch_wait:
-                self.ctx.latch_wait = True
-        else:
-            self.mem[ra : ra + rs] = old
-
-    def _er_dc_system_time(self, ra: int, rs: int) -> None:
-        """ECAT read of 0x0910: system time at the frame's SOF. Ref: §5.50.2 Table 95."""
-        self.dc.refresh_system_time(self.ctx.t_ns)
-
-    def _pr_dc_system_time(self, ra: int, rs: int) -> None:
-        """PDI read of 0x0910: the running system time, latched when the first byte is
-        read, at the host time of the PDI access. Ref: TMC8460 §5.50.2 Table 95."""
-        self.dc.latch_system_time(self.ctx.pdi_ns)
-
-    def _ew_dc_system_time(self, ra: int, rs: int, old: bytes) -> None:
-        """ECAT write of 0x0910 feeds the time control loop. Ref: §5.50.2 Table 95."""
-        lo = _get32(self.mem, ra)
-        hi = _get32(self.mem, ra + 4)
-        value = lo | (hi << 32)
-        nbytes = 8 if self.wr_e >= ra + 8 else 4
-        if self.wr_s > ra:
-            return  # compared only if at least the first byte was written
-        if self.dc.system_time_written(self.ctx.t_ns, value, nbytes):
-            self.ctx.timers_dirty = True  # the clock jumped: SYNC deadlines moved
-
-    def _ew_dc_system_time_offset(self, ra: int, rs: int, old: bytes) -> None:
-        """A new offset moves the SYNC deadlines in host time. Ref: TMC8460 §5.50.2 Table 96."""
-        self.ctx.timers_dirty = True
-
-    def _ew_dc_system_time_delay(self, ra: int, rs: int, old: bytes) -> None:
-        """Ref: TMC8460 §5.50.2 Table 97."""
-
-    def _ew_dc_speed_counter_start(self, ra: int, rs: int, old: bytes) -> None:
-        """Writing 0x0930 resets 0x092C and 0x0932. Ref: TMC8460 §5.50.2 Table 99."""
-        self.dc.reset_speed_counter()
-
-    def _ew_dc_filter_depth(self, ra: int, rs: int, old: bytes) -> None:
-        """Writing 0x0934 resets 0x092C; 0x0935 resets the internal speed counter filter
-        only. Ref: TMC8460 §5.50.2 Tables 101, 102."""
-        if ra == DC_TIME_DIFF_FILTER:
-            self.dc.reset_time_difference()
-
-    def _ew_dc_cyclic_unit_control(self, ra: int, rs: int, old: bytes) -> None:
-        """Bit 0: the SYNC out unit, bits 4/5: the latch units, 1 = PDI controlled; the
-        owner writes the unit's registers and gets its events (read where they are
-        used). Ref: TMC8460 §5.50.3 Table 104."""
-
-    def _ecat_sys_now(self) -> int:
-        """The system time at which the frame being processed reaches this ESC."""
-        return self.dc.system_time(self.dc.arrival_ns(self.ctx.t_ns))
-
-    def _sync_owner_is(self, pdi: bool) -> bool:
-        """0x0980.0: the SYNC out unit's registers are written by its owner only.
-        Ref: TMC8460 Table 104, notes of Tables 105, 110, 112, 113."""
-        return bool(self.mem[DC_CYCLIC_UNIT_CONTROL] & CUC_SYNC_PDI) == pdi
-
-    def _activation(self, ra: int, old: bytes, now_sys: int) -> None:
-        self.mem[ra] &= 0x7F  # bit 7 (debug pulse) self-clearing
-        if self.mem[ra] != old[0]:
-            self.dc.activation_written(now_sys)
-            self.ctx.timers_dirty = True
-
-    def _ew_dc_activation(self, ra: int, rs: int, old: bytes) -> None:
-        """Ref: TMC8460 §5.50.4 Table 105 (written by the SYNC unit's owner, 0x0980.0)."""
-        if not self._sync_owner_is(False):
-            self.mem[ra] = old[0]
-            return
-        self._activation(ra, old, self._ecat_sys_now())
-
-    def _pw_dc_activation(self, ra: int, rs: int, old: bytes) -> None:
-        """The PDI runs the SYNC unit when it owns it (0x0980.0 = 1). Ref: Table 105."""
-        if not self._sync_owner_is(True):
-            self.mem[ra] = old[0]
-            return
-        self._activation(ra, old, self.dc.system_time(self.ctx.pdi_ns))
-
     def sync0_tick(self, now_ns: int) -> None:
         """A due SYNC0 pulse: status, and AL event 0x0220.2 if mapped. Ref: §5.32 bit 2."""
         if self.dc.sync0_pulse(now_ns):
@@ -1362,100 +946,10 @@ class Esc(SmHost):
         if self.dc.sync1_pulse():
             self.set_al_event(EV_SYNC1)
 
-    def _pr_dc_sync_status(self, ra: int, rs: int) -> None:
-        """PDI read of 0x098E/0x098F clears AL event 0x0220.2/.3; in acknowledge mode (pulse
-        length 0x0982 = 0) it also clears the SYNC state bit. Ref: Tables 106, 108, 109."""
-        self.clr_al_event(EV_SYNC0 if ra == DC_SYNC0_STATUS else EV_SYNC1)
-        m = self.mem
-        if not (m[DC_PULSE_LENGTH] | m[DC_PULSE_LENGTH + 1]):
-            m[ra] &= 0xFE
-
-    def _start_time(self, ra: int, rs: int, old: bytes, pdi: bool, now_sys: int) -> None:
-        """Start time: written by the SYNC unit's owner while the unit is off. Written as
-        32 bits it is extended to 64 (0x0981.4, or auto-activation 0x0981.3); with
-        auto-activation the write starts the unit. Ref: TMC8460 Tables 105, 110."""
-        m = self.mem
-        act = m[DC_ACTIVATION]
-        if act & 0x01 or not self._sync_owner_is(pdi):
-            m[ra : ra + rs] = old
-            return
-        if act & 0x18 and self.wr_e <= ra + 4:
-            self.dc.extend_start_time(now_sys)
-        if act & 0x08:
-            m[DC_ACTIVATION] = act | 0x01
-            self._activation(DC_ACTIVATION, bytes([act]), now_sys)
-
-    def _ew_dc_start_time(self, ra: int, rs: int, old: bytes) -> None:
-        """Ref: TMC8460 §5.50.4 Table 110."""
-        self._start_time(ra, rs, old, False, self._ecat_sys_now())
-
-    def _pw_dc_start_time(self, ra: int, rs: int, old: bytes) -> None:
-        """Ref: TMC8460 §5.50.4 Table 110."""
-        self._start_time(ra, rs, old, True, self.dc.system_time(self.ctx.pdi_ns))
-
-    def _ew_dc_cycle_time(self, ra: int, rs: int, old: bytes) -> None:
-        """Written by the SYNC unit's owner (0x0980.0). Ref: TMC8460 Tables 112, 113."""
-        if not self._sync_owner_is(False):
-            self.mem[ra : ra + rs] = old
-
-    def _pw_dc_cycle_time(self, ra: int, rs: int, old: bytes) -> None:
-        """Ref: TMC8460 §5.50.4 Tables 112, 113."""
-        if not self._sync_owner_is(True):
-            self.mem[ra : ra + rs] = old
-
-    def _latch_pdi(self, unit: int) -> bool:
-        """0x0980.4/.5: latch unit ``unit`` is PDI controlled. Ref: TMC8460 Table 104."""
-        return bool(self.mem[DC_CYCLIC_UNIT_CONTROL] & (CUC_LATCH0_PDI << unit))
-
-    def _ew_dc_latch_control(self, ra: int, rs: int, old: bytes) -> None:
-        """Written by the latch unit's owner (0x0980.4/.5). Ref: Tables 114, 115."""
-        if self._latch_pdi(ra - DC_LATCH0_CONTROL):
-            self.mem[ra] = old[0]
-
-    def _pw_dc_latch_control(self, ra: int, rs: int, old: bytes) -> None:
-        """Ref: TMC8460 §5.50.5 Tables 114, 115."""
-        if not self._latch_pdi(ra - DC_LATCH0_CONTROL):
-            self.mem[ra] = old[0]
-
-    def _latch_time_read(self, ra: int, pdi: bool) -> bool:
-        """The owner's read of a latch time clears its event flag; True if no unit of that
-        owner has an event flag left. Ref: TMC8460 Tables 116-121."""
-        idx = (ra - DC_LATCH0_POS) // 8
-        unit = idx >> 1
-        if self._latch_pdi(unit) != pdi:
-            return False
-        m = self.mem
-        m[DC_LATCH0_STATUS + unit] &= ~(1 << (idx & 1)) & 0xFF
-        return not any(self._latch_pdi(u) == pdi and m[DC_LATCH0_STATUS + u] & 0x03 for u in (0, 1))
-
-    def _er_dc_latch_time(self, ra: int, rs: int) -> None:
-        """ECAT read of an ECAT-controlled latch time clears its status flag, and the DC
-        latch event 0x0210.0 once no such flag is left. Ref: Tables 118-121; Table 45."""
-        if self._latch_time_read(ra, False):
-            self._clr_ecat_event(ECAT_EV_DC_LATCH)
-
-    def _pr_dc_latch_time(self, ra: int, rs: int) -> None:
-        """PDI read of a PDI-controlled latch time clears its status flag, and AL event
-        0x0220.1 once no such flag is left. Ref: Tables 118-121 note *; Table 46 bit 1."""
-        if self._latch_time_read(ra, True):
-            self.clr_al_event(EV_DC_LATCH)
-
     def latch_input(self, unit: int, level: bool, host_ns: int) -> None:
-        """The LATCH ``unit`` pin is driven to ``level`` at host time ``host_ns``. The
-        latch inputs work beside the SYNC outputs whatever 0x0151 bits 2/6 say (Table 42
-        note *), while 0x0141.3 has the latch in unit enabled. A captured edge raises the
-        DC latch event of the unit's owner: ECAT 0x0210.0 or AL 0x0220.1 (0x0980.4/.5).
-        Ref: TMC8460 §5.28.2 Table 42, §5.26 Table 38, §5.50.3 Table 104, §5.50.5."""
-        m = self.mem
-        if not m[ESC_CONFIG] & ESC_CFG_LATCH_IN:
-            return  # the latch in unit is disabled (power saving)
-        if bool(m[DC_LATCH0_STATUS + unit] & 0x04) == level:
-            return  # no edge
-        if self.dc.latch_edge(unit, level, host_ns):
-            if self._latch_pdi(unit):
-                self.set_al_event(EV_DC_LATCH)
-            else:
-                self._set_ecat_event(ECAT_EV_DC_LATCH)
+        """The LATCH ``unit`` pin is driven to ``level`` at host time ``host_ns`` (the DC
+        unit's latch in unit). Ref: TMC8460 §5.50.5."""
+        self.dc.latch_input(unit, level, host_ns)
 
     # -- SyncManager event times (TMC8460 §5.50.6) ----------------------------------------
 
@@ -1476,3 +970,26 @@ class Esc(SmHost):
                 self.sm_event_time(DC_PDI_START_EVENT_TIME)
             if last:
                 self.sm_event_time(DC_PDI_CHANGE_EVENT_TIME)
+
+
+def unit_classes() -> dict[str, type]:
+    """The class of each unit a register row's side effect may name."""
+    return {
+        "esc": Esc,
+        "dc": DcUnit,
+        "mii": MiiUnit,
+        "eeprom": EepromUnit,
+        "wd": Watchdog,
+        "sm": SyncManager,
+    }
+
+
+@cache
+def tables() -> Tables:
+    """The register table compiled for the ESC (once): ecatsim/esc/dispatch.py."""
+    return compile_tables(unit_classes())
+
+
+def hook_names() -> set[str]:
+    """``<unit>.<name>`` of the side effects that have at least one hook method."""
+    return dispatch.hook_names(unit_classes())

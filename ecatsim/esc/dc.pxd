@@ -11,7 +11,14 @@ from libc.stdint cimport int64_t
 cdef unsigned long long MASK64, HALF64
 cdef long long HALF32, NO_STAMP, LATER
 # the registers, imported from regs.py: C constants here
-cdef long long DC_ACTIVATION, DC_ACTIVATION_STATUS, DC_LATCH0_CONTROL, DC_LATCH0_POS, DC_LATCH0_STATUS, DC_NEXT_SYNC1, DC_RECV_TIME_P0, DC_RECV_TIME_PU, DC_SPEED_COUNTER_DIFF, DC_SPEED_COUNTER_START, DC_START_TIME, DC_SYNC0_CYCLE, DC_SYNC0_STATUS, DC_SYNC1_CYCLE, DC_SYNC1_STATUS, DC_SYSTEM_TIME, DC_SYSTEM_TIME_DELAY, DC_SYSTEM_TIME_DIFF, DC_SYSTEM_TIME_OFFSET, ESC_CFG_SYNC_OUT, ESC_CONFIG, SYNC_LATCH_CONFIG
+cdef long long CUC_LATCH0_PDI, CUC_SYNC_PDI, DC_ACTIVATION, DC_ACTIVATION_STATUS
+cdef long long DC_CYCLIC_UNIT_CONTROL, DC_LATCH0_CONTROL, DC_LATCH0_POS, DC_LATCH0_STATUS
+cdef long long DC_NEXT_SYNC1, DC_PULSE_LENGTH, DC_RECV_TIME_P0, DC_RECV_TIME_PU
+cdef long long DC_SPEED_COUNTER_DIFF, DC_SPEED_COUNTER_START, DC_START_TIME, DC_SYNC0_CYCLE
+cdef long long DC_SYNC0_STATUS, DC_SYNC1_CYCLE, DC_SYNC1_STATUS, DC_SYSTEM_TIME
+cdef long long DC_SYSTEM_TIME_DELAY, DC_SYSTEM_TIME_DIFF, DC_SYSTEM_TIME_OFFSET
+cdef long long DC_TIME_DIFF_FILTER, ECAT_EV_DC_LATCH, ESC_CFG_LATCH_IN, ESC_CFG_SYNC_OUT
+cdef long long ESC_CONFIG, EV_DC_LATCH, EV_SYNC0, EV_SYNC1, SYNC_LATCH_CONFIG
 
 
 @cython.locals(k="long long")
@@ -29,6 +36,9 @@ cdef void _put32(bytearray m, long long a, unsigned long long v) except *
 
 @cython.final
 cdef class DcUnit:
+    # the ESC (ecatsim.esc.core.Esc): its frame context, write range and events, for the
+    # register hooks
+    cdef public object esc
     cdef public bytearray mem
     cdef public long long position, hop_ns, turnaround_ns, sync1_countdown
     cdef public long long arrive_ns, latch_wait
@@ -65,3 +75,8 @@ cdef class DcUnit:
     cpdef bint sync1_pulse(self) except -1
     @cython.locals(lim="long long", x="long long", m=bytearray)
     cpdef void _speed_counter_diff(self, long long start) except *
+    # the register hooks that the frames of every DC cycle run: C calls from the ESC
+    cpdef void _er_system_time(self, long long ra, long long rs) except *
+    cpdef void _pr_system_time(self, long long ra, long long rs) except *
+    @cython.locals(value="unsigned long long", nbytes="long long")
+    cpdef void _ew_system_time(self, long long ra, long long rs, object old) except *

@@ -9,14 +9,19 @@ Ref: TMC8460 §5.50.1 (receive times), §5.50.2 Tables 95-103 (time loop control
 from __future__ import annotations
 
 import struct
+from typing import TYPE_CHECKING
 
 from ecatsim.esc.regs import (  # compiled: C constants (dc.pxd)
+    CUC_LATCH0_PDI,
+    CUC_SYNC_PDI,
     DC_ACTIVATION,
     DC_ACTIVATION_STATUS,
+    DC_CYCLIC_UNIT_CONTROL,
     DC_LATCH0_CONTROL,
     DC_LATCH0_POS,
     DC_LATCH0_STATUS,
     DC_NEXT_SYNC1,
+    DC_PULSE_LENGTH,
     DC_RECV_TIME_P0,
     DC_RECV_TIME_PU,
     DC_SPEED_COUNTER_DIFF,
@@ -30,10 +35,19 @@ from ecatsim.esc.regs import (  # compiled: C constants (dc.pxd)
     DC_SYSTEM_TIME_DELAY,
     DC_SYSTEM_TIME_DIFF,
     DC_SYSTEM_TIME_OFFSET,
+    DC_TIME_DIFF_FILTER,
+    ECAT_EV_DC_LATCH,
+    ESC_CFG_LATCH_IN,
     ESC_CFG_SYNC_OUT,
     ESC_CONFIG,
+    EV_DC_LATCH,
+    EV_SYNC0,
+    EV_SYNC1,
     SYNC_LATCH_CONFIG,
 )
+
+if TYPE_CHECKING:
+    from ecatsim.esc.core import Esc
 
 _U32 = struct.Struct("<I")
 _U64 = struct.Struct("<Q")
@@ -86,11 +100,13 @@ def _put32(m: bytearray, a: int, v: int) -> None:
 
 
 class DcUnit:
-    """Time base and time-loop control of one ESC."""
+    """Time base and time-loop control of one ESC, and the hooks of its registers
+    0x0900-0x09FF (the ESC ``esc`` gives the frame's time and the event registers)."""
 
     __slots__ = (
         "arrive_ns",
         "drift_ppm",
+        "esc",
         "hop_ns",
         "latch_wait",
         "local_ref",
@@ -109,7 +125,7 @@ class DcUnit:
 
     def __init__(
         self,
-        mem: bytearray,
+        esc: Esc,
         position: int,
         *,
         start_ns: int = 0,
@@ -117,7 +133,8 @@ class DcUnit:
         hop_ns: int = 500,
         turnaround_ns: int = 200,
     ) -> None:
-        self.mem = mem
+        self.esc = esc
+        self.mem = esc.mem
         self.position = position
         self.drift_ppm = drift_ppm
         self.hop_ns = hop_ns
@@ -434,3 +451,203 @@ class DcUnit:
     def reset_time_difference(self) -> None:
         """Writing 0x0934 resets the system time difference 0x092C. Ref: Table 101."""
         _U32.pack_into(self.mem, DC_SYSTEM_TIME_DIFF, 0)
+
+    # -- register hooks (ecatsim/esc/dispatch.py: side_effect dc.<name>) -----------------
+
+    def _ew_receive_time(self, ra: int, rs: int, old: bytes) -> None:
+        """A write to 0x0900 latches the receive times. Ref: TMC8460 §5.50.1 Table 92."""
+        if ra == DC_RECV_TIME_P0:
+            ctx = self.esc.ctx
+            self.latch_receive_times(ctx.t_ns)
+            if self.latch_wait:
+                ctx.latch_wait = True
+        else:
+            self.mem[ra : ra + rs] = old
+
+    def _er_system_time(self, ra: int, rs: int) -> None:
+        """ECAT read of 0x0910: system time at the frame's SOF. Ref: §5.50.2 Table 95."""
+        self.refresh_system_time(self.esc.ctx.t_ns)
+
+    def _pr_system_time(self, ra: int, rs: int) -> None:
+        """PDI read of 0x0910: the running system time, latched when the first byte is
+        read, at the host time of the PDI access. Ref: TMC8460 §5.50.2 Table 95."""
+        self.latch_system_time(self.esc.ctx.pdi_ns)
+
+    def _ew_system_time(self, ra: int, rs: int, old: bytes) -> None:
+        """ECAT write of 0x0910 feeds the time control loop, compared only if at least
+        the first byte was written. Ref: TMC8460 §5.50.2 Table 95."""
+        esc = self.esc
+        if esc.wr_s > ra:
+            return
+        value = _get32(self.mem, ra) | (_get32(self.mem, ra + 4) << 32)
+        nbytes = 8 if esc.wr_e >= ra + 8 else 4
+        ctx = esc.ctx
+        if self.system_time_written(ctx.t_ns, value, nbytes):
+            ctx.timers_dirty = True  # the clock jumped: SYNC deadlines moved
+
+    def _ec_system_time_offset(self, ra: int, rs: int, old: bytes) -> None:
+        """A new offset moves the SYNC deadlines in host time. Ref: TMC8460 §5.50.2 Table 96."""
+        self.esc.ctx.timers_dirty = True
+
+    def _ec_system_time_delay(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.50.2 Table 97 (read where it is used)."""
+
+    def _ew_speed_counter_start(self, ra: int, rs: int, old: bytes) -> None:
+        """Writing 0x0930 resets 0x092C and 0x0932. Ref: TMC8460 §5.50.2 Table 99."""
+        self.reset_speed_counter()
+
+    def _ew_filter_depth(self, ra: int, rs: int, old: bytes) -> None:
+        """Writing 0x0934 resets 0x092C; 0x0935 resets the internal speed counter filter
+        only. Ref: TMC8460 §5.50.2 Tables 101, 102."""
+        if ra == DC_TIME_DIFF_FILTER:
+            self.reset_time_difference()
+
+    def _ec_cyclic_unit_control(self, ra: int, rs: int, old: bytes) -> None:
+        """Bit 0: the SYNC out unit, bits 4/5: the latch units, 1 = PDI controlled; the
+        owner writes the unit's registers and gets its events (read where they are
+        used). Ref: TMC8460 §5.50.3 Table 104."""
+
+    def _ecat_sys_now(self) -> int:
+        """The system time at which the frame being processed reaches this ESC."""
+        return self.system_time(self.arrival_ns(self.esc.ctx.t_ns))
+
+    def _pdi_sys_now(self) -> int:
+        """The system time of the PDI access in progress."""
+        return self.system_time(self.esc.ctx.pdi_ns)
+
+    def _sync_owner_is(self, pdi: bool) -> bool:
+        """0x0980.0: the SYNC out unit's registers are written by its owner only.
+        Ref: TMC8460 §5.50.3 Table 104, notes of Tables 105, 110, 112, 113."""
+        return bool(self.mem[DC_CYCLIC_UNIT_CONTROL] & CUC_SYNC_PDI) == pdi
+
+    def _activation(self, ra: int, old: int, now_sys: int) -> None:
+        self.mem[ra] &= 0x7F  # bit 7 (debug pulse) self-clearing
+        if self.mem[ra] != old:
+            self.activation_written(now_sys)
+            self.esc.ctx.timers_dirty = True
+
+    def _ec_activation(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.50.4 Table 105 (written by the SYNC unit's owner, 0x0980.0)."""
+        if not self._sync_owner_is(False):
+            self.mem[ra] = old[0]
+            return
+        self._activation(ra, old[0], self._ecat_sys_now())
+
+    def _pw_activation(self, ra: int, rs: int, old: bytes) -> None:
+        """The PDI runs the SYNC unit when it owns it (0x0980.0 = 1). Ref: TMC8460
+        §5.50.4 Table 105."""
+        if not self._sync_owner_is(True):
+            self.mem[ra] = old[0]
+            return
+        self._activation(ra, old[0], self._pdi_sys_now())
+
+    def _pr_sync_status(self, ra: int, rs: int) -> None:
+        """PDI read of 0x098E/0x098F clears AL event 0x0220.2/.3; in acknowledge mode (pulse
+        length 0x0982 = 0) it also clears the SYNC state bit. Ref: TMC8460 §5.50.4 Tables
+        106, 108, 109."""
+        self.esc.clr_al_event(EV_SYNC0 if ra == DC_SYNC0_STATUS else EV_SYNC1)
+        m = self.mem
+        if not (m[DC_PULSE_LENGTH] | m[DC_PULSE_LENGTH + 1]):
+            m[ra] &= 0xFE
+
+    def _start_time(self, ra: int, rs: int, old: bytes, pdi: bool, now_sys: int) -> None:
+        """Start time: written by the SYNC unit's owner while the unit is off. Written as
+        32 bits it is extended to 64 (0x0981.4, or auto-activation 0x0981.3); with
+        auto-activation the write starts the unit. Ref: TMC8460 Tables 105, 110."""
+        m = self.mem
+        act = m[DC_ACTIVATION]
+        if act & 0x01 or not self._sync_owner_is(pdi):
+            m[ra : ra + rs] = old
+            return
+        if act & 0x18 and self.esc.wr_e <= ra + 4:
+            self.extend_start_time(now_sys)
+        if act & 0x08:
+            m[DC_ACTIVATION] = act | 0x01
+            self._activation(DC_ACTIVATION, act, now_sys)
+
+    def _ew_start_time(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.50.4 Table 110."""
+        self._start_time(ra, rs, old, False, self._ecat_sys_now())
+
+    def _pw_start_time(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.50.4 Table 110."""
+        self._start_time(ra, rs, old, True, self._pdi_sys_now())
+
+    def _ec_cycle_time(self, ra: int, rs: int, old: bytes) -> None:
+        """Written by the SYNC unit's owner (0x0980.0). Ref: TMC8460 §5.50.4 Tables 112,
+        113."""
+        if not self._sync_owner_is(False):
+            self.mem[ra : ra + rs] = old
+
+    def _pw_cycle_time(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.50.4 Tables 112, 113."""
+        if not self._sync_owner_is(True):
+            self.mem[ra : ra + rs] = old
+
+    def latch_pdi(self, unit: int) -> bool:
+        """0x0980.4/.5: latch unit ``unit`` is PDI controlled. Ref: TMC8460 §5.50.3
+        Table 104."""
+        return bool(self.mem[DC_CYCLIC_UNIT_CONTROL] & (CUC_LATCH0_PDI << unit))
+
+    def _ec_latch_control(self, ra: int, rs: int, old: bytes) -> None:
+        """Written by the latch unit's owner (0x0980.4/.5). Ref: TMC8460 §5.50.5 Tables
+        114, 115."""
+        if self.latch_pdi(ra - DC_LATCH0_CONTROL):
+            self.mem[ra] = old[0]
+
+    def _pw_latch_control(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.50.5 Tables 114, 115."""
+        if not self.latch_pdi(ra - DC_LATCH0_CONTROL):
+            self.mem[ra] = old[0]
+
+    def _latch_time_read(self, ra: int, pdi: bool) -> bool:
+        """The owner's read of a latch time clears its event flag; True if no unit of that
+        owner has an event flag left. Ref: TMC8460 §5.50.5 Tables 116-121."""
+        idx = (ra - DC_LATCH0_POS) // 8
+        unit = idx >> 1
+        if self.latch_pdi(unit) != pdi:
+            return False
+        m = self.mem
+        m[DC_LATCH0_STATUS + unit] &= ~(1 << (idx & 1)) & 0xFF
+        return not any(self.latch_pdi(u) == pdi and m[DC_LATCH0_STATUS + u] & 0x03 for u in (0, 1))
+
+    def _er_latch_time(self, ra: int, rs: int) -> None:
+        """ECAT read of an ECAT-controlled latch time clears its status flag, and the DC
+        latch event 0x0210.0 once no such flag is left. Ref: TMC8460 §5.50.5 Tables
+        118-121; §5.31 Table 45."""
+        if self._latch_time_read(ra, False):
+            self.esc._clr_ecat_event(ECAT_EV_DC_LATCH)
+
+    def _pr_latch_time(self, ra: int, rs: int) -> None:
+        """PDI read of a PDI-controlled latch time clears its status flag, and AL event
+        0x0220.1 once no such flag is left. Ref: TMC8460 §5.50.5 Tables 118-121 note *;
+        §5.32 Table 46 bit 1."""
+        if self._latch_time_read(ra, True):
+            self.esc.clr_al_event(EV_DC_LATCH)
+
+    def latch_input(self, unit: int, level: bool, host_ns: int) -> None:
+        """The LATCH ``unit`` pin is driven to ``level`` at host time ``host_ns``. The
+        latch inputs work beside the SYNC outputs whatever 0x0151 bits 2/6 say (Table 42
+        note *), while 0x0141.3 has the latch in unit enabled. A captured edge raises the
+        DC latch event of the unit's owner: ECAT 0x0210.0 or AL 0x0220.1 (0x0980.4/.5).
+        Ref: TMC8460 §5.28.2 Table 42, §5.26 Table 38, §5.50.3 Table 104, §5.50.5."""
+        m = self.mem
+        if not m[ESC_CONFIG] & ESC_CFG_LATCH_IN:
+            return  # the latch in unit is disabled (power saving)
+        if bool(m[DC_LATCH0_STATUS + unit] & 0x04) == level:
+            return  # no edge
+        if self.latch_edge(unit, level, host_ns):
+            if self.latch_pdi(unit):
+                self.esc.set_al_event(EV_DC_LATCH)
+            else:
+                self.esc._set_ecat_event(ECAT_EV_DC_LATCH)
+
+    def esc_config_loaded(self) -> None:
+        """After an EEPROM reload: a SYNC out unit that 0x0141.2 now disables stops.
+        Ref: TMC8460 §5.26 Table 38 bit 2."""
+        if not self.mem[ESC_CONFIG] & ESC_CFG_SYNC_OUT and (
+            self.next_sync0 is not None or self.next_sync1 is not None
+        ):
+            self.next_sync0 = self.next_sync1 = None
+            self.mem[DC_ACTIVATION_STATUS] &= 0xFC
+            self.esc.ctx.timers_dirty = True

@@ -8,9 +8,13 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from ecatsim.esc import regs
 from ecatsim.sii.crc import crc8
+
+if TYPE_CHECKING:
+    from ecatsim.esc.core import Esc
 
 _U16 = struct.Struct("<H")
 _U32 = struct.Struct("<I")
@@ -47,14 +51,17 @@ CONFIG_WORDS = (
 
 
 class EepromUnit:
-    """The ESC side of the SII EEPROM (an I2C EEPROM behind the ESC, not emulation)."""
+    """The ESC side of the SII EEPROM (an I2C EEPROM behind the ESC, not emulation), and
+    the hooks of its registers 0x0500-0x050F (the ESC ``esc`` gives the frame and the
+    write range)."""
 
-    __slots__ = ("image", "mem", "on_write", "we_frame")
+    __slots__ = ("esc", "image", "mem", "on_write", "we_frame")
 
     def __init__(
-        self, mem: bytearray, image: bytearray, on_write: Callable[[], None] | None = None
+        self, esc: Esc, image: bytearray, on_write: Callable[[], None] | None = None
     ) -> None:
-        self.mem = mem
+        self.esc = esc
+        self.mem = esc.mem
         self.image = image
         self.on_write = on_write
         self.we_frame = -1
@@ -213,3 +220,52 @@ class EepromUnit:
         (ECAT or the PDI). Ref: §5.45 Tables 63, 64 (r/(w))."""
         if self.pdi_owns() != pdi:
             self.mem[reg : reg + len(old)] = old
+
+    # -- register hooks (ecatsim/esc/dispatch.py: side_effect eeprom.<name>) -------------
+
+    def _ew_config(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.45 Table 60."""
+        self.ecat_config_written(self.esc.ctx.frame_no)
+
+    def _pw_pdi_access(self, ra: int, rs: int, old: bytes) -> None:
+        """PDI may take the EEPROM only if offered (0x0500.0 = 1, .1 = 0). Ref: TMC8460
+        §5.45 Table 61."""
+        cfg = self.mem[regs.EEPROM_CONFIG]
+        if not (cfg & 0x01) or cfg & 0x02:
+            self.mem[ra] = old[0]
+        self.ownership_changed(self.esc.ctx.frame_no)
+
+    def _control(self, ra: int, old: bytes, pdi: bool) -> None:
+        esc = self.esc
+        wrote_cmd = esc.wr_s <= ra + 1 < esc.wr_e
+        self.control_written(old[0] | (old[1] << 8), esc.ctx.frame_no, wrote_cmd, pdi)
+        esc.dc.esc_config_loaded()
+
+    def _ew_control(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.45 Table 62."""
+        self._control(ra, old, False)
+
+    def _pw_control(self, ra: int, rs: int, old: bytes) -> None:
+        """The PDI runs the command machine while it has EEPROM control (0x0500.0 or
+        0x0501.0). Ref: TMC8460 §5.45 Tables 59-62."""
+        self._control(ra, old, True)
+
+    def _er_control(self, ra: int, rs: int) -> None:
+        """Ref: TMC8460 §5.45 Table 62 note * (write enable self-clears)."""
+        self.ecat_refresh_status(self.esc.ctx.frame_no)
+
+    def _ew_address(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.45 Table 63."""
+        self.data_written(ra, old, False)
+
+    def _pw_address(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.45 Table 63."""
+        self.data_written(ra, old, True)
+
+    def _ew_data(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.45 Table 64."""
+        self.data_written(ra, old, False)
+
+    def _pw_data(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.45 Table 64."""
+        self.data_written(ra, old, True)

@@ -9,7 +9,12 @@ Ref: TMC8460 §5.46 Tables 66-73, §3.4; IEEE 802.3 clause 22 (PHY registers 0-6
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from ecatsim.esc import regs
+
+if TYPE_CHECKING:
+    from ecatsim.esc.core import Esc
 
 # 0x0510 MII management control/status. Ref: TMC8460 §5.46 Table 67.
 WRITE_ENABLE = 0x0001
@@ -40,12 +45,14 @@ READ_ONLY = frozenset({1, 2, 3, 5, 6})
 
 
 class MiiUnit:
-    """The ESC side of the MII management interface and the PHYs on its bus."""
+    """The ESC side of the MII management interface and the PHYs on its bus, and the hooks
+    of its registers 0x0510-0x051B (the ESC ``esc`` gives the frame and the write range)."""
 
-    __slots__ = ("mem", "phys", "we_frame")
+    __slots__ = ("esc", "mem", "phys", "we_frame")
 
-    def __init__(self, mem: bytearray) -> None:
-        self.mem = mem
+    def __init__(self, esc: Esc) -> None:
+        self.esc = esc
+        self.mem = esc.mem
         #: per port: 32 PHY registers (the PHYs are separate chips: an ESC reset keeps them)
         self.phys = [self._phy_reset() for _ in range(N_PHY_PORTS)]
         self.we_frame = -1
@@ -166,3 +173,90 @@ class MiiUnit:
             phy[1] &= ~STATUS_LINK & 0xFFFF
             phy[5] = 0
             phy[6] = 0
+
+    # -- register hooks (ecatsim/esc/dispatch.py: side_effect mii.<name>) ----------------
+
+    def _wrote_cmd(self, ra: int) -> bool:
+        """The write in progress wrote 0x0511 (the command bits 9:8)."""
+        return self.esc.wr_s <= ra + 1 < self.esc.wr_e
+
+    def _ew_control(self, ra: int, rs: int, old: bytes) -> None:
+        """ECAT writes 0x0510 only while it has MI control. Ref: TMC8460 §5.46 Table 67
+        r/(w)."""
+        if self.pdi_owns():
+            self.mem[ra : ra + rs] = old
+            return
+        o = old[0] | (old[1] << 8)
+        self.control_written(o, self._wrote_cmd(ra), self.esc.ctx.frame_no, False)
+
+    def _pw_control(self, ra: int, rs: int, old: bytes) -> None:
+        """The PDI writes commands only while it has MI control. Ref: TMC8460 §5.46
+        Table 67 r/(w)."""
+        if not self.pdi_owns():
+            self.mem[ra : ra + rs] = old
+            return
+        o = old[0] | (old[1] << 8)
+        self.control_written(o, self._wrote_cmd(ra), self.esc.ctx.frame_no, True)
+
+    def _er_control(self, ra: int, rs: int) -> None:
+        """Ref: TMC8460 §5.46 Table 67 note * (write enable self-clears at the next SOF)."""
+        self.refresh_write_enable(self.esc.ctx.frame_no)
+
+    def _pr_control(self, ra: int, rs: int) -> None:
+        """Ref: TMC8460 §5.46 Table 67 note *."""
+        self.refresh_write_enable(self.esc.ctx.frame_no)
+
+    def _ew_phy(self, ra: int, rs: int, old: bytes) -> None:
+        """PHY address, register and data: written by the side with MI control.
+        Ref: TMC8460 §5.46 Tables 68-70 r/(w)."""
+        if self.pdi_owns():
+            self.mem[ra : ra + rs] = old
+        elif ra == regs.MII_PHY_ADDRESS:
+            self.show_address()
+
+    def _pw_phy(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.46 Tables 68-70 r/(w)."""
+        if not self.pdi_owns():
+            self.mem[ra : ra + rs] = old
+        elif ra == regs.MII_PHY_ADDRESS:
+            self.show_address()
+
+    def _ew_ecat_access(self, ra: int, rs: int, old: bytes) -> None:
+        """ECAT claims or frees MI access only while 0x0517.0 = 0. Ref: TMC8460 §5.46
+        Table 71 note."""
+        if self.mem[regs.MII_PDI_ACCESS] & 0x01:
+            self.mem[ra] = old[0]
+
+    def _ew_pdi_access(self, ra: int, rs: int, old: bytes) -> None:
+        """Bit 1 (force PDI access state) resets 0x0517.0. Ref: TMC8460 §5.46 Table 72."""
+        if self.mem[ra] & 0x02:
+            self.mem[ra] &= 0xFE
+        self.ownership_changed()
+
+    def _pw_pdi_access(self, ra: int, rs: int, old: bytes) -> None:
+        """The PDI takes MI access only if ECAT allows it (0x0516.0 = 0, 0x0517.1 = 0) and
+        the EEPROM is loaded (0x0110.0 = 1); it can always give it back. Ref: TMC8460
+        §5.46 Table 72."""
+        m = self.mem
+        take = m[ra] & 0x01 and not old[0] & 0x01
+        if take and (
+            m[regs.MII_ECAT_ACCESS] & 0x01 or old[0] & 0x02 or not m[regs.DL_STATUS] & 0x01
+        ):
+            m[ra] = old[0]
+        self.ownership_changed()
+
+    def _ew_port_status(self, ra: int, rs: int, old: bytes) -> None:
+        """Writing any PHY port status register clears bits 3 and 5 of all four (by the
+        side with MI control). Ref: TMC8460 §5.46 Table 73."""
+        if not self.pdi_owns():
+            self._clear_port_status()
+
+    def _pw_port_status(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.46 Table 73 r/(w/clr)."""
+        if self.pdi_owns():
+            self._clear_port_status()
+
+    def _clear_port_status(self) -> None:
+        m = self.mem
+        for a in range(regs.PHY_PORT_STATUS, regs.PHY_PORT_STATUS + 4):
+            m[a] &= ~0x28 & 0xFF

@@ -1,11 +1,12 @@
 cimport cython
 # The compiled core's declarations for watchdog.py (Cython, pure-Python mode). P2, P13.
 # the registers, imported from regs.py: C constants here
-cdef long long WD_COUNTER_PD, WD_DIVIDER, WD_STATUS_PD, WD_TIME_PD
+cdef long long EV_WATCHDOG_PD, WD_COUNTER_PD, WD_COUNTER_PDI, WD_DIVIDER, WD_STATUS_PD, WD_TIME_PD
 
 
 @cython.final
 cdef class Watchdog:
+    cdef public object esc  # the ESC (ecatsim.esc.core.Esc), for the AL event register
     cdef public bytearray mem
     cdef public long long deadline_ns, increment_ns, timeout_ns
 

@@ -7,23 +7,32 @@ restarted by every ECAT write to an SM with the watchdog trigger bit, and expire
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from ecatsim.esc.regs import (  # compiled: C constants (watchdog.pxd)
+    EV_WATCHDOG_PD,
     WD_COUNTER_PD,
+    WD_COUNTER_PDI,
     WD_DIVIDER,
     WD_STATUS_PD,
     WD_TIME_PD,
 )
 
+if TYPE_CHECKING:
+    from ecatsim.esc.core import Esc
+
 TICK_NS = 40  # 25 MHz
 
 
 class Watchdog:
-    """Process-data watchdog state (the registers live in ESC memory)."""
+    """Process-data watchdog state (the registers live in ESC memory), and the hooks of
+    the watchdog registers 0x0400-0x0443 (the ESC ``esc`` gives the AL event register)."""
 
-    __slots__ = ("deadline_ns", "increment_ns", "mem", "timeout_ns")
+    __slots__ = ("deadline_ns", "esc", "increment_ns", "mem", "timeout_ns")
 
-    def __init__(self, mem: bytearray) -> None:
-        self.mem = mem
+    def __init__(self, esc: Esc) -> None:
+        self.esc = esc
+        self.mem = esc.mem
         self.deadline_ns = 0  # 0: not running
         self.increment_ns = 0
         self.timeout_ns = 0
@@ -62,3 +71,27 @@ class Watchdog:
         if m[WD_COUNTER_PD] < 0xFF:
             m[WD_COUNTER_PD] += 1
         return True
+
+    # -- register hooks (ecatsim/esc/dispatch.py: side_effect wd.<name>) -----------------
+
+    def _ec_divider(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.39 Table 53."""
+        self.reconfigure()
+
+    def _ec_time_pdi(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.40 Table 54 (the PDI watchdog is kept reloaded by the firmware:
+        Esc.set_pdi_watchdog)."""
+
+    def _ec_time_pd(self, ra: int, rs: int, old: bytes) -> None:
+        """Ref: TMC8460 §5.41 Table 55."""
+        self.reconfigure()
+
+    def _pr_status_pd(self, ra: int, rs: int) -> None:
+        """PDI read of 0x0440 clears AL event 0x0220.6. Ref: TMC8460 §5.42 Table 56 note *."""
+        self.esc.clr_al_event(EV_WATCHDOG_PD)
+
+    def _ew_counter(self, ra: int, rs: int, old: bytes) -> None:
+        """Writing either watchdog counter clears both. Ref: TMC8460 §5.43, §5.44 Tables
+        57, 58."""
+        self.mem[WD_COUNTER_PD] = 0
+        self.mem[WD_COUNTER_PDI] = 0

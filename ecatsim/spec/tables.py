@@ -8,79 +8,20 @@ from __future__ import annotations
 
 import importlib.resources
 import itertools
+import re
 from dataclasses import dataclass
 from functools import cache
 from typing import Any
 
 import yaml
 
-#: Side-effect names a register row may carry; each has a hook in ecatsim.esc.core
-#: (or is listed there as passive).
-SIDE_EFFECTS = frozenset(
-    {
-        "station_address",
-        "station_alias",
-        "write_protect",
-        "reset_ecat",
-        "reset_pdi",
-        "dl_control",
-        "rw_offset",
-        "dl_status",
-        "al_control",
-        "al_status",
-        "al_status_code",
-        "led_override",
-        "ecat_event_mask",
-        "al_event_mask",
-        "ecat_event_request",
-        "al_event_request",
-        "rx_error_counter",
-        "ecat_pu_error_counter",
-        "pdi_error_counter",
-        "lost_link_counter",
-        "wd_divider",
-        "wd_time_pdi",
-        "wd_time_pd",
-        "wd_status_pd",
-        "wd_counter",
-        "eeprom_config",
-        "eeprom_pdi_access",
-        "eeprom_control",
-        "eeprom_address",
-        "eeprom_data",
-        "mii_control",
-        "mii_phy",
-        "mii_ecat_access",
-        "mii_pdi_access",
-        "mii_port_status",
-        "fmmu",
-        "sm_config",
-        "sm_status",
-        "sm_activate",
-        "sm_pdi_control",
-        "dc_receive_time",
-        "dc_system_time",
-        "dc_system_time_offset",
-        "dc_system_time_delay",
-        "dc_system_time_difference",
-        "dc_speed_counter_start",
-        "dc_speed_counter_diff",
-        "dc_filter_depth",
-        "dc_latch_mode",
-        "dc_cyclic_unit_control",
-        "dc_activation",
-        "dc_sync_status",
-        "dc_start_time",
-        "dc_next_sync1",
-        "dc_cycle_time",
-        "dc_latch_control",
-        "dc_latch_status",
-        "dc_latch_time",
-        "dc_event_time",
-        "mfcio_parameter_ram",
-        "user_ram",
-    }
-)
+#: The ESC's units a register row's ``side_effect`` may name, as ``<unit>.<name>``: the
+#: ESC itself (addresses, reset, DL, AL, events, counters, FMMUs), the DC unit, the MII
+#: management interface, the EEPROM interface, the process-data watchdog and the
+#: SyncManagers (a repeated row names the n-th). The hooks are methods of the unit's class
+#: (ecatsim/esc/dispatch.py). Ref: TMC8460 §4 Table 11, §5.
+UNITS = frozenset({"esc", "dc", "mii", "eeprom", "wd", "sm"})
+_NAME = re.compile(r"^[a-z][a-z0-9_]*$")
 
 ACCESS = frozenset({"r", "rw", "-"})
 _KEYS = {
@@ -120,6 +61,19 @@ class Register:
     available: bool
     source: str
     note: str
+    #: the repeat index (n of a ``{n}`` name), 0 for a single row: which of the unit's
+    #: instances a repeated row's side effect acts on (the n-th SyncManager)
+    index: int = 0
+
+    @property
+    def unit(self) -> str | None:
+        """The unit the side effect names (``dc`` of ``dc.system_time``)."""
+        return self.side_effect.partition(".")[0] if self.side_effect else None
+
+    @property
+    def hook(self) -> str | None:
+        """The hook name within the unit (``system_time`` of ``dc.system_time``)."""
+        return self.side_effect.partition(".")[2] if self.side_effect else None
 
 
 @dataclass(frozen=True, slots=True)
@@ -166,8 +120,13 @@ def _row(raw: Any, i: int) -> list[Register]:
     if not isinstance(reset, int) or not 0 <= reset <= full:
         raise SpecError(f"{where}: reset does not fit in {size} bytes")
     se = raw.get("side_effect")
-    if se is not None and se not in SIDE_EFFECTS:
-        raise SpecError(f"{where}: unknown side_effect {se!r}")
+    if se is not None:
+        unit, _, hook = str(se).partition(".")
+        if unit not in UNITS or not _NAME.match(hook):
+            raise SpecError(
+                f"{where}: unknown side_effect {se!r}: write <unit>.<name>, unit one of "
+                + ", ".join(sorted(UNITS))
+            )
     rep = raw.get("repeat") or {"count": 1, "stride": 0}
     count, stride = rep.get("count", 1), rep.get("stride", 0)
     out = []
@@ -186,6 +145,7 @@ def _row(raw: Any, i: int) -> list[Register]:
                 available=bool(raw.get("available", True)),
                 source=str(raw["source"]),
                 note=str(raw.get("note", "")),
+                index=n,
             )
         )
     return out

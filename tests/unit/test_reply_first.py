@@ -103,8 +103,8 @@ def test_sm_config_written_while_enabled_keeps_its_value() -> None:
 
 def test_the_fmmu_hook_is_one_block_and_acts_on_a_change_only() -> None:
     t = tables()
-    assert t.ecat_w[0x0600] == (Esc._ew_fmmu, 0x0600, 96)
-    assert t.ecat_w[0x065C] == (Esc._ew_fmmu, 0x0600, 96)
+    assert t.ecat_w[0x0600] == (Esc._ec_fmmu, 0x0600, 96)
+    assert t.ecat_w[0x065C] == (Esc._ec_fmmu, 0x0600, 96)
     assert t.ecat_w_change[0x0600] == 1 and t.ecat_w_change[0x0806] == 1
     assert t.ecat_w_change[0x0120] == 0  # AL control: every write
     assert t.ecat_w_change[0x0502] == 0  # EEPROM control: every write

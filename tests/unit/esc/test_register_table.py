@@ -9,9 +9,11 @@ import itertools
 
 import pytest
 
-from ecatsim.esc.core import PASSIVE_SIDE_EFFECTS, Esc, FrameContext, hook_names, tables
+from ecatsim.esc.core import Esc, FrameContext, hook_names, tables, unit_classes
+from ecatsim.esc.dc import DcUnit
+from ecatsim.esc.dispatch import PASSIVE_SIDE_EFFECTS, compile_tables
 from ecatsim.esc.regs import DC_SYSTEM_TIME
-from ecatsim.spec.tables import SIDE_EFFECTS, SpecError, load_registers, parse_registers
+from ecatsim.spec.tables import UNITS, SpecError, load_registers, parse_registers
 
 
 def test_every_side_effect_in_the_table_has_a_hook_and_back() -> None:
@@ -21,7 +23,7 @@ def test_every_side_effect_in_the_table_has_a_hook_and_back() -> None:
     assert hooks - used == set()
     assert PASSIVE_SIDE_EFFECTS - used == set()
     assert hooks & PASSIVE_SIDE_EFFECTS == set()
-    assert used <= SIDE_EFFECTS
+    assert {u.partition(".")[0] for u in used} <= UNITS
 
 
 def test_the_system_time_read_hook_called_directly_is_the_tables() -> None:
@@ -31,7 +33,7 @@ def test_the_system_time_read_hook_called_directly_is_the_tables() -> None:
     for a in range(DC_SYSTEM_TIME, DC_SYSTEM_TIME + 8):
         entry = t.ecat_r[a]
         assert entry is not None
-        assert entry[0] is Esc._er_dc_system_time
+        assert entry[0] is DcUnit._er_system_time
         assert entry[1:] == (DC_SYSTEM_TIME, 8)
 
 
@@ -107,3 +109,16 @@ def test_malformed_rows_are_named(text: str, fragment: str) -> None:
     with pytest.raises(SpecError) as e:
         parse_registers(text)
     assert fragment in str(e.value)
+
+
+def test_an_ecat_write_hook_runs_on_every_write_or_on_a_change_not_both() -> None:
+    """``_ew_<name>`` and ``_ec_<name>`` of one unit would both claim the register's ECAT
+    write: the dispatch refuses the pair (decision U1)."""
+
+    def hook(unit: object, ra: int, rs: int, old: bytes) -> None:
+        pass  # pragma: no cover - never called
+
+    classes = dict(unit_classes())
+    classes["dc"] = type("Dc", (), {"_ew_activation": hook, "_ec_activation": hook})
+    with pytest.raises(SpecError, match=r"dc\.activation"):
+        compile_tables(classes)
