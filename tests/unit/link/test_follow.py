@@ -1,7 +1,9 @@
 """The CPU follower (decision K5): probe sockets count the EtherCAT frames that arrive by the
 CPU they arrive on, and poll() pins the caller to the CPU most came from. A veth pair in two
 namespaces; this process sends from one CPU, then another (pinning itself to send, so its
-CPU set is checked right after a move only). Root."""
+CPU set is checked right after a move only), and each send returns once a tap on the
+slave's interface has seen the frame: the receive path (and with it the probes' count) has
+run on the sending CPU by then, however late a busy host gets to it. Root."""
 
 from __future__ import annotations
 
@@ -20,6 +22,8 @@ from tests.integration.netns import NetnsPair, in_netns, require_root
 ECAT = b"\xff" * 6 + b"\x02" * 6 + b"\x88\xa4" + bytes(46)
 TAGGED = b"\xff" * 6 + b"\x02" * 6 + b"\x81\x00\x00\x05\x88\xa4" + bytes(42)
 IPV4 = b"\xff" * 6 + b"\x02" * 6 + b"\x08\x00" + bytes(46)
+#: every protocol, for the tap that sees frames pass (linux/if_ether.h)
+ETH_P_ALL = 0x0003
 
 
 def two_cpus() -> tuple[int, int]:
@@ -29,8 +33,32 @@ def two_cpus() -> tuple[int, int]:
     return cpus[0], cpus[1]
 
 
+#: the source address of every frame these tests send
+SRC = ECAT[6:12]
+#: how long a frame may take to pass the slave's interface on a busy host
+SEEN_S = 5.0
+
+
+class Sender:
+    """A packet socket whose send() returns once ``witness`` (a tap on the slave's
+    interface, which sees frames in both directions) has seen the frame."""
+
+    def __init__(self, sock: socket.socket, witness: socket.socket) -> None:
+        self.sock = sock
+        self.witness = witness
+
+    def send(self, frame: bytes) -> None:
+        self.sock.send(frame)
+        end = time.monotonic() + SEEN_S
+        while (left := end - time.monotonic()) > 0:
+            ready = select.select([self.witness], [], [], left)[0]
+            if ready and self.witness.recv(2048)[6:12] == SRC:
+                return
+        pytest.fail(f"a frame sent was not seen on the slave's interface in {SEEN_S} s")
+
+
 @pytest.fixture
-def rig() -> Iterator[tuple[CpuFollower, socket.socket, socket.socket]]:
+def rig() -> Iterator[tuple[CpuFollower, Sender, Sender]]:
     """(follower on the slave end, a sender on the master end, a sender on the slave end);
     this process's CPU set is restored afterwards."""
     require_root("the CPU follower test")
@@ -40,27 +68,29 @@ def rig() -> Iterator[tuple[CpuFollower, socket.socket, socket.socket]]:
             f = CpuFollower(pair.slave_if)
             own = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, 0)
             own.bind((pair.slave_if, 0))
+            witness = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(ETH_P_ALL))
+            witness.bind((pair.slave_if, ETH_P_ALL))
         with in_netns(pair.master_ns):
             master = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, 0)
             master.bind((pair.master_if, 0))
         try:
-            yield f, master, own
+            yield f, Sender(master, witness), Sender(own, witness)
         finally:
             os.sched_setaffinity(0, allowed)
             master.close()
             own.close()
+            witness.close()
             f.close()
 
 
-def send_from(cpu: int, sock: socket.socket, *frames: bytes) -> None:
+def send_from(cpu: int, sock: Sender, *frames: bytes) -> None:
     os.sched_setaffinity(0, {cpu})
     for frame in frames:
         sock.send(frame)
-    time.sleep(0.02)
 
 
 def test_probes_count_ethercat_frames_by_the_cpu_they_arrive_on(
-    rig: tuple[CpuFollower, socket.socket, socket.socket],
+    rig: tuple[CpuFollower, Sender, Sender],
 ) -> None:
     f, master, own = rig
     a, b = two_cpus()
@@ -74,7 +104,7 @@ def test_probes_count_ethercat_frames_by_the_cpu_they_arrive_on(
 
 
 def test_poll_pins_to_the_cpu_most_frames_came_from(
-    rig: tuple[CpuFollower, socket.socket, socket.socket],
+    rig: tuple[CpuFollower, Sender, Sender],
 ) -> None:
     f, master, _ = rig
     a, b = two_cpus()
@@ -102,7 +132,7 @@ def readable(f: CpuFollower) -> bool:
 
 
 def test_its_descriptor_is_readable_when_frames_come_in_on_another_cpu(
-    rig: tuple[CpuFollower, socket.socket, socket.socket],
+    rig: tuple[CpuFollower, Sender, Sender],
 ) -> None:
     """The daemon's wait watches fileno(): frames on the CPU it is pinned to leave it quiet
     (nothing runs per frame), a frame on another CPU makes it readable until poll()."""
@@ -124,7 +154,7 @@ def test_its_descriptor_is_readable_when_frames_come_in_on_another_cpu(
 
 
 def test_a_cpu_the_daemon_may_not_use_is_not_followed(
-    rig: tuple[CpuFollower, socket.socket, socket.socket],
+    rig: tuple[CpuFollower, Sender, Sender],
 ) -> None:
     f, master, _ = rig
     a, b = two_cpus()
@@ -134,7 +164,7 @@ def test_a_cpu_the_daemon_may_not_use_is_not_followed(
 
 
 def test_a_master_that_keeps_moving_away_pauses_the_following(
-    rig: tuple[CpuFollower, socket.socket, socket.socket],
+    rig: tuple[CpuFollower, Sender, Sender],
 ) -> None:
     """More than CHASE_MOVES moves within a second: the daemon stops following for
     CHASE_PAUSE_NS and may run on all its CPUs again."""
