@@ -492,7 +492,7 @@ class Esc(SmHost):
         of every DC cycle reads (decision P16): the register's one read hook, then its
         bytes, without the search through the hook table. Returns the WKC increment (1).
         Ref: TMC8460 §5.50.2 Table 95."""
-        self.dc._er_system_time(DC_SYSTEM_TIME, 8)
+        self.dc.refresh_system_time(self.ctx.t_ns)  # the hook DcUnit._er_system_time, inline
         mv = self.memv
         for k in range(len(out)):
             out[k] = mv[DC_SYSTEM_TIME + k]
@@ -777,10 +777,12 @@ class Esc(SmHost):
                 break
             fn, ra, rs = entry
             if ra == DC_SYSTEM_TIME:
-                if not pdi:  # the FRMW of every cycle reads it: a C call when compiled (P14)
-                    self.dc._er_system_time(ra, rs)
+                # the FRMW of every cycle reads it: the hooks DcUnit._er_system_time and
+                # _pr_system_time inline, C calls with the frame's times when compiled (P14)
+                if not pdi:
+                    self.dc.refresh_system_time(self.ctx.t_ns)
                 elif s <= ra:  # PDI: latched when the first byte is read (Table 95)
-                    self.dc._pr_system_time(ra, rs)
+                    self.dc.latch_system_time(self.ctx.pdi_ns)
             else:
                 fn(units[hooked[i] - 1], ra, rs)
             i = _first(hooked, ra + rs, e) if ra + rs < e else -1
