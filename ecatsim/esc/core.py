@@ -30,6 +30,8 @@ from ecatsim.esc.regs import (
     DC_ECAT_EVENT_TIME,
     DC_PDI_CHANGE_EVENT_TIME,
     DC_PDI_START_EVENT_TIME,
+    DC_SYNC0_STATUS,
+    DC_SYNC1_STATUS,
     DC_SYSTEM_TIME,
     DL_CONTROL,
     DL_STATUS,
@@ -783,6 +785,10 @@ class Esc(SmHost):
                     self.dc.refresh_system_time(self.ctx.t_ns)
                 elif s <= ra:  # PDI: latched when the first byte is read (Table 95)
                     self.dc.latch_system_time(self.ctx.pdi_ns)
+            elif pdi and (ra == DC_SYNC0_STATUS or ra == DC_SYNC1_STATUS):
+                # the firmware acknowledges every SYNC0 pulse: the hook
+                # DcUnit._pr_sync_status as C calls when compiled (P25)
+                self.clr_al_event(self.dc.sync_status_read(ra))
             else:
                 fn(units[hooked[i] - 1], ra, rs)
             i = _first(hooked, ra + rs, e) if ra + rs < e else -1

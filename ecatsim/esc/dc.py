@@ -545,10 +545,17 @@ class DcUnit:
         """PDI read of 0x098E/0x098F clears AL event 0x0220.2/.3; in acknowledge mode (pulse
         length 0x0982 = 0) it also clears the SYNC state bit. Ref: TMC8460 §5.50.4 Tables
         106, 108, 109."""
-        self.esc.clr_al_event(EV_SYNC0 if ra == DC_SYNC0_STATUS else EV_SYNC1)
+        self.esc.clr_al_event(self.sync_status_read(ra))
+
+    def sync_status_read(self, ra: int) -> int:
+        """The PDI read of 0x098E/0x098F (``ra``) without its AL event: in acknowledge mode
+        (pulse length 0x0982 = 0) the SYNC state bit clears; returns the AL event bit the
+        read clears (the ESC calls this directly for the firmware's acknowledge of every
+        cycle, decision P25). Ref: TMC8460 §5.50.4 Tables 106, 108, 109."""
         m = self.mem
         if not (m[DC_PULSE_LENGTH] | m[DC_PULSE_LENGTH + 1]):
             m[ra] &= 0xFE
+        return EV_SYNC0 if ra == DC_SYNC0_STATUS else EV_SYNC1
 
     def _start_time(self, ra: int, rs: int, old: bytes, pdi: bool, now_sys: int) -> None:
         """Start time: written by the SYNC unit's owner while the unit is off. Written as
