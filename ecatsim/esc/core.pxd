@@ -102,6 +102,9 @@ cdef class Esc(SmHost):
     cpdef void sync1_tick(self) except *
     @cython.locals(end="long long", ws="long long", we="long long")
     cpdef int64_t ecat_read(self, long long ado, unsigned char[:] out) except -1
+    @cython.locals(n="long long", k="long long", m="long long", wmask=bytes, mem=bytearray,
+                   ctx=FrameContext)
+    cpdef int64_t ecat_write_system_time(self, bytes data) except -1
     @cython.locals(n="long long", k="long long", tmp="unsigned char[:]")
     cpdef int64_t ecat_read_or(self, long long ado, unsigned char[:] data) except -1
     @cython.locals(mv="unsigned char[:]", k="long long")

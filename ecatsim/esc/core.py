@@ -500,6 +500,25 @@ class Esc(SmHost):
             out[k] = mv[DC_SYSTEM_TIME + k]
         return 1
 
+    def ecat_write_system_time(self, data: bytes) -> int:
+        """``ecat_write(DC_SYSTEM_TIME, data)`` for the 4 or 8 bytes a writer of the DC time
+        loops gets after the reply (decisions P7, P26): the register's masked bytes, then
+        its one write hook's work (DcUnit._ew_system_time), without the search through
+        the hook table. Returns the WKC increment (1). Ref: TMC8460 §5.50.2 Table 95."""
+        n = len(data)
+        wmask = self.ecat_wmask
+        mem = self.mem
+        for k in range(n):
+            m = wmask[DC_SYSTEM_TIME + k]
+            if m:
+                mem[DC_SYSTEM_TIME + k] = (mem[DC_SYSTEM_TIME + k] & ~m) | (data[k] & m)
+        self.wr_s = DC_SYSTEM_TIME
+        self.wr_e = DC_SYSTEM_TIME + n
+        ctx = self.ctx
+        if self.dc.system_time_stored(ctx.t_ns, 8 if n >= 8 else 4):
+            ctx.timers_dirty = True  # the clock jumped: SYNC deadlines moved
+        return 1
+
     def ecat_read_or(self, ado: int, data: memoryview) -> int:
         """Broadcast read: the read data is ORed into the datagram. Ref: ETG.1000.4 §5.4.3."""
         n = len(data)
@@ -785,7 +804,7 @@ class Esc(SmHost):
                     self.dc.refresh_system_time(self.ctx.t_ns)
                 elif s <= ra:  # PDI: latched when the first byte is read (Table 95)
                     self.dc.latch_system_time(self.ctx.pdi_ns)
-            elif pdi and (ra == DC_SYNC0_STATUS or ra == DC_SYNC1_STATUS):
+            elif pdi and ra in (DC_SYNC0_STATUS, DC_SYNC1_STATUS):
                 # the firmware acknowledges every SYNC0 pulse: the hook
                 # DcUnit._pr_sync_status as C calls when compiled (P25)
                 self.clr_al_event(self.dc.sync_status_read(ra))

@@ -479,11 +479,18 @@ class DcUnit:
         esc = self.esc
         if esc.wr_s > ra:
             return
-        value = _get32(self.mem, ra) | (_get32(self.mem, ra + 4) << 32)
-        nbytes = 8 if esc.wr_e >= ra + 8 else 4
         ctx = esc.ctx
-        if self.system_time_written(ctx.t_ns, value, nbytes):
+        if self.system_time_stored(ctx.t_ns, 8 if esc.wr_e >= ra + 8 else 4):
             ctx.timers_dirty = True  # the clock jumped: SYNC deadlines moved
+
+    def system_time_stored(self, frame_t_ns: int, nbytes: int) -> bool:
+        """The ECAT write of ``nbytes`` (4 or 8) of 0x0910 from its first byte, already in
+        memory, fed to the time control loop; True if the clock jumped (the ESC calls this
+        directly for the writers of every DC cycle, decision P26). Ref: TMC8460 §5.50.2
+        Table 95."""
+        m = self.mem
+        value = _get32(m, DC_SYSTEM_TIME) | (_get32(m, DC_SYSTEM_TIME + 4) << 32)
+        return self.system_time_written(frame_t_ns, value, nbytes)
 
     def _ec_system_time_offset(self, ra: int, rs: int, old: bytes) -> None:
         """A new offset moves the SYNC deadlines in host time. Ref: TMC8460 §5.50.2 Table 96."""
