@@ -23,7 +23,7 @@ vg=(valgrind --tool=callgrind)
 if [ "$cold" -eq 1 ]; then
     vg+=(--cache-sim=yes --I1=32768,8,64 --D1=49152,12,64 --LL=2097152,16,64)
     for f in wait_frame answer after; do
-        vg+=("--toggle-collect=__pyx_f_7ecatsim_9responder_9Responder_$f")
+        vg+=("--toggle-collect=__pyx_f_7ecatsim_8ethercat_9responder_9Responder_$f")
     done
     extra+=(--responder --evict 4)
 fi

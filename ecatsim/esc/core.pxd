@@ -16,6 +16,7 @@ cdef long long _LRD, _LWR, _LRW
 # the registers, imported from regs.py: C constants here
 cdef long long AL_EVENT_MASK, AL_EVENT_REQUEST, AL_STATUS, DC_ECAT_EVENT_TIME
 cdef long long DC_PDI_CHANGE_EVENT_TIME, DC_PDI_START_EVENT_TIME, DC_SYSTEM_TIME, DL_CONTROL
+cdef long long DC_SYNC0_STATUS, DC_SYNC1_STATUS
 cdef long long DL_STATUS, ECAT_EV_AL_STATUS, ECAT_EV_DL_STATUS, ECAT_EV_SM0, ECAT_EVENT_MASK
 cdef long long ECAT_EVENT_REQUEST, ECAT_PU_ERROR_COUNTER, ESC_CONFIG, EV_AL_CONTROL, EV_SM0
 cdef long long EV_SYNC0, EV_SYNC1, EV_WATCHDOG_PD, LOST_LINK_COUNTER, N_SM, PDI_ERROR_CODE
@@ -101,6 +102,9 @@ cdef class Esc(SmHost):
     cpdef void sync1_tick(self) except *
     @cython.locals(end="long long", ws="long long", we="long long")
     cpdef int64_t ecat_read(self, long long ado, unsigned char[:] out) except -1
+    @cython.locals(n="long long", k="long long", m="long long", wmask=bytes, mem=bytearray,
+                   ctx=FrameContext)
+    cpdef int64_t ecat_write_system_time(self, bytes data) except -1
     @cython.locals(n="long long", k="long long", tmp="unsigned char[:]")
     cpdef int64_t ecat_read_or(self, long long ado, unsigned char[:] data) except -1
     @cython.locals(mv="unsigned char[:]", k="long long")

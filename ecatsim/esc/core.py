@@ -30,6 +30,8 @@ from ecatsim.esc.regs import (
     DC_ECAT_EVENT_TIME,
     DC_PDI_CHANGE_EVENT_TIME,
     DC_PDI_START_EVENT_TIME,
+    DC_SYNC0_STATUS,
+    DC_SYNC1_STATUS,
     DC_SYSTEM_TIME,
     DL_CONTROL,
     DL_STATUS,
@@ -492,10 +494,29 @@ class Esc(SmHost):
         of every DC cycle reads (decision P16): the register's one read hook, then its
         bytes, without the search through the hook table. Returns the WKC increment (1).
         Ref: TMC8460 §5.50.2 Table 95."""
-        self.dc._er_system_time(DC_SYSTEM_TIME, 8)
+        self.dc.refresh_system_time(self.ctx.t_ns)  # the hook DcUnit._er_system_time, inline
         mv = self.memv
         for k in range(len(out)):
             out[k] = mv[DC_SYSTEM_TIME + k]
+        return 1
+
+    def ecat_write_system_time(self, data: bytes) -> int:
+        """``ecat_write(DC_SYSTEM_TIME, data)`` for the 4 or 8 bytes a writer of the DC time
+        loops gets after the reply (decisions P7, P26): the register's masked bytes, then
+        its one write hook's work (DcUnit._ew_system_time), without the search through
+        the hook table. Returns the WKC increment (1). Ref: TMC8460 §5.50.2 Table 95."""
+        n = len(data)
+        wmask = self.ecat_wmask
+        mem = self.mem
+        for k in range(n):
+            m = wmask[DC_SYSTEM_TIME + k]
+            if m:
+                mem[DC_SYSTEM_TIME + k] = (mem[DC_SYSTEM_TIME + k] & ~m) | (data[k] & m)
+        self.wr_s = DC_SYSTEM_TIME
+        self.wr_e = DC_SYSTEM_TIME + n
+        ctx = self.ctx
+        if self.dc.system_time_stored(ctx.t_ns, 8 if n >= 8 else 4):
+            ctx.timers_dirty = True  # the clock jumped: SYNC deadlines moved
         return 1
 
     def ecat_read_or(self, ado: int, data: memoryview) -> int:
@@ -777,10 +798,16 @@ class Esc(SmHost):
                 break
             fn, ra, rs = entry
             if ra == DC_SYSTEM_TIME:
-                if not pdi:  # the FRMW of every cycle reads it: a C call when compiled (P14)
-                    self.dc._er_system_time(ra, rs)
+                # the FRMW of every cycle reads it: the hooks DcUnit._er_system_time and
+                # _pr_system_time inline, C calls with the frame's times when compiled (P14)
+                if not pdi:
+                    self.dc.refresh_system_time(self.ctx.t_ns)
                 elif s <= ra:  # PDI: latched when the first byte is read (Table 95)
-                    self.dc._pr_system_time(ra, rs)
+                    self.dc.latch_system_time(self.ctx.pdi_ns)
+            elif pdi and ra in (DC_SYNC0_STATUS, DC_SYNC1_STATUS):
+                # the firmware acknowledges every SYNC0 pulse: the hook
+                # DcUnit._pr_sync_status as C calls when compiled (P25)
+                self.clr_al_event(self.dc.sync_status_read(ra))
             else:
                 fn(units[hooked[i] - 1], ra, rs)
             i = _first(hooked, ra + rs, e) if ra + rs < e else -1

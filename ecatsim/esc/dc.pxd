@@ -78,5 +78,9 @@ cdef class DcUnit:
     # the register hooks that the frames of every DC cycle run: C calls from the ESC
     cpdef void _er_system_time(self, long long ra, long long rs) except *
     cpdef void _pr_system_time(self, long long ra, long long rs) except *
-    @cython.locals(value="unsigned long long", nbytes="long long")
+    cpdef void _pr_sync_status(self, long long ra, long long rs) except *
+    @cython.locals(m=bytearray)
+    cpdef int64_t sync_status_read(self, long long ra) except? -1
     cpdef void _ew_system_time(self, long long ra, long long rs, object old) except *
+    @cython.locals(m=bytearray, value="unsigned long long")
+    cpdef bint system_time_stored(self, long long frame_t_ns, long long nbytes) except -1

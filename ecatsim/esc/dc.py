@@ -479,11 +479,18 @@ class DcUnit:
         esc = self.esc
         if esc.wr_s > ra:
             return
-        value = _get32(self.mem, ra) | (_get32(self.mem, ra + 4) << 32)
-        nbytes = 8 if esc.wr_e >= ra + 8 else 4
         ctx = esc.ctx
-        if self.system_time_written(ctx.t_ns, value, nbytes):
+        if self.system_time_stored(ctx.t_ns, 8 if esc.wr_e >= ra + 8 else 4):
             ctx.timers_dirty = True  # the clock jumped: SYNC deadlines moved
+
+    def system_time_stored(self, frame_t_ns: int, nbytes: int) -> bool:
+        """The ECAT write of ``nbytes`` (4 or 8) of 0x0910 from its first byte, already in
+        memory, fed to the time control loop; True if the clock jumped (the ESC calls this
+        directly for the writers of every DC cycle, decision P26). Ref: TMC8460 §5.50.2
+        Table 95."""
+        m = self.mem
+        value = _get32(m, DC_SYSTEM_TIME) | (_get32(m, DC_SYSTEM_TIME + 4) << 32)
+        return self.system_time_written(frame_t_ns, value, nbytes)
 
     def _ec_system_time_offset(self, ra: int, rs: int, old: bytes) -> None:
         """A new offset moves the SYNC deadlines in host time. Ref: TMC8460 §5.50.2 Table 96."""
@@ -545,10 +552,17 @@ class DcUnit:
         """PDI read of 0x098E/0x098F clears AL event 0x0220.2/.3; in acknowledge mode (pulse
         length 0x0982 = 0) it also clears the SYNC state bit. Ref: TMC8460 §5.50.4 Tables
         106, 108, 109."""
-        self.esc.clr_al_event(EV_SYNC0 if ra == DC_SYNC0_STATUS else EV_SYNC1)
+        self.esc.clr_al_event(self.sync_status_read(ra))
+
+    def sync_status_read(self, ra: int) -> int:
+        """The PDI read of 0x098E/0x098F (``ra``) without its AL event: in acknowledge mode
+        (pulse length 0x0982 = 0) the SYNC state bit clears; returns the AL event bit the
+        read clears (the ESC calls this directly for the firmware's acknowledge of every
+        cycle, decision P25). Ref: TMC8460 §5.50.4 Tables 106, 108, 109."""
         m = self.mem
         if not (m[DC_PULSE_LENGTH] | m[DC_PULSE_LENGTH + 1]):
             m[ra] &= 0xFE
+        return EV_SYNC0 if ra == DC_SYNC0_STATUS else EV_SYNC1
 
     def _start_time(self, ra: int, rs: int, old: bytes, pdi: bool, now_sys: int) -> None:
         """Start time: written by the SYNC unit's owner while the unit is off. Written as

@@ -372,12 +372,12 @@ class Segment:
             before = bytes(self._dc_before[:n])
             for i in range(min(reader, reach)):
                 esc = escs[i]
-                esc.ecat_write(_DC_SYSTEM_TIME, before)
+                esc.ecat_write_system_time(before)  # ecat_write of 0x0910 (P26)
         if reader + 1 < reach:  # the writers behind it
             after = bytes(self._dc_after[:n])
             for i in range(reader + 1, reach):
                 esc = escs[i]
-                esc.ecat_write(_DC_SYSTEM_TIME, after)
+                esc.ecat_write_system_time(after)  # ecat_write of 0x0910 (P26)
 
     def _circulate(self, buf: bytearray, p: int) -> bool:
         """A frame passing an ESC whose port 0 is closed gets the circulating bit; one that
