@@ -45,6 +45,23 @@ def same(fast: Esc, slow: Esc) -> None:
     assert fast.ctx.pending == slow.ctx.pending
 
 
+@pytest.mark.parametrize(
+    ("side", "hook"), [("ecat_r", DcUnit._er_system_time), ("ecat_w", DcUnit._ew_system_time)]
+)
+def test_every_byte_of_the_system_time_names_the_hook_the_fast_paths_call(
+    side: str, hook: object
+) -> None:
+    """Esc.reg_read_hooks (ECAT read) and Esc.ecat_write_system_time (the writers' time
+    loops) act as the table's hook of 0x0910 does, by direct calls in the compiled core:
+    the table must name that same hook, with the whole register, for every byte of it."""
+    t = tables()
+    for a in range(DC_SYSTEM_TIME, DC_SYSTEM_TIME + 8):
+        entry = getattr(t, side)[a]
+        assert entry is not None
+        assert entry[0] is hook
+        assert entry[1:] == (DC_SYSTEM_TIME, 8)
+
+
 @pytest.mark.parametrize("pdi", [False, True])
 def test_the_system_time_read_is_the_tables_hook(pdi: bool) -> None:
     """Esc.reg_read_hooks refreshes (ECAT) or latches (PDI) 0x0910 inline: the same as the
@@ -100,12 +117,6 @@ def test_the_time_loop_write_is_the_register_write(size: int) -> None:
     ecat_write of 0x0910 through the table's write hook (DcUnit._ew_system_time) does:
     memory, clock, rate, the timers flag and the WKC increment, for small differences (the
     loop's correction) and large ones (the clock jumps)."""
-    t = tables()
-    for a in range(DC_SYSTEM_TIME, DC_SYSTEM_TIME + 8):
-        entry = t.ecat_w[a]
-        assert entry is not None
-        assert entry[0] is DcUnit._ew_system_time
-        assert entry[1:] == (DC_SYSTEM_TIME, 8)
     fast, slow = twins()
     for t_ns in TIMES:
         for e in (fast, slow):

@@ -10,7 +10,6 @@ import itertools
 import pytest
 
 from ecatsim.esc.core import Esc, FrameContext, hook_names, tables, unit_classes
-from ecatsim.esc.dc import DcUnit
 from ecatsim.esc.dispatch import PASSIVE_SIDE_EFFECTS, compile_tables
 from ecatsim.esc.regs import DC_SYSTEM_TIME
 from ecatsim.spec.tables import UNITS, SpecError, load_registers, parse_registers
@@ -24,17 +23,6 @@ def test_every_side_effect_in_the_table_has_a_hook_and_back() -> None:
     assert PASSIVE_SIDE_EFFECTS - used == set()
     assert hooks & PASSIVE_SIDE_EFFECTS == set()
     assert {u.partition(".")[0] for u in used} <= UNITS
-
-
-def test_the_system_time_read_hook_called_directly_is_the_tables() -> None:
-    """Esc.reg_read_hooks calls the ECAT read hook of 0x0910 by name (a C call in the
-    compiled core); the table must name the same hook for every byte of the register."""
-    t = tables()
-    for a in range(DC_SYSTEM_TIME, DC_SYSTEM_TIME + 8):
-        entry = t.ecat_r[a]
-        assert entry is not None
-        assert entry[0] is DcUnit._er_system_time
-        assert entry[1:] == (DC_SYSTEM_TIME, 8)
 
 
 @pytest.mark.parametrize("size", [4, 8])
