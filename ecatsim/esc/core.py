@@ -15,11 +15,9 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Callable
-from functools import cache
 
-from ecatsim.esc import dispatch, regs
+from ecatsim.esc import regs
 from ecatsim.esc.dc import DcUnit
-from ecatsim.esc.dispatch import Tables, compile_tables
 from ecatsim.esc.eeprom import EepromUnit
 from ecatsim.esc.fmmu import FmmuMap, compile_fmmus, copy_bits
 from ecatsim.esc.mii import MiiUnit
@@ -205,6 +203,8 @@ class Esc(SmHost):
         self.mem = bytearray(0x10000)
         #: a view of mem for the read paths (mem is never resized or replaced)
         self.memv = memoryview(self.mem)
+        from ecatsim.esc.units import tables  # the table names this class: built at first use
+
         t = self.t = tables()
         #: the tables' masks and side-effect bitmaps, bound here (typed in the compiled core)
         self.ecat_wmask = t.ecat_wmask
@@ -997,26 +997,3 @@ class Esc(SmHost):
                 self.sm_event_time(DC_PDI_START_EVENT_TIME)
             if last:
                 self.sm_event_time(DC_PDI_CHANGE_EVENT_TIME)
-
-
-def unit_classes() -> dict[str, type]:
-    """The class of each unit a register row's side effect may name."""
-    return {
-        "esc": Esc,
-        "dc": DcUnit,
-        "mii": MiiUnit,
-        "eeprom": EepromUnit,
-        "wd": Watchdog,
-        "sm": SyncManager,
-    }
-
-
-@cache
-def tables() -> Tables:
-    """The register table compiled for the ESC (once): ecatsim/esc/dispatch.py."""
-    return compile_tables(unit_classes())
-
-
-def hook_names() -> set[str]:
-    """``<unit>.<name>`` of the side effects that have at least one hook method."""
-    return dispatch.hook_names(unit_classes())

@@ -16,3 +16,14 @@ def test_every_subpackage_is_listed() -> None:
         ".".join(p.parent.relative_to(ROOT).parts) for p in (ROOT / "ecatsim").rglob("__init__.py")
     }
     assert found - listed == set()
+
+
+def test_no_module_is_over_1000_lines() -> None:
+    """One module per unit (docs/architecture.md): none of the package grows past 1000
+    lines."""
+    root = Path(__file__).resolve().parents[2] / "ecatsim"
+    sizes = {
+        str(f.relative_to(root)): len(f.read_text().splitlines())
+        for f in [*root.rglob("*.py"), *root.rglob("*.pyx")]
+    }
+    assert {f: n for f, n in sizes.items() if n > 1000} == {}

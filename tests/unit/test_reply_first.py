@@ -7,7 +7,8 @@ from __future__ import annotations
 
 import struct
 
-from ecatsim.esc.core import Esc, tables
+from ecatsim.esc.core import Esc
+from ecatsim.esc.units import tables
 from ecatsim.wire import datagram as dg
 from ecatsim.wire.frame import ecat_offset
 from tests.perf.hotpath import MS, CspCycle, configure_to_op, op_segment

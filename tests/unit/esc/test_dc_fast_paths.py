@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import pytest
 
-from ecatsim.esc.core import Esc, FrameContext, tables
+from ecatsim.esc.core import Esc, FrameContext
 from ecatsim.esc.dc import DcUnit
 from ecatsim.esc.regs import (
     AL_EVENT_MASK,
@@ -21,6 +21,7 @@ from ecatsim.esc.regs import (
     EV_SYNC0,
     EV_SYNC1,
 )
+from ecatsim.esc.units import tables
 
 TIMES = (0, 1, 999_999, 10**9 + 7, 2**40 + 3)
 

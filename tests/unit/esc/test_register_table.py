@@ -9,9 +9,10 @@ import itertools
 
 import pytest
 
-from ecatsim.esc.core import Esc, FrameContext, hook_names, tables, unit_classes
+from ecatsim.esc.core import Esc, FrameContext
 from ecatsim.esc.dispatch import PASSIVE_SIDE_EFFECTS, compile_tables
 from ecatsim.esc.regs import DC_SYSTEM_TIME
+from ecatsim.esc.units import hook_names, tables, unit_classes
 from ecatsim.spec.tables import UNITS, SpecError, load_registers, parse_registers
 
 
