@@ -80,7 +80,7 @@ def test_op_and_1000_cycles_of_process_data(
     to_op(master)
     expected = master.expected_wkc
     assert expected == 3 * n
-    lag_ok = 0
+    lag_ok = late = 0
     for cycle in range(1000):
         # a cyclic master (0.5 ms): the firmware copies between two frames, as on a real
         # board; a frame sent while it works is answered first (decision P19)
@@ -93,18 +93,21 @@ def test_op_and_1000_cycles_of_process_data(
         if cycle >= 2:
             for i, s in enumerate(master.slaves):
                 sw, mode, pos, torque, vel, count = TX_FMT.unpack(bytes(s.input))
-                # inputs reflect the outputs of the previous cycle (reply first, then react)
-                prev = cycle - 1
-                assert (sw, pos, torque, vel) == (
-                    prev & 0xFFFF,
-                    prev * 7 + i,
-                    -prev & 0x7FFF,
-                    prev + 1000 * i,
-                ), (cycle, i)
+                # inputs reflect the outputs of the previous cycle (reply first, then
+                # react); the cycle before that only where the host held the daemon off
+                # its CPU for the whole 0.5 ms between the reply and the next frame (the
+                # firmware's work then yields to that frame, decision P19): rarely
+                got = (sw, pos, torque, vel)
+                prev, older = cycle - 1, cycle - 2
+                want = (prev & 0xFFFF, prev * 7 + i, -prev & 0x7FFF, prev + 1000 * i)
+                held = (older & 0xFFFF, older * 7 + i, -older & 0x7FFF, older + 1000 * i)
+                assert got in (want, held), (cycle, i, got)
                 assert mode == 0
-                assert count >= cycle - 1
-                lag_ok += 1
-    assert lag_ok == 998 * n
+                assert count >= cycle - (1 if got == want else 2)
+                lag_ok += got == want
+                late += got == held
+    assert lag_ok + late == 998 * n
+    assert late <= 998 * n // 100, late  # at most 1 % of the samples
 
 
 def _echo_config(n: int, d: Path) -> Path:
