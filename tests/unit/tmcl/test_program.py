@@ -203,21 +203,7 @@ def test_a_new_download_disarms_the_old_programs_interrupts_and_timers(bench: Be
     """Decision T29: 132 replaces the program, so it resets the interpreter as 131 does
     (vectors, enables, global enable, timers); 129 then starts the new code alone. Bank 3
     (the timer period) is a parameter and stays."""
-    download(
-        bench,
-        [
-            (P.VECT, 0, 0, 6),
-            (P.SGP, 0, 3, 100),
-            (P.EI, 0, 0, 0),
-            (P.EI, 255, 0, 0),
-            (P.WAIT, 0, 0, 50),
-            (P.JA, 0, 0, 4),
-            (P.GGP, 20, 2, 0),  # 6: the timer's handler counts in user variable 20
-            (P.CALC, 0, 0, 1),
-            (P.AGP, 20, 2, 0),
-            (P.RETI, 0, 0, 0),
-        ],
-    )
+    download(bench, TIMER_PROGRAM)  # cell 6: the timer's handler counts in variable 20
     bench.value(P.RUN_APP, 1, 0, 0)
     bench.advance(0.35)
     assert bench.value(P.GGP, 20, 2) == 3
