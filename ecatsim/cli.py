@@ -123,8 +123,9 @@ def run(
     """Emulate the segment on an interface until SIGINT/SIGTERM."""
     from ecatsim.ethercat.run import RunOptions, run_daemon
 
-    configure_logging(log_format, logging.DEBUG if trace_frames else logging.INFO)
+    logs = configure_logging(log_format, logging.DEBUG if trace_frames else logging.INFO)
     opts = RunOptions(
+        logs=logs,
         iface=iface,
         tap=tap,
         udp=udp,

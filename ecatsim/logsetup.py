@@ -6,10 +6,12 @@ from __future__ import annotations
 import logging
 import sys
 from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import Any, TextIO, TypeVar
 
 import click
 import structlog
+
+from ecatsim.logqueue import LogQueue, holding_logger, timestamp
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -22,22 +24,27 @@ log_format_option: Callable[[F], F] = click.option(
 )
 
 
-def configure_logging(fmt: str, level: int = logging.INFO) -> None:
+def configure_logging(fmt: str, level: int = logging.INFO, file: TextIO | None = None) -> LogQueue:
     """structlog: pretty on a TTY, JSON with --log-format json, plain text otherwise
-    (``auto`` is ``console``)."""
+    (``auto`` is ``console``), to ``file`` (standard error by default). Returns the queue
+    that holds lines while a daemon serves frames (ecatsim/logqueue.py; inactive until the
+    daemon sets it)."""
+    queue = LogQueue()
+    out = file if file is not None else sys.stderr
     processors: list[Any] = [
         structlog.contextvars.merge_contextvars,
         structlog.processors.add_log_level,
-        structlog.processors.TimeStamper(fmt="iso", utc=True),
+        timestamp,
     ]
     if fmt == "json":
         processors += [structlog.processors.dict_tracebacks, structlog.processors.JSONRenderer()]
     else:
-        colors = fmt in ("console", "auto") and sys.stderr.isatty()
+        colors = fmt in ("console", "auto") and out.isatty()
         processors += [structlog.dev.ConsoleRenderer(colors=colors)]
     structlog.configure(
         processors=processors,
-        wrapper_class=structlog.make_filtering_bound_logger(level),
-        logger_factory=structlog.PrintLoggerFactory(file=sys.stderr),
+        wrapper_class=holding_logger(level, queue),
+        logger_factory=structlog.PrintLoggerFactory(file=out),
         cache_logger_on_first_use=False,
     )
+    return queue

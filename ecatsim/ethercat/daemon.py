@@ -36,6 +36,7 @@ from ecatsim.ethercat.sequence import NOT_ECAT, REPLY, FrameSequence
 from ecatsim.faults.engine import FaultEngine
 from ecatsim.link.base import Link
 from ecatsim.link.follow import CpuFollower
+from ecatsim.logqueue import LogQueue
 from ecatsim.wire.frame import ecat_offset
 
 if TYPE_CHECKING:
@@ -106,8 +107,11 @@ class Daemon:
         faults: FaultEngine | None = None,
         doors: DoorHost | None = None,
         out: OutPort | None = None,
+        logs: LogQueue | None = None,
     ) -> None:
         self.ctl = ctl
+        #: log lines held while the loop serves, written after the replies (decision P37)
+        self.logs = logs
         #: the out link (--out-iface), None: the segment ends in this process
         self.out = out
         #: the TMCL and LIN front doors served in the same loop, between frames
@@ -306,10 +310,26 @@ class Daemon:
         """Serve until stop() is called."""
         buf = bytearray(MAX_FRAME)
         fine_timer_slack()
-        if self.responder_applies():
-            self._run_compiled(buf)
-        else:
-            self._run_select(buf)
+        logs = self.logs
+        if logs is not None:
+            logs.active = True  # lines are held while frames are served (decision P37)
+            self.segment.schedule.held_logs = logs.held
+            self.segment.schedule.write_logs = logs.drain
+        try:
+            if self.responder_applies():
+                self._run_compiled(buf)
+            else:
+                self._run_select(buf)
+        finally:
+            if logs is not None:
+                logs.active = False
+                logs.drain()
+
+    def _write_logs(self) -> None:
+        """Write the held log lines, stopping for a frame that waits (decision P37)."""
+        logs = self.logs
+        if logs is not None and logs.held:
+            logs.drain(self.segment.schedule.frame_waiting)
 
     def responder_applies(self) -> bool:
         """The compiled responder can serve this link: it was built, the link is a raw
@@ -498,6 +518,7 @@ class Daemon:
                     self.faults.poll(now)
                 except Exception as exc:
                     self._failure("faults", exc)
+        self._write_logs()
 
     def close(self) -> None:
         self.link.close()

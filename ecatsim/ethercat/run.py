@@ -35,6 +35,7 @@ from ecatsim.link.base import Link
 from ecatsim.link.errors import LinkError
 from ecatsim.link.follow import CpuFollower
 from ecatsim.link.raw import RawLink, has_carrier, iface_ipv4_addresses
+from ecatsim.logqueue import LogQueue
 from ecatsim.mfcio import trace as mfcio_trace
 from ecatsim.mfcio.block import MfcioBlock
 
@@ -65,6 +66,8 @@ class RunOptions:
     esi_dir: Path | None = None
     #: port 1 of the last slave leaves on this interface (the segment file's out_iface)
     out_iface: str | None = None
+    #: where the daemon holds its log lines while it serves (decision P37)
+    logs: LogQueue | None = None
 
 
 def segment_config(opts: RunOptions) -> SegmentConfig:
@@ -232,6 +235,7 @@ def serve(opts: RunOptions, cfg: SegmentConfig) -> None:
         faults=faults,
         doors=doors,
         out=out,
+        logs=opts.logs,
     )
     # Everything built so far lives for the whole run: keep it out of the cyclic garbage
     # collector so a full collection cannot stall a reply by milliseconds.

@@ -17,6 +17,7 @@ cdef class Schedule:
     cdef public list escs, firmware
     cdef public object frame_waiting
     cdef public object persist
+    cdef public object held_logs, write_logs
     cdef public long long probe_ns, resume_pos, yielded
     cdef public long long sync0_late_ns, sync0_ticks
 

@@ -13,7 +13,7 @@ Ref: TMC8460 §5.50.4 (SYNC0 generation), §5.42 (process-data watchdog); ETG.10
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Sequence, Sized
 from typing import Protocol
 
 from ecatsim.esc.core import Esc, FrameContext
@@ -54,11 +54,13 @@ class Schedule:
         "escs",
         "firmware",
         "frame_waiting",
+        "held_logs",
         "persist",
         "probe_ns",
         "resume_pos",
         "sync0_late_ns",
         "sync0_ticks",
+        "write_logs",
         "yielded",
     )
 
@@ -78,6 +80,10 @@ class Schedule:
         #: after a reply stops for it and goes on after that frame's reply (decision P19);
         #: None: the work runs to its end
         self.frame_waiting: Callable[[], bool] | None = None
+        #: log lines held while the daemon serves (ecatsim/logqueue.py), written by
+        #: ``write_logs(frame_waiting)`` once the firmware's work is done (decision P37)
+        self.held_logs: Sized = ()
+        self.write_logs: Callable[[Callable[[], bool] | None], int] | None = None
         #: times the work after a reply stopped for a waiting frame
         self.yielded = 0
         #: the position the next round of firmware work starts at (0: the first)
@@ -128,6 +134,8 @@ class Schedule:
             for pos in sorted(ctx.flush):
                 self.persist(pos)
             ctx.flush.clear()
+        if self.held_logs and self.write_logs is not None:
+            self.write_logs(self.frame_waiting)  # the lines held meanwhile (decision P37)
 
     def pulses_due(self, t: int) -> None:
         """sync_until(t), unless no pulse can be due by ``t`` (the per-frame fast path)."""
