@@ -20,6 +20,8 @@ import os
 import platform
 import tempfile
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -61,9 +63,30 @@ def bring_up(m: Any, cap: Capture, pair: NetnsPair, n: int, period_us: int,
         raise SystemExit("bench: the segment did not reach OP")
 
 
+@contextmanager
+def master_scheduling(rt: int | None, cpu: int | None) -> Iterator[str]:
+    """The master's thread SCHED_FIFO at ``rt`` and pinned to ``cpu`` (each if given) for
+    the bring-up and the cycles, as a real-time master runs; yields what it set."""
+    policy, affinity = os.sched_getscheduler(0), os.sched_getaffinity(0)
+    param = os.sched_getparam(0)
+    try:
+        if cpu is not None:
+            os.sched_setaffinity(0, {cpu})
+        if rt is not None:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt))
+        yield (f"SCHED_FIFO {rt}" if rt is not None else "ordinary") + (
+            f", CPU {cpu}" if cpu is not None else ", unpinned"
+        )
+    finally:
+        os.sched_setscheduler(0, policy, param)
+        os.sched_setaffinity(0, affinity)
+
+
 def run_bringup(n: int, cycles_k: int, period_us: int, overlap: bool,
-                extra: tuple[str, ...], spin: bool = False) -> dict[str, Any]:  # fmt: skip
-    """One bring-up of ``n`` drives and ``cycles_k`` cycles on a fresh daemon."""
+                extra: tuple[str, ...], spin: bool = False, master_rt: int | None = None,
+                master_cpu: int | None = None) -> dict[str, Any]:  # fmt: skip
+    """One bring-up of ``n`` drives and ``cycles_k`` cycles on a fresh daemon; the master
+    scheduled as :func:`master_scheduling` says."""
     import pysoem
 
     tmp = Path(tempfile.mkdtemp(prefix="ecatsim-bringup-"))
@@ -72,7 +95,10 @@ def run_bringup(n: int, cycles_k: int, period_us: int, overlap: bool,
         d.start(timeout=120)
         m = pysoem.Master()
         try:
-            with Capture.master_end(pair.master_ns, pair.master_if) as cap:
+            with (
+                Capture.master_end(pair.master_ns, pair.master_if) as cap,
+                master_scheduling(master_rt, master_cpu) as master,
+            ):
                 t0 = time.perf_counter()
                 bring_up(m, cap, pair, n, period_us, overlap)
                 bring_up_s = time.perf_counter() - t0
@@ -86,7 +112,8 @@ def run_bringup(n: int, cycles_k: int, period_us: int, overlap: bool,
             d.stop()
     frames = analyse(cap.frames(), cap.marks)
     frames.get("phases", {}).pop("end", None)
-    return {"slaves": n, "overlap": overlap, "period_us": period_us,
+    return {"slaves": n, "overlap": overlap, "period_us": period_us, "master": master,
+            "daemon_flags": list(extra),
             "bring_up_s": round(bring_up_s, 2), "frames": frames,
             "cycles": {k: cyc[k] for k in ("cycles", "lost", "wkc_errors", "expected_wkc",
                                            "wkc_error_seen", "cpu_percent", "rtt_us",
@@ -97,7 +124,8 @@ def run_bringup(n: int, cycles_k: int, period_us: int, overlap: bool,
 def summary(r: dict[str, Any]) -> str:
     """One bring-up's figures: the totals, each phase, the five slowest frames."""
     f, c = r["frames"], r["cycles"]
-    lines = [f"N={r['slaves']} ({'overlap map' if r['overlap'] else 'map'}) bring-up "
+    lines = [f"N={r['slaves']} ({'overlap map' if r['overlap'] else 'map'}, master "
+             f"{r['master']}, daemon {' '.join(r['daemon_flags']) or 'default flags'}) bring-up "
              f"{r['bring_up_s']} s, {c['cycles']} cycles: {f['frames']} frames, reply p50 "
              f"{f['p50_us']} p99.9 {f['p999_us']} max {f['max_us']} us, over 1 ms "
              f"{f['over_1ms']}, over 2 ms {f['over_2ms']}, resends {f['resends']}, "
@@ -124,7 +152,8 @@ def run(args: BenchOptions) -> int:
                            "load_1min": os.getloadavg()[0],
                            "python": platform.python_version(), "runs": []}  # fmt: skip
     for n in [n for n in args.bringup for _ in range(args.repeat)]:
-        r = run_bringup(n, args.cycles, args.period_us, args.overlap, extra, args.master_spin)
+        r = run_bringup(n, args.cycles, args.period_us, args.overlap, extra, args.master_spin,
+                        args.master_rt, args.master_cpu)  # fmt: skip
         out["runs"].append(r)
         print(summary(r), flush=True)
     results.write(args.results, f"bringup-{'-'.join(str(n) for n in args.bringup)}", out)

@@ -127,6 +127,17 @@ NO_PYSOEM = "ecatsim bench needs pysoem: pip install 'ecatsim[bench]'"
     "its IO map holds more drives.",
 )
 @click.option(
+    "--master-rt",
+    type=click.IntRange(min=1, max=99),
+    help="--bringup: run the master SCHED_FIFO at this priority, as real-time masters run "
+    "(above the daemon's 20).",
+)
+@click.option(
+    "--master-cpu",
+    type=int,
+    help="--bringup: pin the master to this CPU (with --cpu for the daemon: a core each).",
+)
+@click.option(
     "--results",
     type=click.Path(file_okay=False, path_type=Path),
     default=DEFAULT_DIR,

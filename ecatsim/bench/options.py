@@ -30,6 +30,9 @@ class BenchOptions:
     bringup: tuple[int, ...] = ()
     cycles: int = 2000
     overlap: bool = False
+    #: the master's SCHED_FIFO priority and CPU (--bringup; None: ordinary, unpinned)
+    master_rt: int | None = None
+    master_cpu: int | None = None
     results: Path = DEFAULT_DIR
 
     def scheduling_flags(self) -> tuple[str, ...]:

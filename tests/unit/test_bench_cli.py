@@ -5,6 +5,7 @@ the daemon's reply times pair up."""
 from __future__ import annotations
 
 import ast
+import os
 import subprocess
 import sys
 import tomllib
@@ -34,7 +35,7 @@ def test_every_option_has_help() -> None:
     assert r.exit_code == 0
     assert r.output.startswith("Usage: cli bench [OPTIONS]")
     assert "p99.99" in r.output
-    for option in ("--bringup", "--cycles", "--overlap", "--repeat", "--results"):
+    for option in ("--bringup", "--cycles", "--overlap", "--repeat", "--results", "--master-rt"):
         assert option in r.output
 
 
@@ -177,3 +178,20 @@ def test_without_pysoem_the_bench_says_so_in_one_line() -> None:
     assert (r.returncode, r.stdout) == (2, "")
     assert r.stderr == f"ecatsim: error: {NO_PYSOEM}\n"
     assert NO_PYSOEM == "ecatsim bench needs pysoem: pip install 'ecatsim[bench]'"
+
+
+def test_the_bringup_master_runs_real_time_on_its_cpu_and_is_restored() -> None:
+    """``--master-rt``/``--master-cpu``: SCHED_FIFO and one CPU for the master's thread
+    during the bring-up and the cycles, the thread's own scheduling again afterwards."""
+    from ecatsim.bench.bringup import master_scheduling
+
+    cpu = min(os.sched_getaffinity(0))
+    before = (os.sched_getscheduler(0), os.sched_getaffinity(0))
+    with master_scheduling(30, cpu) as said:
+        assert said == f"SCHED_FIFO 30, CPU {cpu}"
+        assert os.sched_getscheduler(0) == os.SCHED_FIFO
+        assert os.sched_getparam(0).sched_priority == 30
+        assert os.sched_getaffinity(0) == {cpu}
+    assert (os.sched_getscheduler(0), os.sched_getaffinity(0)) == before
+    with master_scheduling(None, None) as said:
+        assert said == "ordinary, unpinned"
