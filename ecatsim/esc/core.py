@@ -63,9 +63,6 @@ from ecatsim.esc.sm import SmHost, SyncManager
 from ecatsim.esc.watchdog import Watchdog
 from ecatsim.wire.datagram import Cmd
 
-_U16 = struct.Struct("<H")
-_U32 = struct.Struct("<I")
-
 #: the logical commands as plain ints (compiled: C constants)
 _LRD = int(Cmd.LRD)
 _LWR = int(Cmd.LWR)
@@ -73,9 +70,10 @@ _LRW = int(Cmd.LRW)
 
 
 def _get32(m: bytearray, a: int) -> int:
-    """The little-endian 32-bit register at ``a``."""
-    b3 = m[a + 3]  # compiled: a 64-bit integer, so bit 31 does not sign-extend
-    return m[a] | (m[a + 1] << 8) | (m[a + 2] << 16) | (b3 << 24)
+    """The little-endian 32-bit register at ``a`` (registers only: decision P27)."""
+    p = m  # compiled: a C pointer to the bytes, no index checks
+    b3 = p[a + 3]  # compiled: a 64-bit integer, so bit 31 does not sign-extend
+    return p[a] | (p[a + 1] << 8) | (p[a + 2] << 16) | (b3 << 24)
 
 
 def _first(hooked: bytes, s: int, e: int) -> int:
@@ -87,15 +85,17 @@ def _first(hooked: bytes, s: int, e: int) -> int:
 
 
 def _put16(m: bytearray, a: int, v: int) -> None:
-    m[a] = v & 0xFF
-    m[a + 1] = (v >> 8) & 0xFF
+    p = m  # compiled: a pointer, as in _get32 (registers only)
+    p[a] = v & 0xFF
+    p[a + 1] = (v >> 8) & 0xFF
 
 
 def _put32(m: bytearray, a: int, v: int) -> None:
-    m[a] = v & 0xFF
-    m[a + 1] = (v >> 8) & 0xFF
-    m[a + 2] = (v >> 16) & 0xFF
-    m[a + 3] = (v >> 24) & 0xFF
+    p = m  # compiled: a pointer, as in _get32 (registers only)
+    p[a] = v & 0xFF
+    p[a + 1] = (v >> 8) & 0xFF
+    p[a + 2] = (v >> 16) & 0xFF
+    p[a + 3] = (v >> 24) & 0xFF
 
 
 class FrameContext:
@@ -897,7 +897,7 @@ class Esc(SmHost):
         """Write AL status; a change raises ECAT event 0x0210.3. Ref: TMC8460 §5.21, §5.31."""
         m = self.mem
         old = m[AL_STATUS] | (m[AL_STATUS + 1] << 8)
-        _U16.pack_into(m, AL_STATUS, value & 0xFFFF)
+        _put16(m, AL_STATUS, value & 0xFFFF)
         if old != value:
             self._set_ecat_event(ECAT_EV_AL_STATUS)
 
@@ -986,7 +986,7 @@ class Esc(SmHost):
         of the PDI access. Ref: TMC8460 §5.50.6 Tables 122-124, §5.49 Table 90."""
         ctx = self.ctx
         t = self.dc.arrival_ns(ctx.t_ns) if reg == DC_ECAT_EVENT_TIME else ctx.pdi_ns
-        _U32.pack_into(self.mem, reg, self.dc.local_time(t) & 0xFFFFFFFF)
+        _put32(self.mem, reg, self.dc.local_time(t) & 0xFFFFFFFF)
 
     def pdi_buffer_event(self, sm: SyncManager, first: bool, last: bool) -> None:
         """A PDI access of SM ``sm``'s buffer: its start address is a PDI buffer start

@@ -49,9 +49,10 @@ cdef class SyncManager:
     cpdef void writer_write(self, long long off, const unsigned char[:] data) except *
     @cython.locals(first=bint, last=bint, base="long long", mv="unsigned char[:]", k="long long")
     cpdef void reader_read(self, long long off, unsigned char[:] out) except *
-    @cython.locals(base="long long")
+    @cython.locals(base="long long", end="long long", mem=bytearray, p="const unsigned char*")
     cpdef bytes read_whole(self)
-    @cython.locals(base="long long", mem=bytearray, i="long long")
+    @cython.locals(base="long long", mem=bytearray, i="long long", n="long long",
+                   p="unsigned char*", d="const unsigned char*")
     cpdef void write_whole(self, bytes data) except *
     cpdef void ecat_write(self, long long off, const unsigned char[:] data) except *
     @cython.locals(base="long long")

@@ -272,20 +272,31 @@ class SyncManager:
         self._reader_access(first, last)
 
     def read_whole(self) -> bytes:
-        """The whole buffer read as the reading side (``reader_read`` of every byte)."""
+        """The whole buffer read as the reading side (``reader_read`` of every byte).
+        Compiled, the bytes object is made once from the memory's bytes (decision P28)."""
         self._reader_open()
         base = self._base_for_read()
-        data = bytes(self.mem[base : base + self.length])
+        mem = self.mem
+        end = min(base + self.length, len(mem))  # a slice stops at the memory's end
+        p = mem  # compiled: a C pointer to the bytes (a slice of it is a bytes object)
+        data = bytes(p[base:end]) if base < end else b""
         self._reader_access(True, True)
         return data
 
     def write_whole(self, data: bytes) -> None:
         """The whole buffer written as the writing side (``writer_write`` of exactly
-        ``length`` bytes)."""
+        ``length`` bytes). Compiled: a C loop over the bytes, the indexes checked once
+        (the same IndexError after the same bytes, decision P28)."""
         base = self._base_for_write()
         mem = self.mem
-        for i in range(self.length):
-            mem[base + i] = data[i]
+        n = self.length
+        if n > len(data) or base + n > len(mem):
+            for i in range(n):  # the checked loop: raises where the buffers end
+                mem[base + i] = data[i]
+        p = mem  # compiled: C pointers, the indexes checked above
+        d = data
+        for i in range(n):
+            p[base + i] = d[i]
         self._writer_access(True, True)
 
     def peek(self, off: int, n: int) -> bytes:
