@@ -99,13 +99,13 @@ cdef class Esc(SmHost):
     # sm_status_changed, wd_pd_trigger, sm_event_time: SmHost's, overridden in core.py (a
     # final type may not declare its overrides again here)
     @cython.locals(ebit="long long", abit="long long")
-    cpdef void _sm_events(self, long long mirror, long long n) except *
+    cpdef void _sm_events(self, long long mirror, long long n, long long changed) except *
     cpdef void sync0_tick(self, object now_ns) except *
     cpdef void sync1_tick(self) except *
     @cython.locals(end="long long", ws="long long", we="long long")
     cpdef int64_t ecat_read(self, long long ado, unsigned char[:] out) except -1
-    @cython.locals(n="long long", k="long long", m="long long", wmask=bytes, mem=bytearray,
-                   ctx=FrameContext)
+    @cython.locals(n="long long", k="long long", m="long long", wmask="const unsigned char*",
+                   mem="unsigned char*", d="const unsigned char*", ctx=FrameContext)
     cpdef int64_t ecat_write_system_time(self, bytes data) except -1
     @cython.locals(n="long long", k="long long", tmp="unsigned char[:]")
     cpdef int64_t ecat_read_or(self, long long ado, unsigned char[:] data) except -1

@@ -9,7 +9,7 @@ cimport cython
 from libc.stdint cimport int64_t
 
 cdef unsigned long long MASK64, HALF64
-cdef long long HALF32, NO_STAMP, LATER
+cdef long long HALF32, NO_STAMP, LATER, MOVE_NS
 # the registers, imported from regs.py: C constants here
 cdef long long CUC_LATCH0_PDI, CUC_SYNC_PDI, DC_ACTIVATION, DC_ACTIVATION_STATUS
 cdef long long DC_CYCLIC_UNIT_CONTROL, DC_LATCH0_CONTROL, DC_LATCH0_POS, DC_LATCH0_STATUS

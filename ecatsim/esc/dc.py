@@ -262,7 +262,7 @@ class DcUnit:
             self._set_rate(max(-1e6, min(1e6, self.rate_ppb - diff * gain * 5.0)))
         self.local_ref = (local_now - step) & MASK64
         mag = min(abs(diff), 0x7FFFFFFF)
-        _put32(m, DC_SYSTEM_TIME_DIFF, mag | (0x80000000 if diff < 0 else 0))
+        _put32(m, DC_SYSTEM_TIME_DIFF, mag | (HALF32 if diff < 0 else 0))  # compiled: C ints
         self._speed_counter_diff(start)
         # 0x0910 reads back the corrected local copy (refresh_system_time at time t)
         _put64(m, DC_SYSTEM_TIME, (self.local_ref + offset) & MASK64)
