@@ -25,11 +25,13 @@ cdef long long SM_ACT_LATCH_ECAT, SM_ACT_LATCH_PDI, SM_CTRL_WATCHDOG, WD_COUNTER
 cdef long long WD_STATUS_PD
 
 
-@cython.locals(b3="long long")
+@cython.locals(b3="long long", p="const unsigned char*")
 cdef long long _get32(bytearray m, long long a) except? -1
 @cython.locals(i="long long")
 cdef long long _first(bytes hooked, long long s, long long e) except? -2
+@cython.locals(p="unsigned char*")
 cdef void _put16(bytearray m, long long a, long long v) except *
+@cython.locals(p="unsigned char*")
 cdef void _put32(bytearray m, long long a, long long v) except *
 
 
@@ -97,13 +99,13 @@ cdef class Esc(SmHost):
     # sm_status_changed, wd_pd_trigger, sm_event_time: SmHost's, overridden in core.py (a
     # final type may not declare its overrides again here)
     @cython.locals(ebit="long long", abit="long long")
-    cpdef void _sm_events(self, long long mirror, long long n) except *
+    cpdef void _sm_events(self, long long mirror, long long n, long long changed) except *
     cpdef void sync0_tick(self, object now_ns) except *
     cpdef void sync1_tick(self) except *
     @cython.locals(end="long long", ws="long long", we="long long")
     cpdef int64_t ecat_read(self, long long ado, unsigned char[:] out) except -1
-    @cython.locals(n="long long", k="long long", m="long long", wmask=bytes, mem=bytearray,
-                   ctx=FrameContext)
+    @cython.locals(n="long long", k="long long", m="long long", wmask="const unsigned char*",
+                   mem="unsigned char*", d="const unsigned char*", ctx=FrameContext)
     cpdef int64_t ecat_write_system_time(self, bytes data) except -1
     @cython.locals(n="long long", k="long long", tmp="unsigned char[:]")
     cpdef int64_t ecat_read_or(self, long long ado, unsigned char[:] data) except -1

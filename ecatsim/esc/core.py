@@ -63,9 +63,6 @@ from ecatsim.esc.sm import SmHost, SyncManager
 from ecatsim.esc.watchdog import Watchdog
 from ecatsim.wire.datagram import Cmd
 
-_U16 = struct.Struct("<H")
-_U32 = struct.Struct("<I")
-
 #: the logical commands as plain ints (compiled: C constants)
 _LRD = int(Cmd.LRD)
 _LWR = int(Cmd.LWR)
@@ -73,9 +70,10 @@ _LRW = int(Cmd.LRW)
 
 
 def _get32(m: bytearray, a: int) -> int:
-    """The little-endian 32-bit register at ``a``."""
-    b3 = m[a + 3]  # compiled: a 64-bit integer, so bit 31 does not sign-extend
-    return m[a] | (m[a + 1] << 8) | (m[a + 2] << 16) | (b3 << 24)
+    """The little-endian 32-bit register at ``a`` (registers only: decision P27)."""
+    p = m  # compiled: a C pointer to the bytes, no index checks
+    b3 = p[a + 3]  # compiled: a 64-bit integer, so bit 31 does not sign-extend
+    return p[a] | (p[a + 1] << 8) | (p[a + 2] << 16) | (b3 << 24)
 
 
 def _first(hooked: bytes, s: int, e: int) -> int:
@@ -87,15 +85,17 @@ def _first(hooked: bytes, s: int, e: int) -> int:
 
 
 def _put16(m: bytearray, a: int, v: int) -> None:
-    m[a] = v & 0xFF
-    m[a + 1] = (v >> 8) & 0xFF
+    p = m  # compiled: a pointer, as in _get32 (registers only)
+    p[a] = v & 0xFF
+    p[a + 1] = (v >> 8) & 0xFF
 
 
 def _put32(m: bytearray, a: int, v: int) -> None:
-    m[a] = v & 0xFF
-    m[a + 1] = (v >> 8) & 0xFF
-    m[a + 2] = (v >> 16) & 0xFF
-    m[a + 3] = (v >> 24) & 0xFF
+    p = m  # compiled: a pointer, as in _get32 (registers only)
+    p[a] = v & 0xFF
+    p[a + 1] = (v >> 8) & 0xFF
+    p[a + 2] = (v >> 16) & 0xFF
+    p[a + 3] = (v >> 24) & 0xFF
 
 
 class FrameContext:
@@ -431,9 +431,6 @@ class Esc(SmHost):
             _put32(m, AL_EVENT_REQUEST, v)
             self._pdi_irq(v)
 
-    def _pdi_irq_update(self) -> None:
-        self._pdi_irq(_get32(self.mem, AL_EVENT_REQUEST))
-
     def _pdi_irq(self, request: int) -> None:
         """The PDI interrupt: AL event request AND AL event mask. Ref: §5.32, §5.33. The
         pending set changes only where the line does (most event changes leave it high)."""
@@ -454,20 +451,21 @@ class Esc(SmHost):
         bit 4+n and 0x0220 bit 8+n. The SM calls this only when they change (only SM
         accesses change these bits). Ref: §5.49 Tables 88, 89.
         """
-        self._sm_events(sm.mirror, sm.n)
+        self._sm_events(sm.mirror, sm.n, sm.changed)
 
-    def _sm_events(self, mirror: int, n: int) -> None:
+    def _sm_events(self, mirror: int, n: int, changed: int) -> None:
         """sm_status_changed for SM ``n`` (a method of its own: the override of SmHost's
-        callback cannot carry typed locals in a final type, decision P17)."""
+        callback cannot carry typed locals in a final type, decision P17). Only the bits
+        that ``changed`` are set or cleared: no one else writes them (decision P29)."""
         ebit = ECAT_EV_SM0 << n
         abit = EV_SM0 << n
-        if mirror & 1:
+        if changed & 1 and mirror & 1:
             self._set_ecat_event(ebit)
-        else:
+        elif changed & 1:
             self._clr_ecat_event(ebit)
-        if mirror & 2:
+        if changed & 2 and mirror & 2:
             self.set_al_event(abit)
-        else:
+        elif changed & 2:
             self.clr_al_event(abit)
 
     def wd_pd_trigger(self) -> None:
@@ -506,12 +504,13 @@ class Esc(SmHost):
         its one write hook's work (DcUnit._ew_system_time), without the search through
         the hook table. Returns the WKC increment (1). Ref: TMC8460 §5.50.2 Table 95."""
         n = len(data)
-        wmask = self.ecat_wmask
+        wmask = self.ecat_wmask  # compiled: C pointers to the bytes (a register, P27)
         mem = self.mem
+        d = data
         for k in range(n):
             m = wmask[DC_SYSTEM_TIME + k]
             if m:
-                mem[DC_SYSTEM_TIME + k] = (mem[DC_SYSTEM_TIME + k] & ~m) | (data[k] & m)
+                mem[DC_SYSTEM_TIME + k] = (mem[DC_SYSTEM_TIME + k] & ~m) | (d[k] & m)
         self.wr_s = DC_SYSTEM_TIME
         self.wr_e = DC_SYSTEM_TIME + n
         ctx = self.ctx
@@ -897,7 +896,7 @@ class Esc(SmHost):
         """Write AL status; a change raises ECAT event 0x0210.3. Ref: TMC8460 §5.21, §5.31."""
         m = self.mem
         old = m[AL_STATUS] | (m[AL_STATUS + 1] << 8)
-        _U16.pack_into(m, AL_STATUS, value & 0xFFFF)
+        _put16(m, AL_STATUS, value & 0xFFFF)
         if old != value:
             self._set_ecat_event(ECAT_EV_AL_STATUS)
 
@@ -959,7 +958,7 @@ class Esc(SmHost):
 
     def _pw_al_event_mask(self, ra: int, rs: int, old: bytes) -> None:
         """Ref: TMC8460 §5.30 (mask for the PDI interrupt)."""
-        self._pdi_irq_update()
+        self._pdi_irq(_get32(self.mem, AL_EVENT_REQUEST))
 
     def sync0_tick(self, now_ns: int) -> None:
         """A due SYNC0 pulse: status, and AL event 0x0220.2 if mapped. Ref: §5.32 bit 2."""
@@ -986,7 +985,7 @@ class Esc(SmHost):
         of the PDI access. Ref: TMC8460 §5.50.6 Tables 122-124, §5.49 Table 90."""
         ctx = self.ctx
         t = self.dc.arrival_ns(ctx.t_ns) if reg == DC_ECAT_EVENT_TIME else ctx.pdi_ns
-        _U32.pack_into(self.mem, reg, self.dc.local_time(t) & 0xFFFFFFFF)
+        _put32(self.mem, reg, self.dc.local_time(t) & 0xFFFFFFFF)
 
     def pdi_buffer_event(self, sm: SyncManager, first: bool, last: bool) -> None:
         """A PDI access of SM ``sm``'s buffer: its start address is a PDI buffer start

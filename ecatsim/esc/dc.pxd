@@ -9,7 +9,7 @@ cimport cython
 from libc.stdint cimport int64_t
 
 cdef unsigned long long MASK64, HALF64
-cdef long long HALF32, NO_STAMP, LATER
+cdef long long HALF32, NO_STAMP, LATER, MOVE_NS
 # the registers, imported from regs.py: C constants here
 cdef long long CUC_LATCH0_PDI, CUC_SYNC_PDI, DC_ACTIVATION, DC_ACTIVATION_STATUS
 cdef long long DC_CYCLIC_UNIT_CONTROL, DC_LATCH0_CONTROL, DC_LATCH0_POS, DC_LATCH0_STATUS
@@ -24,13 +24,13 @@ cdef long long ESC_CONFIG, EV_DC_LATCH, EV_SYNC0, EV_SYNC1, SYNC_LATCH_CONFIG
 @cython.locals(k="long long")
 cdef long long _trunc(double x) except? -1
 cdef long long _signed64(unsigned long long x)
-@cython.locals(v="unsigned long long", i="long long")
+@cython.locals(v="unsigned long long", i="long long", p="const unsigned char*")
 cdef unsigned long long _get64(bytearray m, long long a) except? 0
-@cython.locals(b3="unsigned long long")
+@cython.locals(b3="unsigned long long", p="const unsigned char*")
 cdef unsigned long long _get32(bytearray m, long long a) except? 0
-@cython.locals(i="long long")
+@cython.locals(i="long long", p="unsigned char*")
 cdef void _put64(bytearray m, long long a, unsigned long long v) except *
-@cython.locals(i="long long")
+@cython.locals(i="long long", p="unsigned char*")
 cdef void _put32(bytearray m, long long a, unsigned long long v) except *
 
 

@@ -76,27 +76,35 @@ def _signed64(x: int) -> int:
     return x if x < HALF64 else -((MASK64 - x) + 1)
 
 
+# The register helpers below take DC registers of the 64 KiB memory only: the compiled
+# core reaches their bytes through a C pointer, without index checks (decision P27).
+
+
 def _get64(m: bytearray, a: int) -> int:
     """The little-endian 64-bit register at ``a``."""
+    p = m  # compiled: a pointer to the bytearray's bytes
     v = 0
     for i in range(7, -1, -1):
-        v = (v << 8) | m[a + i]
+        v = (v << 8) | p[a + i]
     return v
 
 
 def _get32(m: bytearray, a: int) -> int:
-    b3 = m[a + 3]  # compiled: a 64-bit integer, so bit 31 does not sign-extend
-    return m[a] | (m[a + 1] << 8) | (m[a + 2] << 16) | (b3 << 24)
+    p = m  # compiled: a pointer, as in _get64
+    b3 = p[a + 3]  # compiled: a 64-bit integer, so bit 31 does not sign-extend
+    return p[a] | (p[a + 1] << 8) | (p[a + 2] << 16) | (b3 << 24)
 
 
 def _put64(m: bytearray, a: int, v: int) -> None:
+    p = m  # compiled: a pointer, as in _get64
     for i in range(8):
-        m[a + i] = (v >> (8 * i)) & 0xFF
+        p[a + i] = (v >> (8 * i)) & 0xFF
 
 
 def _put32(m: bytearray, a: int, v: int) -> None:
+    p = m  # compiled: a pointer, as in _get64
     for i in range(4):
-        m[a + i] = (v >> (8 * i)) & 0xFF
+        p[a + i] = (v >> (8 * i)) & 0xFF
 
 
 class DcUnit:
@@ -254,7 +262,7 @@ class DcUnit:
             self._set_rate(max(-1e6, min(1e6, self.rate_ppb - diff * gain * 5.0)))
         self.local_ref = (local_now - step) & MASK64
         mag = min(abs(diff), 0x7FFFFFFF)
-        _put32(m, DC_SYSTEM_TIME_DIFF, mag | (0x80000000 if diff < 0 else 0))
+        _put32(m, DC_SYSTEM_TIME_DIFF, mag | (HALF32 if diff < 0 else 0))  # compiled: C ints
         self._speed_counter_diff(start)
         # 0x0910 reads back the corrected local copy (refresh_system_time at time t)
         _put64(m, DC_SYSTEM_TIME, (self.local_ref + offset) & MASK64)

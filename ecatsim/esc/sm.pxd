@@ -28,7 +28,7 @@ cdef class SyncManager:
     cdef public bint active, enabled, locked, mailbox, ecat_side_writes, mbx_full
     cdef public long long w, l, r
     cdef public bint r_open, w_open
-    cdef public long long status, mirror, irq_to_ecat, irq_to_pdi
+    cdef public long long status, mirror, changed, irq_to_ecat, irq_to_pdi
 
     @cython.locals(st="long long", mirror="long long")
     cpdef void _sync(self) except *
@@ -45,13 +45,16 @@ cdef class SyncManager:
     cpdef bint ecat_may_read(self) except -1
     cpdef bint pdi_may_write(self) except -1
     cpdef bint pdi_may_read(self) except -1
-    @cython.locals(first=bint, last=bint, base="long long", mv="unsigned char[:]", k="long long")
+    @cython.locals(first=bint, last=bint, base="long long", mv="unsigned char[:]", k="long long",
+                   n="long long", p="unsigned char*")
     cpdef void writer_write(self, long long off, const unsigned char[:] data) except *
-    @cython.locals(first=bint, last=bint, base="long long", mv="unsigned char[:]", k="long long")
+    @cython.locals(first=bint, last=bint, base="long long", mv="unsigned char[:]", k="long long",
+                   n="long long", p="const unsigned char*")
     cpdef void reader_read(self, long long off, unsigned char[:] out) except *
-    @cython.locals(base="long long")
+    @cython.locals(base="long long", end="long long", mem=bytearray, p="const unsigned char*")
     cpdef bytes read_whole(self)
-    @cython.locals(base="long long", mem=bytearray, i="long long")
+    @cython.locals(base="long long", mem=bytearray, i="long long", n="long long",
+                   p="unsigned char*", d="const unsigned char*")
     cpdef void write_whole(self, bytes data) except *
     cpdef void ecat_write(self, long long off, const unsigned char[:] data) except *
     @cython.locals(base="long long")

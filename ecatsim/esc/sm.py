@@ -64,6 +64,7 @@ class SyncManager:
 
     __slots__ = (
         "active",
+        "changed",
         "control",
         "ecat_side_writes",
         "enabled",
@@ -114,6 +115,8 @@ class SyncManager:
         #: the event bits last mirrored into 0x0210/0x0220 (-1: mirror on the next change):
         #: bit 0 ECAT event, bit 1 AL event (PDI)
         self.mirror = -1
+        #: the bits of ``mirror`` its last change changed (all after a restart, decision P29)
+        self.changed = 3
         #: the status bit (0x0805+8n) that raises the ECAT / the AL event, 0 if disabled
         self.irq_to_ecat = 0
         self.irq_to_pdi = 0
@@ -177,6 +180,7 @@ class SyncManager:
         self.mem[self.status_addr] = st
         mirror = (1 if st & self.irq_to_ecat else 0) | (2 if st & self.irq_to_pdi else 0)
         if mirror != self.mirror:  # the event registers change only when these bits do
+            self.changed = 3 if self.mirror < 0 else mirror ^ self.mirror
             self.mirror = mirror
             self.host.sm_status_changed(self)
 
@@ -252,40 +256,64 @@ class SyncManager:
         Ref: TMC8460 §5.49 Table 89 (buffer exchange when the last byte is written).
         """
         first = off == 0
-        last = off + len(data) >= self.length
+        n = len(data)
+        last = off + n >= self.length
         base = self._base_for_write() + off
-        mv = self.mv
-        for k in range(len(data)):  # compiled: a C loop (a slice copy is a generic call)
-            mv[base + k] = data[k]
+        if base < 0 or base + n > len(self.mem):
+            mv = self.mv  # the checked loop: wraps or raises where the memory does
+            for k in range(n):
+                mv[base + k] = data[k]
+        else:  # compiled: a C loop through a pointer (a slice copy is a generic call), P28
+            p = self.mem
+            for k in range(n):
+                p[base + k] = data[k]
         self._writer_access(first, last)
 
     def reader_read(self, off: int, out: memoryview) -> None:
         """Read into ``out`` from window offset ``off`` as the reading side."""
         first = off == 0
-        last = off + len(out) >= self.length
+        n = len(out)
+        last = off + n >= self.length
         if first:
             self._reader_open()
         base = self._base_for_read() + off
-        mv = self.mv
-        for k in range(len(out)):  # compiled: a C loop, as in writer_write
-            out[k] = mv[base + k]
+        if base < 0 or base + n > len(self.mem):
+            mv = self.mv  # the checked loop, as in writer_write
+            for k in range(n):
+                out[k] = mv[base + k]
+        else:  # compiled: a C loop through a pointer, as in writer_write
+            p = self.mem
+            for k in range(n):
+                out[k] = p[base + k]
         self._reader_access(first, last)
 
     def read_whole(self) -> bytes:
-        """The whole buffer read as the reading side (``reader_read`` of every byte)."""
+        """The whole buffer read as the reading side (``reader_read`` of every byte).
+        Compiled, the bytes object is made once from the memory's bytes (decision P28)."""
         self._reader_open()
         base = self._base_for_read()
-        data = bytes(self.mem[base : base + self.length])
+        mem = self.mem
+        end = min(base + self.length, len(mem))  # a slice stops at the memory's end
+        p = mem  # compiled: a C pointer to the bytes (a slice of it is a bytes object)
+        # b"" + slice: bytes in Python; compiled, the slice itself (bytes(bytes) is a call)
+        data = b"" + p[base:end] if base < end else b""
         self._reader_access(True, True)
         return data
 
     def write_whole(self, data: bytes) -> None:
         """The whole buffer written as the writing side (``writer_write`` of exactly
-        ``length`` bytes)."""
+        ``length`` bytes). Compiled: a C loop over the bytes, the indexes checked once
+        (the same IndexError after the same bytes, decision P28)."""
         base = self._base_for_write()
         mem = self.mem
-        for i in range(self.length):
-            mem[base + i] = data[i]
+        n = self.length
+        if n > len(data) or base + n > len(mem):
+            for i in range(n):  # the checked loop: raises where the buffers end
+                mem[base + i] = data[i]
+        p = mem  # compiled: C pointers, the indexes checked above
+        d = data
+        for i in range(n):
+            p[base + i] = d[i]
         self._writer_access(True, True)
 
     def peek(self, off: int, n: int) -> bytes:
