@@ -7,6 +7,7 @@ cimport cython
 from ecatsim.device.servo cimport Servo
 cimport ecatsim.device.cia402 as cia402
 from ecatsim.slave.od cimport Entry
+from ecatsim.slave.pdo cimport CycleDevice
 
 
 # the statusword bits as C constants (drive.py uses them only within itself)
@@ -26,7 +27,7 @@ cdef bint _no_voltage(object st)
 cdef long long _int_of(tuple hit) except? -1
 
 
-cdef class Drive:
+cdef class Drive(CycleDevice):
     cdef public object od
     cdef public dict _entries
     cdef public object _published

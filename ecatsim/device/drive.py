@@ -29,6 +29,7 @@ from ecatsim.device.servo import (
 )
 from ecatsim.slave.al import AlState
 from ecatsim.slave.od import Entry, ObjectDictionary
+from ecatsim.slave.pdo import CycleDevice
 
 log = structlog.get_logger("ecatsim.drive")
 
@@ -122,8 +123,8 @@ def _int_of(hit: tuple[Entry, int, int] | None) -> int:
     return v if isinstance(v, int) else 0
 
 
-class Drive:
-    """CoeDevice for the TMC8670."""
+class Drive(CycleDevice):
+    """CoeDevice for the TMC8670 (a CycleDevice: the process image calls its cycle in C)."""
 
     def __init__(
         self,

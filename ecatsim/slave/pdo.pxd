@@ -6,14 +6,22 @@ cimport cython
 from ecatsim.slave.od cimport Entry
 
 
+cdef class CycleDevice:
+    cpdef outputs_applied(self, now_ns)
+    cpdef update_inputs(self, now_ns)
+
+
 cdef class PdoImage:
-    cdef public object od, device, rules
+    cdef public object od, rules
+    cdef object _device
+    cdef CycleDevice _dev
     cdef object _plan
     cdef object _rx_st, _tx_st
     cdef tuple _rx_entries, _tx_entries
 
-    @cython.locals(entries=tuple, values=tuple, i="Py_ssize_t", e=Entry)
+    @cython.locals(entries=tuple, values=tuple, i="Py_ssize_t", e=Entry, dev=CycleDevice)
     cpdef void set_outputs(self, object data, object now_ns) except *
+    @cython.locals(dev=CycleDevice)
     cpdef bytes get_inputs(self, object now_ns)
     @cython.locals(entries=tuple, values=list, i="Py_ssize_t", e=Entry)
     cpdef bytes pack_inputs(self)

@@ -290,6 +290,19 @@ class CoeDevice(Protocol):
     def al_state_changed(self, state: AlState, now_ns: int) -> None: ...
 
 
+class CycleDevice:
+    """The base of a CoeDevice whose cycle the compiled process image calls as C calls
+    (pdo.pxd declares both methods cpdef: a subclass's overrides are found through the
+    extension type's method table, not by Python attribute lookup; decision P32). A
+    CoeDevice that does not derive from it is called through Python as before."""
+
+    def outputs_applied(self, now_ns: int) -> None:
+        raise NotImplementedError
+
+    def update_inputs(self, now_ns: int) -> None:
+        raise NotImplementedError
+
+
 class PdoImage:
     """The firmware's Application for a CoE device: process images through the OD."""
 
@@ -297,10 +310,23 @@ class PdoImage:
         self, od: ObjectDictionary, device: CoeDevice, rules: PdoRules = DEFAULT_RULES
     ) -> None:
         self.od = od
+        self._device: CoeDevice
+        self._dev: CycleDevice | None = None
         self.device = device
         self.rules = rules
         self.plan = compile_plan(od, rules)
         install(od, rules)
+
+    @property
+    def device(self) -> CoeDevice:
+        """The device behind the process image."""
+        return self._device
+
+    @device.setter
+    def device(self, device: CoeDevice) -> None:
+        self._device = device
+        #: the same device as a CycleDevice, called in C (None: through Python)
+        self._dev = device if isinstance(device, CycleDevice) else None
 
     @property
     def plan(self) -> Plan:
@@ -349,10 +375,18 @@ class PdoImage:
                         f.entry.value = f.entry.decode(data[f.offset : f.offset + f.size])
                     else:
                         f.entry.value = f.read(data)
-        self.device.outputs_applied(now_ns)
+        dev = self._dev
+        if dev is not None:
+            dev.outputs_applied(now_ns)
+        else:
+            self._device.outputs_applied(now_ns)
 
     def get_inputs(self, now_ns: int) -> bytes:
-        self.device.update_inputs(now_ns)
+        dev = self._dev
+        if dev is not None:
+            dev.update_inputs(now_ns)
+        else:
+            self._device.update_inputs(now_ns)
         return self.pack_inputs()
 
     def pack_inputs(self) -> bytes:

@@ -6,8 +6,9 @@ from __future__ import annotations
 import struct
 
 from ecatsim.device.description import default_description
+from ecatsim.device.drive import Drive
 from ecatsim.slave.od_build import build_od
-from ecatsim.slave.pdo import Field, PdoImage, Plan, codec, compile_plan
+from ecatsim.slave.pdo import CycleDevice, Field, PdoImage, Plan, codec, compile_plan
 
 
 class Quiet:
@@ -54,3 +55,50 @@ def test_no_codec_for_types_struct_cannot_carry() -> None:
     assert codec((Field(0, 4, e),), 4) is None
     assert codec((Field(0, 2, None), Field(2, 2, od.entry(0x6040, 0))), 6) is not None
     assert compile_plan(od).tx_size == 17
+
+
+class Recorder(CycleDevice):
+    """A CycleDevice: the compiled process image calls its overrides in C (P32)."""
+
+    def __init__(self) -> None:
+        self.calls: list[tuple[str, int]] = []
+
+    def outputs_applied(self, now_ns: int) -> None:
+        self.calls.append(("out", now_ns))
+
+    def update_inputs(self, now_ns: int) -> None:
+        self.calls.append(("in", now_ns))
+
+
+def test_the_cycle_reaches_a_cycle_device_and_a_plain_one_alike() -> None:
+    od = build_od(default_description())
+    rec = Recorder()
+    img = PdoImage(od, rec)
+    assert img.device is rec
+    img.set_outputs(bytes(12), 5)
+    img.get_inputs(7)
+    assert rec.calls == [("out", 5), ("in", 7)]
+
+    class Plain(Quiet):
+        def __init__(self) -> None:
+            self.calls: list[tuple[str, int]] = []
+
+        def outputs_applied(self, now_ns: int) -> None:
+            self.calls.append(("out", now_ns))
+
+        def update_inputs(self, now_ns: int) -> None:
+            self.calls.append(("in", now_ns))
+
+    plain = Plain()
+    img.device = plain  # type: ignore[assignment]  # replaced: the new one is called
+    img.set_outputs(bytes(12), 9)
+    img.get_inputs(11)
+    assert plain.calls == [("out", 9), ("in", 11)] and rec.calls == [("out", 5), ("in", 7)]
+    img.device = rec
+    img.get_inputs(13)
+    assert rec.calls[-1] == ("in", 13)
+
+
+def test_the_drive_is_a_cycle_device() -> None:
+    assert issubclass(Drive, CycleDevice)
+    assert not isinstance(Quiet(), CycleDevice)
