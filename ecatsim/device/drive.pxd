@@ -15,8 +15,10 @@ cdef long long SW_VOLTAGE, SW_WARNING, SW_REMOTE, SW_TARGET_REACHED, SW_INTERNAL
 cdef long long SW_OMS12, SW_OMS13, SW_MOTOR_ACTIVE, SW_DIRECTION
 
 
-@cython.locals(k="long long", f=double)
 cdef object _round(double x)
+@cython.locals(k="long long", f=double)
+cdef long long _round_c(double x)
+cdef bint _small(double x)
 
 
 cdef bint _powered(object st)
@@ -33,6 +35,9 @@ cdef class Drive(CycleDevice):
     cdef public object _published
     cdef public object _snapshot_hits
     cdef public object _control_hits
+    cdef public bint _pub_c
+    cdef public long long[::1] _pub_lo, _pub_hi, _pub_last
+    cdef public list _pub_obj
     cdef public long long q_60ff, q_6083, q_6084, q_607a, q_60b0, q_60b1, q_6071, q_60b2
     cdef public long long q_6065, q_6085, q_605a
     cdef public object params
@@ -92,5 +97,10 @@ cdef class Drive(CycleDevice):
     cpdef _controlword(self)
 
     @cython.locals(s=Servo, sw="long long", rpm=double, mode="long long", hits=tuple,
-                   values=tuple, k=Py_ssize_t, hit=tuple, e=Entry)
+                   values=tuple, k=Py_ssize_t, hit=tuple, e=Entry, fast=bint,
+                   pos_c="long long", p_demand=double, err=double, v_demand=double,
+                   iq=double, iq_ref=double)
     cpdef _publish(self)
+    @cython.locals(hits=tuple, hit=tuple, e=Entry, lo="long long", hi="long long",
+                   w="long long")
+    cdef void _put(self, Py_ssize_t k, long long v) except *

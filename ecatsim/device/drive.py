@@ -8,6 +8,7 @@ Ref: TMC8670 §6-§9 (objects, modes, statusword); CiA 402-2 (PDS FSA §8, modes
 from __future__ import annotations
 
 import math
+from array import array
 from collections.abc import Callable
 
 import structlog
@@ -94,6 +95,11 @@ def _round(x: float) -> int:
     where the builtin is a Python call (nan and infinities raise as round() does)."""
     if not -4.0e18 < x < 4.0e18:
         return round(x)
+    return _round_c(x)
+
+
+def _round_c(x: float) -> int:
+    """``round(x)`` for -4e18 < x < 4e18, as a C integer in the compiled core."""
     k = int(x)
     f = x - k  # exact: the fraction of a float
     if f > 0.5 or (f == 0.5 and k & 1):
@@ -101,6 +107,11 @@ def _round(x: float) -> int:
     elif f < -0.5 or (f == -0.5 and k & 1):
         k -= 1
     return k
+
+
+def _small(x: float) -> bool:
+    """Whether ``_round_c`` takes ``x`` (nan is not)."""
+    return -4.0e18 < x < 4.0e18
 
 
 def _powered(st: PdsState) -> bool:
@@ -139,6 +150,11 @@ class Drive(CycleDevice):
         self._published: tuple[tuple[Entry, int, int] | None, ...] | None = None
         self._snapshot_hits: tuple[tuple[Entry, int, int] | None, ...] | None = None
         self._control_hits: tuple[tuple[Entry, int, int] | None, ...] | None = None
+        #: the published entries' ranges, the ints _publish() wrote last and their values
+        #: (decision P34); set with _published
+        self._pub_c = False
+        self._pub_lo = self._pub_hi = self._pub_last = array("q")
+        self._pub_obj: list[object] = []
         # OD values the substeps use, read once per advance() (see _snapshot)
         self.q_60ff = self.q_6083 = self.q_6084 = self.q_607a = self.q_60b0 = 0
         self.q_60b1 = self.q_6071 = self.q_60b2 = self.q_6065 = self.q_6085 = 0
@@ -649,6 +665,42 @@ class Drive(CycleDevice):
             sw |= SW_MOTOR_ACTIVE
         if rpm < -1.0:
             sw |= SW_DIRECTION
+        hits = self._published
+        if hits is None:
+            hits = self._publish_hits()
+        fast = self._pub_c and type(pos) is int
+        pos_c = 0
+        if fast:
+            try:
+                pos_c = pos
+            except OverflowError:  # compiled: beyond a C integer
+                fast = False
+        if fast:
+            p_demand = self.p_demand
+            err = p_demand - pos_c  # Python's float - int: the int as a double
+            v_demand = self.v_demand_rpm
+            iq = s.iq_ma
+            iq_ref = s.iq_ref_ma
+            if (
+                _small(rpm)
+                and _small(p_demand)
+                and _small(v_demand)
+                and _small(iq)
+                and _small(iq_ref)
+                and _small(err)
+            ):
+                # the values below as C integers, each written only if it changed (P34)
+                self._put(0, sw)
+                self._put(1, mode)
+                self._put(2, pos_c)
+                self._put(3, _round_c(rpm))
+                self._put(4, _round_c(p_demand))
+                self._put(5, _round_c(v_demand))
+                self._put(6, _round_c(iq))
+                self._put(7, _round_c(iq_ref))
+                self._put(8, _round_c(err))
+                self._put(9, self.fault_code)
+                return
         values = (
             sw,
             mode,
@@ -661,9 +713,6 @@ class Drive(CycleDevice):
             _round(self.p_demand - pos),
             self.fault_code,
         )
-        hits = self._published
-        if hits is None:
-            hits = self._published = tuple([self._entry(i, 0) for i in PUBLISHED])
         for k in range(len(values)):
             hit = hits[k]
             if hit is not None:
@@ -672,6 +721,38 @@ class Drive(CycleDevice):
                 hi = hit[2]
                 e = hit[0]
                 e.value = lo if v < lo else hi if v > hi else v
+
+    def _put(self, k: int, v: int) -> None:
+        """Write ``v``, clamped to its range, into the k-th published entry (none:
+        nothing), unless the entry still holds the very int this wrote last with that
+        value: then it holds ``v`` already (decision P34)."""
+        hits = self._published
+        assert hits is not None
+        hit = hits[k]
+        if hit is None:
+            return
+        lo = self._pub_lo[k]
+        hi = self._pub_hi[k]
+        w = lo if v < lo else hi if v > hi else v
+        e = hit[0]
+        if e.value is self._pub_obj[k] and self._pub_last[k] == w:
+            return
+        e.value = w
+        self._pub_obj[k] = e.value
+        self._pub_last[k] = w
+
+    def _publish_hits(self) -> tuple[tuple[Entry, int, int] | None, ...]:
+        """The PUBLISHED entries, looked up once, with their ranges as C integers where
+        every range fits one (``_pub_c``, P34)."""
+        hits = self._published = tuple([self._entry(i, 0) for i in PUBLISHED])
+        ranges = [(h[1], h[2]) if h is not None else (0, 0) for h in hits]
+        self._pub_c = all(lo >= -(1 << 63) and hi < 1 << 63 for lo, hi in ranges)
+        if self._pub_c:
+            self._pub_lo = array("q", [lo for lo, _ in ranges])
+            self._pub_hi = array("q", [hi for _, hi in ranges])
+            self._pub_last = array("q", [0] * len(hits))
+            self._pub_obj = [_MISSING] * len(hits)
+        return hits
 
     def _publish_sdo_only(self) -> None:
         """Values no PDO can carry, refreshed when the OD is read (SDO upload, control
