@@ -40,6 +40,8 @@ cdef class Drive(CycleDevice):
     cdef public list _pub_obj
     cdef public long long q_60ff, q_6083, q_6084, q_607a, q_60b0, q_60b1, q_6071, q_60b2
     cdef public long long q_6065, q_6085, q_605a
+    cdef int _d_kind
+    cdef double _d_ref, _d_vff, _d_window
     cdef public object params
     cdef public long long substep_ns
     cdef public Servo servo
@@ -91,7 +93,8 @@ cdef class Drive(CycleDevice):
     cpdef _snapshot(self)
 
     @cython.locals(mode="long long", v=double, target=double)
-    cpdef object _steady_demand(self)
+    cpdef bint _steady_demand(self) except -1
+    cdef bint _demand(self, int kind, double ref, double v_ff, double window)
 
     @cython.locals(cw="long long", mode="long long", hits=tuple)
     cpdef _controlword(self)

@@ -159,6 +159,9 @@ class Drive(CycleDevice):
         self.q_60ff = self.q_6083 = self.q_6084 = self.q_607a = self.q_60b0 = 0
         self.q_60b1 = self.q_6071 = self.q_60b2 = self.q_6065 = self.q_6085 = 0
         self.q_605a = 0
+        #: the steady demand _steady_demand() found (kind, reference, feed-forward, window)
+        self._d_kind = 0
+        self._d_ref = self._d_vff = self._d_window = 0.0
         self.params = params or MotorParams()
         self.substep_ns = round(self.params.substep * 1e9)
         self.servo = Servo(self.params)
@@ -443,12 +446,15 @@ class Drive(CycleDevice):
         t = start
         left = n
         while left > 0:
-            demand = self._steady_demand()
             steps = left
-            if demand is None:  # the demand moves every substep (profiles, ramps)
-                demand = self._substep_demand(self.params.substep)
+            if self._steady_demand():
+                kind = self._d_kind
+                ref = self._d_ref
+                v_ff = self._d_vff
+                window = self._d_window
+            else:  # the demand moves every substep (profiles, ramps)
+                kind, ref, v_ff, window = self._substep_demand(self.params.substep)
                 steps = 1
-            kind, ref, v_ff, window = demand
             done, why = s.run(steps, kind, ref, v_ff, window, self._trip(), index is not None)
             if why == STOP_FOLLOWING:
                 self._fault("following_error")  # this substep still runs on the demand
@@ -494,30 +500,40 @@ class Drive(CycleDevice):
         self.q_6085 = _int_of(hits[9])
         self.q_605a = _int_of(hits[10])
 
-    def _steady_demand(self) -> Demand | None:
-        """The servo demand if it stays the same over the substeps to come (the OD values
-        are fixed until the next advance), else None. Ref: CiA 402-2 §10-§12."""
+    def _steady_demand(self) -> bool:
+        """Whether the servo demand stays the same over the substeps to come (the OD
+        values are fixed until the next advance); if so it is in ``_d_kind``, ``_d_ref``,
+        ``_d_vff``, ``_d_window`` (C fields in the compiled core, no tuple: decision P35).
+        Ref: CiA 402-2 §10-§12."""
         st = self.state
         if not _powered(st):
-            return (TORQUE, 0.0, 0.0, 0.0)  # voltage off: the motor coasts
-        if st != _OE:
-            return None  # quick stop / fault reaction ramps
+            return self._demand(TORQUE, 0.0, 0.0, 0.0)  # voltage off: the motor coasts
+        if st is not _OE:  # a PdsState member (P23)
+            return False  # quick stop / fault reaction ramps
         mode = self.mode
         if mode == CSP:
             self.p_demand = float(self.q_607a + self.q_60b0)
-            return (POSITION, self.p_demand, self.v_ff_rpm, self._window())
+            return self._demand(POSITION, self.p_demand, self.v_ff_rpm, self._window())
         if mode == CSV:
             v = float(self.q_60ff + self.q_60b1)
             self.v_demand_rpm = v
-            return (VELOCITY, v, 0.0, 0.0)
+            return self._demand(VELOCITY, v, 0.0, 0.0)
         if mode == CST:
-            return (TORQUE, float(self.q_6071 + self.q_60b2), 0.0, 0.0)
+            return self._demand(TORQUE, float(self.q_6071 + self.q_60b2), 0.0, 0.0)
         if mode == PV:
             target = 0.0 if self.prev_cw & 0x0100 else float(self.q_60ff)
-            return (VELOCITY, target, 0.0, 0.0) if self.v_demand_rpm == target else None
+            return self.v_demand_rpm == target and self._demand(VELOCITY, target, 0.0, 0.0)
         if mode in (PP, HM):
-            return None
-        return (VELOCITY, 0.0, 0.0, 0.0)
+            return False
+        return self._demand(VELOCITY, 0.0, 0.0, 0.0)
+
+    def _demand(self, kind: int, ref: float, v_ff: float, window: float) -> bool:
+        """Hold a steady demand (see _steady_demand); True."""
+        self._d_kind = kind
+        self._d_ref = ref
+        self._d_vff = v_ff
+        self._d_window = window
+        return True
 
     def _substep_demand(self, dt: float) -> Demand:
         """The demand for one substep where it moves every substep: pp profile, pv ramp,
