@@ -370,8 +370,10 @@ class Drive(CycleDevice):
             self._mode_change(mode)
         if self.al_state != _AL_OP:
             return
-        if cmd == _FAULT_RESET:
-            if self.state == _FAULT and not self.injected:
+        # decode() returns Command members and the state is a PdsState member: identity
+        # decides (P23, P36)
+        if cmd is _FAULT_RESET:
+            if self.state is _FAULT and not self.injected:
                 self.active_faults.clear()
                 self.fault_code = 0
                 if self.emcy_clear is not None:
@@ -380,14 +382,14 @@ class Drive(CycleDevice):
             return
         tr = cia402.step(self.state, cmd)
         if tr is None:
-            if self.state == _OE and self.mode == PP:
+            if self.state is _OE and self.mode == PP:
                 self._pp_setpoint()
             return
         number, nxt = tr
         if number == 16 and self._v(0x605A) < 5:
             return  # back to enabled only for quick stop option codes 5-8
         self._enter(nxt, f"t{number}")
-        if cmd == _SWITCH_ON_ENABLE and self.state == _SO:
+        if cmd is _SWITCH_ON_ENABLE and self.state is _SO:
             self._enter(_OE, "t4")
 
     def _enter(self, nxt: PdsState, why: str) -> None:
@@ -466,7 +468,7 @@ class Drive(CycleDevice):
                 self._fault("overcurrent")
             elif why == STOP_INDEX and index is not None:
                 self._index_pulse(index, t)
-        if self.state == _OE and self.mode not in (PP, CSP):
+        if self.state is _OE and self.mode not in (PP, CSP):
             self.p_demand = s.angle / TWO_PI * self.params.ppr  # follows the actual
         self.t_ns = start + n * dt_ns if n < 200_000 else now
 
@@ -649,7 +651,7 @@ class Drive(CycleDevice):
         pos = s.read_counts()
         rpm = s.read_rpm()
         mode = self.mode
-        if st == _OE:
+        if st is _OE:
             if mode == PP:
                 prof = self.profile
                 window = self._v(0x6067)

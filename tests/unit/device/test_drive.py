@@ -277,3 +277,14 @@ def test_published_values_are_ints_in_range_whichever_path_writes_them() -> None
         clamped = max(-(1 << 31), min((1 << 31) - 1, want))
         assert od.value(0x6064, 0) == clamped == (pos if pos is not None else want)
         assert od.value(0x60F4, 0) == max(-(1 << 31), min((1 << 31) - 1, round(d.p_demand - want)))
+
+
+def test_decode_and_the_transitions_give_the_enum_members_themselves() -> None:
+    """The drive tests commands and states by identity (P23, P36): decode() returns
+    Command members and the transition table PdsState members, never equal ints."""
+    members = {id(c) for c in Command}
+    for cw in range(0x100):
+        for prev in (0, 0x80):
+            assert id(cia402.decode(cw, prev)) in members
+    for number, nxt in cia402.TRANSITIONS.values():
+        assert any(nxt is st for st in PdsState), number
