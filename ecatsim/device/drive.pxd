@@ -7,6 +7,7 @@ cimport cython
 from ecatsim.device.servo cimport Servo
 cimport ecatsim.device.cia402 as cia402
 from ecatsim.slave.od cimport Entry
+from ecatsim.slave.pdo cimport CycleDevice
 
 
 # the statusword bits as C constants (drive.py uses them only within itself)
@@ -14,8 +15,10 @@ cdef long long SW_VOLTAGE, SW_WARNING, SW_REMOTE, SW_TARGET_REACHED, SW_INTERNAL
 cdef long long SW_OMS12, SW_OMS13, SW_MOTOR_ACTIVE, SW_DIRECTION
 
 
-@cython.locals(k="long long", f=double)
 cdef object _round(double x)
+@cython.locals(k="long long", f=double)
+cdef long long _round_c(double x)
+cdef bint _small(double x)
 
 
 cdef bint _powered(object st)
@@ -26,14 +29,19 @@ cdef bint _no_voltage(object st)
 cdef long long _int_of(tuple hit) except? -1
 
 
-cdef class Drive:
+cdef class Drive(CycleDevice):
     cdef public object od
     cdef public dict _entries
     cdef public object _published
     cdef public object _snapshot_hits
     cdef public object _control_hits
+    cdef public bint _pub_c
+    cdef public long long[::1] _pub_lo, _pub_hi, _pub_last
+    cdef public list _pub_obj
     cdef public long long q_60ff, q_6083, q_6084, q_607a, q_60b0, q_60b1, q_6071, q_60b2
     cdef public long long q_6065, q_6085, q_605a
+    cdef int _d_kind
+    cdef double _d_ref, _d_vff, _d_window
     cdef public object params
     cdef public long long substep_ns
     cdef public Servo servo
@@ -85,11 +93,17 @@ cdef class Drive:
     cpdef _snapshot(self)
 
     @cython.locals(mode="long long", v=double, target=double)
-    cpdef object _steady_demand(self)
+    cpdef bint _steady_demand(self) except -1
+    cdef bint _demand(self, int kind, double ref, double v_ff, double window)
 
     @cython.locals(cw="long long", mode="long long", hits=tuple)
     cpdef _controlword(self)
 
     @cython.locals(s=Servo, sw="long long", rpm=double, mode="long long", hits=tuple,
-                   values=tuple, k=Py_ssize_t, hit=tuple, e=Entry)
+                   values=tuple, k=Py_ssize_t, hit=tuple, e=Entry, fast=bint,
+                   pos_c="long long", p_demand=double, err=double, v_demand=double,
+                   iq=double, iq_ref=double)
     cpdef _publish(self)
+    @cython.locals(hits=tuple, hit=tuple, e=Entry, lo="long long", hi="long long",
+                   w="long long")
+    cdef void _put(self, Py_ssize_t k, long long v) except *

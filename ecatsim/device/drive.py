@@ -8,6 +8,7 @@ Ref: TMC8670 §6-§9 (objects, modes, statusword); CiA 402-2 (PDS FSA §8, modes
 from __future__ import annotations
 
 import math
+from array import array
 from collections.abc import Callable
 
 import structlog
@@ -29,6 +30,7 @@ from ecatsim.device.servo import (
 )
 from ecatsim.slave.al import AlState
 from ecatsim.slave.od import Entry, ObjectDictionary
+from ecatsim.slave.pdo import CycleDevice
 
 log = structlog.get_logger("ecatsim.drive")
 
@@ -93,6 +95,11 @@ def _round(x: float) -> int:
     where the builtin is a Python call (nan and infinities raise as round() does)."""
     if not -4.0e18 < x < 4.0e18:
         return round(x)
+    return _round_c(x)
+
+
+def _round_c(x: float) -> int:
+    """``round(x)`` for -4e18 < x < 4e18, as a C integer in the compiled core."""
     k = int(x)
     f = x - k  # exact: the fraction of a float
     if f > 0.5 or (f == 0.5 and k & 1):
@@ -100,6 +107,11 @@ def _round(x: float) -> int:
     elif f < -0.5 or (f == -0.5 and k & 1):
         k -= 1
     return k
+
+
+def _small(x: float) -> bool:
+    """Whether ``_round_c`` takes ``x`` (nan is not)."""
+    return -4.0e18 < x < 4.0e18
 
 
 def _powered(st: PdsState) -> bool:
@@ -122,8 +134,8 @@ def _int_of(hit: tuple[Entry, int, int] | None) -> int:
     return v if isinstance(v, int) else 0
 
 
-class Drive:
-    """CoeDevice for the TMC8670."""
+class Drive(CycleDevice):
+    """CoeDevice for the TMC8670 (a CycleDevice: the process image calls its cycle in C)."""
 
     def __init__(
         self,
@@ -138,10 +150,18 @@ class Drive:
         self._published: tuple[tuple[Entry, int, int] | None, ...] | None = None
         self._snapshot_hits: tuple[tuple[Entry, int, int] | None, ...] | None = None
         self._control_hits: tuple[tuple[Entry, int, int] | None, ...] | None = None
+        #: the published entries' ranges, the ints _publish() wrote last and their values
+        #: (decision P34); set with _published
+        self._pub_c = False
+        self._pub_lo = self._pub_hi = self._pub_last = array("q")
+        self._pub_obj: list[object] = []
         # OD values the substeps use, read once per advance() (see _snapshot)
         self.q_60ff = self.q_6083 = self.q_6084 = self.q_607a = self.q_60b0 = 0
         self.q_60b1 = self.q_6071 = self.q_60b2 = self.q_6065 = self.q_6085 = 0
         self.q_605a = 0
+        #: the steady demand _steady_demand() found (kind, reference, feed-forward, window)
+        self._d_kind = 0
+        self._d_ref = self._d_vff = self._d_window = 0.0
         self.params = params or MotorParams()
         self.substep_ns = round(self.params.substep * 1e9)
         self.servo = Servo(self.params)
@@ -350,8 +370,10 @@ class Drive:
             self._mode_change(mode)
         if self.al_state != _AL_OP:
             return
-        if cmd == _FAULT_RESET:
-            if self.state == _FAULT and not self.injected:
+        # decode() returns Command members and the state is a PdsState member: identity
+        # decides (P23, P36)
+        if cmd is _FAULT_RESET:
+            if self.state is _FAULT and not self.injected:
                 self.active_faults.clear()
                 self.fault_code = 0
                 if self.emcy_clear is not None:
@@ -360,14 +382,14 @@ class Drive:
             return
         tr = cia402.step(self.state, cmd)
         if tr is None:
-            if self.state == _OE and self.mode == PP:
+            if self.state is _OE and self.mode == PP:
                 self._pp_setpoint()
             return
         number, nxt = tr
         if number == 16 and self._v(0x605A) < 5:
             return  # back to enabled only for quick stop option codes 5-8
         self._enter(nxt, f"t{number}")
-        if cmd == _SWITCH_ON_ENABLE and self.state == _SO:
+        if cmd is _SWITCH_ON_ENABLE and self.state is _SO:
             self._enter(_OE, "t4")
 
     def _enter(self, nxt: PdsState, why: str) -> None:
@@ -426,12 +448,15 @@ class Drive:
         t = start
         left = n
         while left > 0:
-            demand = self._steady_demand()
             steps = left
-            if demand is None:  # the demand moves every substep (profiles, ramps)
-                demand = self._substep_demand(self.params.substep)
+            if self._steady_demand():
+                kind = self._d_kind
+                ref = self._d_ref
+                v_ff = self._d_vff
+                window = self._d_window
+            else:  # the demand moves every substep (profiles, ramps)
+                kind, ref, v_ff, window = self._substep_demand(self.params.substep)
                 steps = 1
-            kind, ref, v_ff, window = demand
             done, why = s.run(steps, kind, ref, v_ff, window, self._trip(), index is not None)
             if why == STOP_FOLLOWING:
                 self._fault("following_error")  # this substep still runs on the demand
@@ -443,7 +468,7 @@ class Drive:
                 self._fault("overcurrent")
             elif why == STOP_INDEX and index is not None:
                 self._index_pulse(index, t)
-        if self.state == _OE and self.mode not in (PP, CSP):
+        if self.state is _OE and self.mode not in (PP, CSP):
             self.p_demand = s.angle / TWO_PI * self.params.ppr  # follows the actual
         self.t_ns = start + n * dt_ns if n < 200_000 else now
 
@@ -477,30 +502,40 @@ class Drive:
         self.q_6085 = _int_of(hits[9])
         self.q_605a = _int_of(hits[10])
 
-    def _steady_demand(self) -> Demand | None:
-        """The servo demand if it stays the same over the substeps to come (the OD values
-        are fixed until the next advance), else None. Ref: CiA 402-2 §10-§12."""
+    def _steady_demand(self) -> bool:
+        """Whether the servo demand stays the same over the substeps to come (the OD
+        values are fixed until the next advance); if so it is in ``_d_kind``, ``_d_ref``,
+        ``_d_vff``, ``_d_window`` (C fields in the compiled core, no tuple: decision P35).
+        Ref: CiA 402-2 §10-§12."""
         st = self.state
         if not _powered(st):
-            return (TORQUE, 0.0, 0.0, 0.0)  # voltage off: the motor coasts
-        if st != _OE:
-            return None  # quick stop / fault reaction ramps
+            return self._demand(TORQUE, 0.0, 0.0, 0.0)  # voltage off: the motor coasts
+        if st is not _OE:  # a PdsState member (P23)
+            return False  # quick stop / fault reaction ramps
         mode = self.mode
         if mode == CSP:
             self.p_demand = float(self.q_607a + self.q_60b0)
-            return (POSITION, self.p_demand, self.v_ff_rpm, self._window())
+            return self._demand(POSITION, self.p_demand, self.v_ff_rpm, self._window())
         if mode == CSV:
             v = float(self.q_60ff + self.q_60b1)
             self.v_demand_rpm = v
-            return (VELOCITY, v, 0.0, 0.0)
+            return self._demand(VELOCITY, v, 0.0, 0.0)
         if mode == CST:
-            return (TORQUE, float(self.q_6071 + self.q_60b2), 0.0, 0.0)
+            return self._demand(TORQUE, float(self.q_6071 + self.q_60b2), 0.0, 0.0)
         if mode == PV:
             target = 0.0 if self.prev_cw & 0x0100 else float(self.q_60ff)
-            return (VELOCITY, target, 0.0, 0.0) if self.v_demand_rpm == target else None
+            return self.v_demand_rpm == target and self._demand(VELOCITY, target, 0.0, 0.0)
         if mode in (PP, HM):
-            return None
-        return (VELOCITY, 0.0, 0.0, 0.0)
+            return False
+        return self._demand(VELOCITY, 0.0, 0.0, 0.0)
+
+    def _demand(self, kind: int, ref: float, v_ff: float, window: float) -> bool:
+        """Hold a steady demand (see _steady_demand); True."""
+        self._d_kind = kind
+        self._d_ref = ref
+        self._d_vff = v_ff
+        self._d_window = window
+        return True
 
     def _substep_demand(self, dt: float) -> Demand:
         """The demand for one substep where it moves every substep: pp profile, pv ramp,
@@ -616,7 +651,7 @@ class Drive:
         pos = s.read_counts()
         rpm = s.read_rpm()
         mode = self.mode
-        if st == _OE:
+        if st is _OE:
             if mode == PP:
                 prof = self.profile
                 window = self._v(0x6067)
@@ -648,6 +683,42 @@ class Drive:
             sw |= SW_MOTOR_ACTIVE
         if rpm < -1.0:
             sw |= SW_DIRECTION
+        hits = self._published
+        if hits is None:
+            hits = self._publish_hits()
+        fast = self._pub_c and type(pos) is int
+        pos_c = 0
+        if fast:
+            try:
+                pos_c = pos
+            except OverflowError:  # compiled: beyond a C integer
+                fast = False
+        if fast:
+            p_demand = self.p_demand
+            err = p_demand - pos_c  # Python's float - int: the int as a double
+            v_demand = self.v_demand_rpm
+            iq = s.iq_ma
+            iq_ref = s.iq_ref_ma
+            if (
+                _small(rpm)
+                and _small(p_demand)
+                and _small(v_demand)
+                and _small(iq)
+                and _small(iq_ref)
+                and _small(err)
+            ):
+                # the values below as C integers, each written only if it changed (P34)
+                self._put(0, sw)
+                self._put(1, mode)
+                self._put(2, pos_c)
+                self._put(3, _round_c(rpm))
+                self._put(4, _round_c(p_demand))
+                self._put(5, _round_c(v_demand))
+                self._put(6, _round_c(iq))
+                self._put(7, _round_c(iq_ref))
+                self._put(8, _round_c(err))
+                self._put(9, self.fault_code)
+                return
         values = (
             sw,
             mode,
@@ -660,9 +731,6 @@ class Drive:
             _round(self.p_demand - pos),
             self.fault_code,
         )
-        hits = self._published
-        if hits is None:
-            hits = self._published = tuple([self._entry(i, 0) for i in PUBLISHED])
         for k in range(len(values)):
             hit = hits[k]
             if hit is not None:
@@ -671,6 +739,38 @@ class Drive:
                 hi = hit[2]
                 e = hit[0]
                 e.value = lo if v < lo else hi if v > hi else v
+
+    def _put(self, k: int, v: int) -> None:
+        """Write ``v``, clamped to its range, into the k-th published entry (none:
+        nothing), unless the entry still holds the very int this wrote last with that
+        value: then it holds ``v`` already (decision P34)."""
+        hits = self._published
+        assert hits is not None
+        hit = hits[k]
+        if hit is None:
+            return
+        lo = self._pub_lo[k]
+        hi = self._pub_hi[k]
+        w = lo if v < lo else hi if v > hi else v
+        e = hit[0]
+        if e.value is self._pub_obj[k] and self._pub_last[k] == w:
+            return
+        e.value = w
+        self._pub_obj[k] = e.value
+        self._pub_last[k] = w
+
+    def _publish_hits(self) -> tuple[tuple[Entry, int, int] | None, ...]:
+        """The PUBLISHED entries, looked up once, with their ranges as C integers where
+        every range fits one (``_pub_c``, P34)."""
+        hits = self._published = tuple([self._entry(i, 0) for i in PUBLISHED])
+        ranges = [(h[1], h[2]) if h is not None else (0, 0) for h in hits]
+        self._pub_c = all(lo >= -(1 << 63) and hi < 1 << 63 for lo, hi in ranges)
+        if self._pub_c:
+            self._pub_lo = array("q", [lo for lo, _ in ranges])
+            self._pub_hi = array("q", [hi for _, hi in ranges])
+            self._pub_last = array("q", [0] * len(hits))
+            self._pub_obj = [_MISSING] * len(hits)
+        return hits
 
     def _publish_sdo_only(self) -> None:
         """Values no PDO can carry, refreshed when the OD is read (SDO upload, control

@@ -5,6 +5,7 @@ cimport cython
 
 from ecatsim.esc.core cimport Esc, FrameContext
 from ecatsim.esc.dc cimport DcUnit
+from ecatsim.slave.firmware cimport Firmware
 
 cdef long long NO_DEADLINE, MAX_SYNC0_CATCHUP, PULSE_HINT_MARGIN_NS, PROBE_NS
 
@@ -25,7 +26,7 @@ cdef class Schedule:
     cpdef void service_at(self, long long t) except *
     cpdef void pulses_due(self, long long t) except *
     @cython.locals(ctx=FrameContext, esc=Esc, dc=DcUnit, k="long long", nxt="long long",
-                   d="long long", d1="long long")
+                   d="long long", d1="long long", cfw=Firmware)
     cpdef void sync_until(self, long long t) except *
     @cython.locals(best="long long")
     cpdef object next_deadline(self)

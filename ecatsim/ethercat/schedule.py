@@ -17,6 +17,7 @@ from collections.abc import Callable, Sequence, Sized
 from typing import Protocol
 
 from ecatsim.esc.core import Esc, FrameContext
+from ecatsim.slave.firmware import Firmware
 
 #: overdue SYNC0 pulses fired one by one before the rest are skipped (a stall this long,
 #: or a forward jump of the system time, is not caught up). Decision DC2.
@@ -154,6 +155,8 @@ class Schedule:
         for esc in self.sync_escs:
             dc = esc.dc
             fw = self.firmware[esc.position] if self.firmware else None
+            # the TMC8670's firmware is called in C (any other through Python; P32)
+            cfw = fw if isinstance(fw, Firmware) else None
             for k in range(MAX_SYNC0_CATCHUP + 1):
                 # NO_DEADLINE: no pulse scheduled (later than any host time t)
                 d1 = dc.sync1_deadline_or(NO_DEADLINE)
@@ -171,7 +174,10 @@ class Schedule:
                     self.sync0_late_ns = t - d
                 if fw is not None and esc.position in ctx.pending:
                     ctx.pdi_ns = d
-                    fw.service(d)
+                    if cfw is not None:
+                        cfw.service(d)
+                    else:
+                        fw.service(d)
             else:
                 d = dc.sync0_deadline_or(NO_DEADLINE)
                 d1 = dc.sync1_deadline_or(NO_DEADLINE)

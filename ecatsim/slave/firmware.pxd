@@ -5,6 +5,7 @@
 cimport cython
 
 from ecatsim.esc.pdi cimport Pdi
+from ecatsim.slave.pdo cimport PdoImage
 
 # the registers and events, imported through pdi.py: C constants here
 cdef long long AL_CONTROL, AL_EVENT_MASK, AL_STATUS, AL_STATUS_CODE, DC_ACTIVATION
@@ -16,7 +17,9 @@ cdef long long EV_SM1, PD_EVENTS, EVENT_MASK, OP_WAIT_NS
 
 cdef class Firmware:
     cdef public Pdi pdi
-    cdef public object app, mailbox, mbx
+    cdef object _app
+    cdef PdoImage _pdo
+    cdef public object mailbox, mbx
     cdef public long long event_mask
     cdef public object od, emergency, device, coe
     cdef public bint pd_masked
@@ -29,9 +32,10 @@ cdef class Firmware:
     cdef public long long code
     cdef public object log
 
-    @cython.locals(p=Pdi, ev="long long", pd_events="long long", dc=bint)
+    @cython.locals(p=Pdi, ev="long long", pd_events="long long", dc=bint, pdo=PdoImage)
     cpdef void service(self, long long now_ns) except *
     @cython.locals(want="long long", pending=bint)
     cpdef void service_mailbox(self, long long ev, long long now_ns) except *
     cpdef void _outputs_received(self, long long now_ns) except *
+    @cython.locals(pdo=PdoImage)
     cpdef void _write_inputs(self, long long now_ns) except *

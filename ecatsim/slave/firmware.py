@@ -35,6 +35,7 @@ from ecatsim.slave.coe import CoeProtocol
 from ecatsim.slave.emcy import Emergency
 from ecatsim.slave.mailbox import MailboxEngine
 from ecatsim.slave.od import ObjectDictionary
+from ecatsim.slave.pdo import PdoImage
 
 log = structlog.get_logger("ecatsim.slave")
 
@@ -100,6 +101,8 @@ class Firmware:
         bootstrap_supported: bool = False,
     ) -> None:
         self.pdi = pdi
+        self._app: Application
+        self._pdo: PdoImage | None = None
         self.app = app
         self.mailbox = mailbox
         self.mbx = mbx
@@ -123,6 +126,17 @@ class Firmware:
         self.code = al.CODE_NONE
         self.log = log.bind(slave=pdi.position)
         self.reset()
+
+    @property
+    def app(self) -> Application:
+        """The application behind the firmware."""
+        return self._app
+
+    @app.setter
+    def app(self, app: Application) -> None:
+        self._app = app
+        #: the same application as a PdoImage, called in C (None: through Python; P32)
+        self._pdo = app if isinstance(app, PdoImage) else None
 
     # ----------------------------------------------------------------- lifecycle
 
@@ -184,7 +198,11 @@ class Firmware:
                     if out is not None:
                         self._outputs_received(now_ns)
                         if self.state is _OP:
-                            self.app.set_outputs(out, now_ns)
+                            pdo = self._pdo
+                            if pdo is not None:
+                                pdo.set_outputs(out, now_ns)
+                            else:
+                                self._app.set_outputs(out, now_ns)
                 self._write_inputs(now_ns)
             elif pd_events & (EV_SM0 << SM_PD_IN) and p.u8(DC_ACTIVATION_STATUS) & 0x01:
                 self._write_inputs(now_ns)  # no pulse yet: keep the inputs fresh meanwhile
@@ -193,8 +211,12 @@ class Firmware:
                 out = p.sm_read(SM_PD_OUT)
                 if out is not None:
                     self._outputs_received(now_ns)
-                    if self.state is _OP:
-                        self.app.set_outputs(out, now_ns)  # free run: applied when SM2 is written
+                    if self.state is _OP:  # free run: applied when SM2 is written
+                        pdo = self._pdo
+                        if pdo is not None:
+                            pdo.set_outputs(out, now_ns)
+                        else:
+                            self._app.set_outputs(out, now_ns)
             if ev & EV_SYNC0:
                 p.u8(DC_SYNC0_STATUS)
             if pd_events:
@@ -248,7 +270,11 @@ class Firmware:
 
     def _write_inputs(self, now_ns: int) -> None:
         if self.state is _SAFEOP or self.state is _OP:
-            self.pdi.sm_write(SM_PD_IN, self.app.get_inputs(now_ns))
+            pdo = self._pdo
+            if pdo is not None:
+                self.pdi.sm_write(SM_PD_IN, pdo.get_inputs(now_ns))
+            else:
+                self.pdi.sm_write(SM_PD_IN, self._app.get_inputs(now_ns))
 
     # ----------------------------------------------------------------- AL control
 

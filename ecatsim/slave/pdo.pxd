@@ -6,14 +6,33 @@ cimport cython
 from ecatsim.slave.od cimport Entry
 
 
+cdef class CycleDevice:
+    cpdef outputs_applied(self, now_ns)
+    cpdef update_inputs(self, now_ns)
+
+
 cdef class PdoImage:
-    cdef public object od, device, rules
+    cdef public object od, rules
+    cdef object _device
+    cdef CycleDevice _dev
     cdef object _plan
     cdef object _rx_st, _tx_st
     cdef tuple _rx_entries, _tx_entries
+    cdef tuple _rx_layout, _tx_layout
+    cdef bytearray _tx_buf
 
-    @cython.locals(entries=tuple, values=tuple, i="Py_ssize_t", e=Entry)
+    @cython.locals(entries=tuple, values=tuple, i="Py_ssize_t", e=Entry, dev=CycleDevice,
+                   layout=tuple, buf=bytes, spec="long long", off="Py_ssize_t",
+                   n="long long", raw="long long", k="long long", half="long long")
     cpdef void set_outputs(self, object data, object now_ns) except *
+    @cython.locals(dev=CycleDevice)
     cpdef bytes get_inputs(self, object now_ns)
-    @cython.locals(entries=tuple, values=list, i="Py_ssize_t", e=Entry)
+    @cython.locals(entries=tuple, values=list, i="Py_ssize_t", e=Entry, layout=tuple)
     cpdef bytes pack_inputs(self)
+    @cython.locals(entries=tuple, out=bytearray, i="Py_ssize_t", e=Entry, c="long long",
+                   spec="long long", off="Py_ssize_t", n="long long", k="long long",
+                   half="long long")
+    cdef object _pack_small(self, tuple layout)
+
+
+cpdef long long _c_int(object v) except? -1

@@ -95,6 +95,9 @@ class Codec:
 
     st: struct.Struct
     entries: tuple[Entry, ...]
+    #: per entry ``offset << 4 | bytes << 1 | signed`` where every entry is an integer of
+    #: 1-4 bytes (the compiled core decodes and encodes those in C; decision P33), else None
+    layout: tuple[int, ...] | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -119,7 +122,7 @@ _CODES = {
 def codec(fields: tuple[Field, ...], size: int) -> Codec | None:
     """One struct for an image of byte-aligned integer fields; None if any field is of
     another type (strings, REAL32, 24-bit types: the per-entry path handles those)."""
-    fmt, pos, entries = ["<"], 0, []
+    fmt, pos, entries, layout = ["<"], 0, [], []
     for f in fields:
         if not f.whole_bytes:
             return None
@@ -136,10 +139,17 @@ def codec(fields: tuple[Field, ...], size: int) -> Codec | None:
                 return None
             fmt.append(code)
             entries.append(f.entry)
+            layout.append(f.offset << 4 | f.size << 1 | (code in "bhiq"))
         pos = f.offset + f.size
     if size > pos:
         fmt.append(f"{size - pos}x")
-    return Codec(struct.Struct("".join(fmt)), tuple(entries))
+    small = all((spec >> 1) & 7 <= 4 for spec in layout)
+    return Codec(struct.Struct("".join(fmt)), tuple(entries), tuple(layout) if small else None)
+
+
+def _c_int(v: int) -> int:
+    """``v`` itself; compiled, a C ``long long`` (OverflowError beyond its range)."""
+    return v
 
 
 def _mapped(od: ObjectDictionary, value: int, rx: bool) -> tuple[Entry | None, int]:
@@ -290,6 +300,19 @@ class CoeDevice(Protocol):
     def al_state_changed(self, state: AlState, now_ns: int) -> None: ...
 
 
+class CycleDevice:
+    """The base of a CoeDevice whose cycle the compiled process image calls as C calls
+    (pdo.pxd declares both methods cpdef: a subclass's overrides are found through the
+    extension type's method table, not by Python attribute lookup; decision P32). A
+    CoeDevice that does not derive from it is called through Python as before."""
+
+    def outputs_applied(self, now_ns: int) -> None:
+        raise NotImplementedError
+
+    def update_inputs(self, now_ns: int) -> None:
+        raise NotImplementedError
+
+
 class PdoImage:
     """The firmware's Application for a CoE device: process images through the OD."""
 
@@ -297,10 +320,23 @@ class PdoImage:
         self, od: ObjectDictionary, device: CoeDevice, rules: PdoRules = DEFAULT_RULES
     ) -> None:
         self.od = od
+        self._device: CoeDevice
+        self._dev: CycleDevice | None = None
         self.device = device
         self.rules = rules
         self.plan = compile_plan(od, rules)
         install(od, rules)
+
+    @property
+    def device(self) -> CoeDevice:
+        """The device behind the process image."""
+        return self._device
+
+    @device.setter
+    def device(self, device: CoeDevice) -> None:
+        self._device = device
+        #: the same device as a CycleDevice, called in C (None: through Python)
+        self._dev = device if isinstance(device, CycleDevice) else None
 
     @property
     def plan(self) -> Plan:
@@ -314,8 +350,13 @@ class PdoImage:
         #: the one-struct codecs' parts, bound once per plan (the DC cycle's hot path)
         self._rx_st = rx.st if rx is not None else None
         self._rx_entries = rx.entries if rx is not None else ()
+        self._rx_layout = rx.layout if rx is not None else None
         self._tx_st = tx.st if tx is not None else None
         self._tx_entries = tx.entries if tx is not None else ()
+        self._tx_layout = tx.layout if tx is not None else None
+        #: the input image the C encoder fills: its padding stays zero, its entries'
+        #: bytes are all written by every fill (decision P33)
+        self._tx_buf = bytearray(plan.tx_size)
 
     def prepare(self) -> int:
         """Compile the plan at PREOP->SAFEOP; an invalid mapping is an AL status code.
@@ -338,10 +379,28 @@ class PdoImage:
         st = self._rx_st
         if st is not None and len(data) >= st.size:
             entries: tuple[Entry, ...] = self._rx_entries
-            values: tuple[int, ...] = st.unpack_from(data)
-            for i in range(len(entries)):
-                e = entries[i]
-                e.value = values[i]
+            layout = self._rx_layout
+            if layout is not None and type(data) is bytes:
+                # the struct's values, decoded in C from the bytes (decision P33)
+                buf: bytes = data
+                for i in range(len(entries)):
+                    spec = layout[i]
+                    off = spec >> 4
+                    n = (spec >> 1) & 7
+                    raw = 0
+                    for k in range(n):
+                        raw |= buf[off + k] << (8 * k)
+                    half = 1  # the sign bit's value: a C long long shifted in the core
+                    half <<= 8 * n - 1
+                    if spec & 1 and raw >= half:
+                        raw -= half << 1
+                    e = entries[i]
+                    e.value = raw
+            else:
+                values: tuple[int, ...] = st.unpack_from(data)
+                for i in range(len(entries)):
+                    e = entries[i]
+                    e.value = values[i]
         else:
             for f in self._plan.rx:
                 if f.entry is not None:
@@ -349,15 +408,28 @@ class PdoImage:
                         f.entry.value = f.entry.decode(data[f.offset : f.offset + f.size])
                     else:
                         f.entry.value = f.read(data)
-        self.device.outputs_applied(now_ns)
+        dev = self._dev
+        if dev is not None:
+            dev.outputs_applied(now_ns)
+        else:
+            self._device.outputs_applied(now_ns)
 
     def get_inputs(self, now_ns: int) -> bytes:
-        self.device.update_inputs(now_ns)
+        dev = self._dev
+        if dev is not None:
+            dev.update_inputs(now_ns)
+        else:
+            self._device.update_inputs(now_ns)
         return self.pack_inputs()
 
     def pack_inputs(self) -> bytes:
         """The input image from the OD values, as they are now."""
         st = self._tx_st
+        layout = self._tx_layout
+        if layout is not None:
+            fast = self._pack_small(layout)
+            if fast is not None:
+                return bytes(fast)
         if st is not None:
             entries: tuple[Entry, ...] = self._tx_entries
             values = []
@@ -376,6 +448,34 @@ class PdoImage:
                 else:
                     f.write(out, int.from_bytes(f.entry.encode(), "little"))
         return bytes(out)
+
+    def _pack_small(self, layout: tuple[int, ...]) -> bytearray | None:
+        """The struct's bytes in the image buffer, encoded in C where every value is an
+        int within its field's type; None (the struct path decides) for any other (P33)."""
+        entries: tuple[Entry, ...] = self._tx_entries
+        out = self._tx_buf
+        for i in range(len(entries)):
+            e = entries[i]
+            v = e.value
+            if type(v) is not int:
+                return None
+            try:
+                c = _c_int(v)
+            except OverflowError:
+                return None
+            spec = layout[i]
+            off = spec >> 4
+            n = (spec >> 1) & 7
+            half = 1  # the sign bit's value: a C long long shifted in the core
+            half <<= 8 * n - 1
+            if spec & 1:
+                if c < -half or c >= half:
+                    return None
+            elif c < 0 or c >= half << 1:
+                return None
+            for k in range(n):
+                out[off + k] = (c >> (8 * k)) & 0xFF
+        return out
 
     def al_state_changed(self, state: AlState, now_ns: int) -> None:
         self.device.al_state_changed(state, now_ns)

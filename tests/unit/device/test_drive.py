@@ -252,3 +252,39 @@ def test_2041_gains_written_and_used() -> None:
     od.set(0x2041, 5, 256)  # 1 V/A: a slower loop
     d._load_gains()
     assert d.servo.gains.cur_kp == 1.0
+
+
+def test_published_values_are_ints_in_range_whichever_path_writes_them() -> None:
+    """_publish writes C integers only where they changed (P34): an entry holding a bool,
+    a string or an int of the same value ends as that int; values beyond a C integer (an
+    absurd encoder angle) go the Python path, clamped to the entry's range alike."""
+    od = build_od(default_description())
+    d = Drive(od)
+    d.update_inputs(0)
+    assert [type(od.value(i, 0)) for i in (0x6041, 0x6064, 0x606C)] == [int, int, int]
+    sw = od.value(0x6041, 0)
+    od.set(0x6041, 0, bool(sw) if sw in (0, 1) else "stale")
+    od.set(0x6064, 0, True)
+    od.set(0x6077, 0, 1 << 80)
+    d.update_inputs(0)
+    assert (od.value(0x6041, 0), type(od.value(0x6041, 0))) == (sw, int)
+    assert (od.value(0x6064, 0), type(od.value(0x6064, 0))) == (0, int)
+    assert (od.value(0x6077, 0), type(od.value(0x6077, 0))) == (0, int)
+    for angle, pos in ((1e30, (1 << 31) - 1), (-1e30, -(1 << 31)), (3e5, None)):
+        d.servo.angle = angle
+        d.update_inputs(0)
+        want = d.servo.read_counts()
+        clamped = max(-(1 << 31), min((1 << 31) - 1, want))
+        assert od.value(0x6064, 0) == clamped == (pos if pos is not None else want)
+        assert od.value(0x60F4, 0) == max(-(1 << 31), min((1 << 31) - 1, round(d.p_demand - want)))
+
+
+def test_decode_and_the_transitions_give_the_enum_members_themselves() -> None:
+    """The drive tests commands and states by identity (P23, P36): decode() returns
+    Command members and the transition table PdsState members, never equal ints."""
+    members = {id(c) for c in Command}
+    for cw in range(0x100):
+        for prev in (0, 0x80):
+            assert id(cia402.decode(cw, prev)) in members
+    for number, nxt in cia402.TRANSITIONS.values():
+        assert any(nxt is st for st in PdsState), number
