@@ -68,6 +68,7 @@ cdef class Drive(CycleDevice):
     cdef public double overcurrent_ma
     cdef public object index_output
     cdef public object tracer
+    cdef public object log
 
     cpdef object _entry(self, int index, int sub)
     @cython.locals(e=Entry)

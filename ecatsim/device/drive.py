@@ -143,8 +143,12 @@ class Drive(CycleDevice):
         params: MotorParams | None = None,
         emcy: Emcy | None = None,
         emcy_clear: Callable[[], None] | None = None,
+        slave: int | None = None,
     ) -> None:
         self.od = od
+        #: the drive's logger, bound once (a call on the module's lazy logger binds anew
+        #: each time), naming the slave's position where the segment gives it
+        self.log = log.bind(slave=slave) if slave is not None else log.bind()
         self._entries: dict[int, tuple[Entry, int, int] | None] = {}
         #: the entries _publish() writes every cycle, in PUBLISHED order (looked up once)
         self._published: tuple[tuple[Entry, int, int] | None, ...] | None = None
@@ -353,7 +357,7 @@ class Drive(CycleDevice):
         code, reg = FAULTS[kind]
         self.active_faults.add(kind)
         self.fault_code = code
-        log.warning("drive_fault", kind=kind, code=f"0x{code:04X}")
+        self.log.warning("drive_fault", kind=kind, code=f"0x{code:04X}")
         if self.emcy is not None:
             self.emcy(code, reg, b"")
         self.state = _FRA
@@ -397,7 +401,7 @@ class Drive(CycleDevice):
             self._hold_here()
         if not _powered(nxt):
             self.servo.reset_integrators()
-        log.info("pds_state", state=nxt.name, why=why)
+        self.log.info("pds_state", state=nxt.name, why=why)
         self.state = nxt
 
     def _hold_here(self) -> None:

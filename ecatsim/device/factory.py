@@ -40,9 +40,15 @@ def motor_params(raw: Any, src: str) -> MotorParams:
 
 
 def make_coe_device(
-    kind: str, desc: DeviceDescription, od: ObjectDictionary, emcy: Emergency
+    kind: str,
+    desc: DeviceDescription,
+    od: ObjectDictionary,
+    emcy: Emergency,
+    slave: int | None = None,
 ) -> CoeDevice:
-    """tmc8670: the CiA 402 drive; echo: the loopback device."""
+    """tmc8670: the CiA 402 drive (logging as ``slave``, its position); echo: the loopback
+    device."""
     if kind == "echo":
         return OdEchoDevice(od)
-    return Drive(od, motor_params(desc.motor_raw, desc.source), emcy.raise_error, emcy.clear)
+    params = motor_params(desc.motor_raw, desc.source)
+    return Drive(od, params, emcy.raise_error, emcy.clear, slave=slave)

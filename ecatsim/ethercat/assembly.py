@@ -335,7 +335,7 @@ def build_segment(cfg: SegmentConfig, clock: Clock, out: bool = False) -> Segmen
                 if model is not None:
                     device = GenericDevice(od, _signals(sc, od, cfg.source, i))
                 else:
-                    device = make_coe_device(sc.device, desc, od, emcy)
+                    device = make_coe_device(sc.device, desc, od, emcy, slave=i)
             except DescriptionError as exc:
                 raise UserError(str(exc)) from exc
             app: Application = PdoImage(od, device, rules)

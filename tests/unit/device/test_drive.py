@@ -288,3 +288,22 @@ def test_decode_and_the_transitions_give_the_enum_members_themselves() -> None:
             assert id(cia402.decode(cw, prev)) in members
     for number, nxt in cia402.TRANSITIONS.values():
         assert any(nxt is st for st in PdsState), number
+
+
+def test_a_drive_of_the_segment_names_its_slave_in_its_log_lines() -> None:
+    """128 drives enabled together log 128 pds_state lines: each says which slave."""
+    from structlog.testing import capture_logs
+
+    from tests.support.tinymaster import segment_of
+
+    with capture_logs() as logs:
+        seg, _ = segment_of(2, device="tmc8670")
+        drive = seg.firmware[1].app.device
+        drive._enter(PdsState.READY_TO_SWITCH_ON, "t2")
+    assert logs[-1] == {
+        "event": "pds_state",
+        "slave": 1,
+        "state": "READY_TO_SWITCH_ON",
+        "why": "t2",
+        "log_level": "info",
+    }
