@@ -60,8 +60,8 @@ def test_no_codec_for_types_struct_cannot_carry() -> None:
     assert compile_plan(od).tx_size == 17
 
 
-class Recorder(CycleDevice):
-    """A CycleDevice: the compiled process image calls its overrides in C (P32)."""
+class Calls:
+    """Records the cycle's calls to a device."""
 
     def __init__(self) -> None:
         self.calls: list[tuple[str, int]] = []
@@ -73,6 +73,10 @@ class Recorder(CycleDevice):
         self.calls.append(("in", now_ns))
 
 
+class Recorder(Calls, CycleDevice):
+    """A CycleDevice: the compiled process image calls its overrides in C (P32)."""
+
+
 def test_the_cycle_reaches_a_cycle_device_and_a_plain_one_alike() -> None:
     od = build_od(default_description())
     rec = Recorder()
@@ -82,15 +86,8 @@ def test_the_cycle_reaches_a_cycle_device_and_a_plain_one_alike() -> None:
     img.get_inputs(7)
     assert rec.calls == [("out", 5), ("in", 7)]
 
-    class Plain(Quiet):
-        def __init__(self) -> None:
-            self.calls: list[tuple[str, int]] = []
-
-        def outputs_applied(self, now_ns: int) -> None:
-            self.calls.append(("out", now_ns))
-
-        def update_inputs(self, now_ns: int) -> None:
-            self.calls.append(("in", now_ns))
+    class Plain(Calls, Quiet):
+        """A device that is not a CycleDevice: called through Python."""
 
     plain = Plain()
     img.device = plain  # type: ignore[assignment]  # replaced: the new one is called
