@@ -20,6 +20,7 @@ from ecatsim.errors import UserError
 from ecatsim.ethercat import realtime
 from ecatsim.ethercat.assembly import build_segment
 from ecatsim.ethercat.daemon import Daemon, OutPort
+from ecatsim.ethercat.gcwatch import GcPauses
 from ecatsim.ethercat.linklock import LinkLock, lock_link, lock_name
 from ecatsim.ethercat.privileges import drop_privileges
 from ecatsim.ethercat.segment import Segment
@@ -257,8 +258,10 @@ def serve(opts: RunOptions, cfg: SegmentConfig) -> None:
         ctl=str(ctl.path),
         doors=sorted(doors.doors) if doors is not None else [],
     )
+    pauses = GcPauses()
     try:
-        daemon.run()
+        with pauses:
+            daemon.run()
     finally:
         daemon.close()
         ctl.close()
@@ -279,4 +282,6 @@ def serve(opts: RunOptions, cfg: SegmentConfig) -> None:
             failures=daemon.failures,
             cpu_moves=daemon.follower.moves if daemon.follower is not None else 0,
             cpu_follow_pauses=daemon.follower.pauses if daemon.follower is not None else 0,
+            gc_collections=pauses.count,
+            gc_max_us=pauses.max_ns // 1000,
         )
