@@ -279,6 +279,8 @@ def serve(opts: RunOptions, cfg: SegmentConfig) -> None:
             bad_frames=segment.bad_frames,
             sync0_pulses=segment.schedule.sync0_ticks,
             sync0_max_late_us=segment.schedule.sync0_late_ns // 1000,
+            sync0_deferred=segment.schedule.sync0_deferred,
+            sync0_merged=segment.schedule.sync0_merged,
             failures=daemon.failures,
             cpu_moves=daemon.follower.moves if daemon.follower is not None else 0,
             cpu_follow_pauses=daemon.follower.pauses if daemon.follower is not None else 0,

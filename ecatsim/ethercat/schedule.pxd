@@ -15,19 +15,23 @@ cdef class Schedule:
     cdef public list _sync_escs
     cdef public object awake
     cdef public FrameContext ctx
-    cdef public list escs, firmware
+    cdef public list escs, firmware, deferred
     cdef public object frame_waiting
     cdef public object persist
     cdef public object held_logs, write_logs
     cdef public long long probe_ns, resume_pos, yielded
-    cdef public long long sync0_late_ns, sync0_ticks
+    cdef public long long sync0_late_ns, sync0_ticks, sync0_deferred, sync0_merged
 
     @cython.locals(ctx=FrameContext, esc=Esc, d="long long", look="long long", pos="long long")
     cpdef void service_at(self, long long t) except *
     cpdef void pulses_due(self, long long t) except *
     @cython.locals(ctx=FrameContext, esc=Esc, dc=DcUnit, k="long long", nxt="long long",
-                   d="long long", d1="long long", cfw=Firmware)
-    cpdef void sync_until(self, long long t) except *
+                   d="long long", d1="long long", cfw=Firmware, defer=bint, look="long long",
+                   waiting=bint)
+    cpdef void sync_until(self, long long t, bint frame_first=*) except *
+    @cython.locals(lst=list, fw=Firmware, look="long long", ctx=FrameContext, n=Py_ssize_t,
+                   i=Py_ssize_t)
+    cpdef bint run_deferred(self) except *
     @cython.locals(best="long long")
     cpdef object next_deadline(self)
     @cython.locals(best="long long", d="long long", e=Esc)

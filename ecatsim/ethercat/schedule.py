@@ -5,7 +5,10 @@ The silicon answers a frame at once and its firmware reacts later, over the PDI,
 events the frame latched (decision P19). The segment's walk (ecatsim/ethercat/segment.py)
 only latches; this schedule runs the reactions, at most every ``probe_ns`` of work looking
 whether a frame waits, and stopping for it. SYNC0 pulses due before a frame's arrival run
-before its walk, each at its own time (decision DC2).
+before its walk, each at its own time (decision DC2); where the SYNC0 work of many slaves
+would hold a waiting frame up, each slave's firmware takes its outputs at the pulse and the
+rest of its work (the drive's cycle, the inputs as of the pulse) runs after that frame's
+reply (decision P30).
 Ref: TMC8460 §5.50.4 (SYNC0 generation), §5.42 (process-data watchdog); ETG.1000.6 §5.3
 (DC synchronous mode), §6.4 (AL state machine run by the firmware).
 """
@@ -52,6 +55,7 @@ class Schedule:
         "_sync_escs",
         "awake",
         "ctx",
+        "deferred",
         "escs",
         "firmware",
         "frame_waiting",
@@ -59,7 +63,9 @@ class Schedule:
         "persist",
         "probe_ns",
         "resume_pos",
+        "sync0_deferred",
         "sync0_late_ns",
+        "sync0_merged",
         "sync0_ticks",
         "write_logs",
         "yielded",
@@ -97,6 +103,12 @@ class Schedule:
         self._sync_escs: list[Esc] = []
         self.sync0_ticks = 0
         self.sync0_late_ns = 0
+        #: firmware whose pulse's work was latched for after a waiting frame, in pulse
+        #: order (one whose ``sync_ns`` is back to -1 has run it already; decision P30)
+        self.deferred: list[Firmware] = []
+        #: pulses whose work waited for a frame; pulses that replaced one still waiting
+        self.sync0_deferred = 0
+        self.sync0_merged = 0
         #: host time before which no SYNC pulse can be due (recomputed by sync_until)
         self._pulse_hint = 0
         #: host time of the earliest SYNC0/SYNC1 pulse (NO_DEADLINE: none)
@@ -106,11 +118,14 @@ class Schedule:
         """Fire the SYNC0 pulses due by host time ``t``, run the timers due, the firmware
         of every slave with a raised PDI interrupt (stopping for a waiting frame), then
         persist the EEPROM images that changed. Never called between receive and reply."""
-        self.pulses_due(t)  # first: each pulse is handled at its own, earlier, time
+        if t >= self._pulse_hint or self.ctx.timers_dirty:
+            self.sync_until(t, False)  # first: each pulse is handled at its own time
         for esc in self.escs:
             d = esc.wd.deadline_ns
             if d and t >= d:  # due (the running watchdogs of a cyclic bus are not)
                 esc.check_timers(t)
+        if self.deferred and not self.run_deferred():
+            return  # a frame waits: the rest after its reply (decision P30)
         ctx = self.ctx
         if (ctx.pending or self.awake) and self.firmware:
             probe = self.frame_waiting
@@ -139,19 +154,29 @@ class Schedule:
             self.write_logs(self.frame_waiting)  # the lines held meanwhile (decision P37)
 
     def pulses_due(self, t: int) -> None:
-        """sync_until(t), unless no pulse can be due by ``t`` (the per-frame fast path)."""
+        """The pulses due before a frame that arrived at ``t``: sync_until(t, True), unless
+        no pulse can be due by ``t`` (the per-frame fast path)."""
         if t >= self._pulse_hint or self.ctx.timers_dirty:
-            self.sync_until(t)
+            self.sync_until(t, True)
 
-    def sync_until(self, t: int) -> None:
+    def sync_until(self, t: int, frame_first: bool = False) -> None:
         """Fire every SYNC0 pulse due by ``t`` in time order, each handled by the firmware
         at the pulse's own time: outputs received before the pulse are applied and inputs
         captured as of that instant, however late the host gets to it. Called before a
-        frame that arrived at ``t`` is processed, and from the timers.
+        frame that arrived at ``t`` is processed (``frame_first``), and from the timers.
+
+        On the daemon's link (``frame_waiting`` set), a frame is not held up by more than
+        ``probe_ns`` of this work: once it waits (``frame_first``: once that much work is
+        done; else when ``frame_waiting()`` says so), each further pulse only latches its
+        outputs (``Firmware.sync0_latch``) and its work runs after the frame's reply, from
+        ``service_at`` (``run_deferred``). Decision P30.
         Ref: TMC8460 §5.50.4 (SYNC0 generation); ETG.1000.6 §5.3 (DC synchronous mode).
         """
         ctx = self.ctx
         nxt = NO_DEADLINE
+        probe = self.frame_waiting
+        defer = False
+        look = time.monotonic_ns() + self.probe_ns if probe is not None else NO_DEADLINE
         for esc in self.sync_escs:
             dc = esc.dc
             fw = self.firmware[esc.position] if self.firmware else None
@@ -174,15 +199,54 @@ class Schedule:
                     self.sync0_late_ns = t - d
                 if fw is not None and esc.position in ctx.pending:
                     ctx.pdi_ns = d
-                    if cfw is not None:
-                        cfw.service(d)
-                    else:
+                    if cfw is None:
                         fw.service(d)
+                    elif defer:
+                        waiting = cfw.sync_ns >= 0
+                        if cfw.sync0_latch(d):
+                            self.sync0_deferred += 1
+                            if waiting:
+                                self.sync0_merged += 1  # the slave's cycle overran
+                            else:
+                                self.deferred.append(cfw)
+                    else:
+                        cfw.service(d)  # runs a pulse's work still latched first
+                        if look != NO_DEADLINE and time.monotonic_ns() >= look:
+                            if frame_first or (probe is not None and probe()):
+                                defer = True  # the frame first (decision P30)
+                            else:
+                                look = time.monotonic_ns() + self.probe_ns
             else:
                 d = dc.sync0_deadline_or(NO_DEADLINE)
                 d1 = dc.sync1_deadline_or(NO_DEADLINE)
             nxt = min(nxt, d, d1)
         self._set_next_sync(nxt)
+
+    def run_deferred(self) -> bool:
+        """Run the pulses' work latched for after a frame (``deferred``, in pulse order),
+        each at its pulse's time, looking every ``probe_ns`` whether a frame waits. False
+        if it stopped for one (the rest stays latched). Decision P30."""
+        lst = self.deferred
+        probe = self.frame_waiting
+        look = time.monotonic_ns() + self.probe_ns if probe is not None else NO_DEADLINE
+        ctx = self.ctx
+        n = len(lst)
+        i = 0
+        while i < n:
+            fw = lst[i]
+            i += 1
+            if fw.sync_ns < 0:
+                continue  # run already, before a later pulse or event of its slave
+            ctx.pdi_ns = fw.sync_ns
+            fw.sync0_run()
+            if look != NO_DEADLINE and time.monotonic_ns() >= look:
+                if probe is not None and probe():
+                    self.yielded += 1
+                    del lst[:i]
+                    return False
+                look = time.monotonic_ns() + self.probe_ns
+        lst.clear()
+        return True
 
     def _set_next_sync(self, nxt: int) -> None:
         self._next_sync = nxt

@@ -26,6 +26,8 @@ cdef class Firmware:
     cdef public object refuse_next
     cdef public bint outputs_seen
     cdef public long long op_requested_ns
+    cdef public long long sync_ns
+    cdef public object sync_out
     cdef public bint bootstrap_supported
     cdef public object state
     cdef public bint error
@@ -34,6 +36,11 @@ cdef class Firmware:
 
     @cython.locals(p=Pdi, ev="long long", pd_events="long long", dc=bint, pdo=PdoImage)
     cpdef void service(self, long long now_ns) except *
+    @cython.locals(p=Pdi, ev="long long")
+    cpdef bint sync0_latch(self, long long now_ns) except *
+    cdef void _latch(self, Pdi p, long long ev, long long now_ns) except *
+    @cython.locals(pdo=PdoImage, now_ns="long long")
+    cpdef void sync0_run(self) except *
     @cython.locals(want="long long", pending=bint)
     cpdef void service_mailbox(self, long long ev, long long now_ns) except *
     cpdef void _outputs_received(self, long long now_ns) except *

@@ -120,6 +120,10 @@ class Firmware:
         self.outputs_seen = False
         #: host time of a SAFEOP -> OP request waiting for the first outputs (0: none)
         self.op_requested_ns = 0
+        #: the SYNC0 work latched at a pulse and not run yet (decision P30): the pulse's
+        #: time (-1: none) and the outputs taken from SM2 at it (None: no new outputs)
+        self.sync_ns = -1
+        self.sync_out: bytes | None = None
         self.bootstrap_supported = bootstrap_supported
         self.state = AlState.INIT
         self.error = False
@@ -150,6 +154,8 @@ class Firmware:
         self.code = al.CODE_NONE
         self.outputs_seen = False
         self.op_requested_ns = 0
+        self.sync_ns = -1
+        self.sync_out = None
         p = self.pdi
         if not p.operational():
             return
@@ -176,6 +182,8 @@ class Firmware:
         p = self.pdi
         if not p.operational():
             return
+        if self.sync_ns >= 0:
+            self.sync0_run()  # a pulse's work still latched comes first (decision P30)
         ev = p.al_event()
         if ev & EV_AL_CONTROL:
             self._al_control(p.u16(AL_CONTROL), now_ns)
@@ -192,18 +200,8 @@ class Firmware:
             # captured there; frames do not wake the firmware (SM2/SM3 events are masked once
             # the pulses run). Ref: ETG.1000.6 §5.3 (DC mode); decision DC3.
             if ev & EV_SYNC0:
-                p.u8(DC_SYNC0_STATUS)  # acknowledges the event
-                if ev & (EV_SM0 << SM_PD_OUT):
-                    out = p.sm_read(SM_PD_OUT)
-                    if out is not None:
-                        self._outputs_received(now_ns)
-                        if self.state is _OP:
-                            pdo = self._pdo
-                            if pdo is not None:
-                                pdo.set_outputs(out, now_ns)
-                            else:
-                                self._app.set_outputs(out, now_ns)
-                self._write_inputs(now_ns)
+                self._latch(p, ev, now_ns)
+                self.sync0_run()
             elif pd_events & (EV_SM0 << SM_PD_IN) and p.u8(DC_ACTIVATION_STATUS) & 0x01:
                 self._write_inputs(now_ns)  # no pulse yet: keep the inputs fresh meanwhile
         else:
@@ -226,6 +224,50 @@ class Firmware:
             self.op_requested_ns = 0  # no outputs in time: SAFEOP with 0x001B (decision F5)
             self.fail(AlState.SAFEOP, al.CODE_SM_WATCHDOG, now_ns)
         self.service_mailbox(ev, now_ns)
+
+    def sync0_latch(self, now_ns: int) -> bool:
+        """What the firmware does at the SYNC0 pulse itself, in DC synchronous mode: it
+        acknowledges the pulse and takes the newest outputs from SM2. The rest of the
+        pulse's work (applying them, the drive's cycle, the inputs as of the pulse into SM3)
+        is ``sync0_run``, which may come after frames that arrived meanwhile (decision P30).
+        A pulse latched while an earlier one's work waits replaces it: the newer outputs,
+        if any, and the newer time, as a slave whose cycle overran (the work of the earlier
+        pulse is not run). True if work was latched.
+        Ref: ETG.1000.6 §5.3 (DC synchronous mode); TMC8460 §5.50.4 (SYNC0 acknowledge).
+        """
+        p = self.pdi
+        if not p.operational():
+            return False
+        ev = p.al_event()
+        if not ev & EV_SYNC0 or (p.u8(DC_ACTIVATION) & 0x03) != 0x03:
+            return False
+        self._latch(p, ev, now_ns)
+        return True
+
+    def _latch(self, p: Pdi, ev: int, now_ns: int) -> None:
+        p.u8(DC_SYNC0_STATUS)  # acknowledges the event
+        if ev & (EV_SM0 << SM_PD_OUT):
+            out = p.sm_read(SM_PD_OUT)
+            if out is not None:
+                self.sync_out = out
+        self.sync_ns = now_ns
+
+    def sync0_run(self) -> None:
+        """The latched pulse's work, at the pulse's time: the outputs taken at it applied
+        (in OP), the inputs as of the pulse written to SM3. Ref: ETG.1000.6 §5.3."""
+        now_ns = self.sync_ns
+        out = self.sync_out
+        self.sync_ns = -1
+        self.sync_out = None
+        if out is not None:
+            self._outputs_received(now_ns)
+            if self.state is _OP:
+                pdo = self._pdo
+                if pdo is not None:
+                    pdo.set_outputs(out, now_ns)
+                else:
+                    self._app.set_outputs(out, now_ns)
+        self._write_inputs(now_ns)
 
     def service_mailbox(self, ev: int, now_ns: int) -> None:
         """Serve SM0 (requests) and SM1 (replies taken by the master), then set the event

@@ -1,0 +1,112 @@
+"""The SYNC0 work behind a waiting frame (decision P30): each slave's firmware takes its
+outputs at the pulse, and where a frame waits, the rest of its work runs after that frame's
+reply. The frame reads the inputs the slave last wrote; the work, once run, gives exactly
+the inputs an undelayed run gives (the same outputs, the same pulse time)."""
+
+from __future__ import annotations
+
+from tests.perf.hotpath import IN, MS, OUT, CspCycle
+
+N = 4
+#: where the LRW's data starts in the frame: Ethernet 14, EtherCAT 2, datagram header 10
+DATA = 26
+
+
+def inputs(reply: bytes, i: int) -> bytes:
+    """Drive ``i``'s inputs in a cyclic frame's reply."""
+    at = DATA + OUT * N + IN * i
+    return reply[at : at + IN]
+
+
+def without_inputs(reply: bytes) -> bytes:
+    at = DATA + OUT * N
+    return reply[:at] + reply[at + IN * N :]
+
+
+def latched(c: CspCycle) -> list[bool]:
+    return [fw.sync_ns >= 0 for fw in c.seg.firmware]
+
+
+def twins() -> tuple[CspCycle, CspCycle, list[bool], list[bytes]]:
+    """Two equal segments of N enabled drives in csp after one more cycle, and the drives'
+    inputs in its reply; the second's link says whether a frame waits (``waiting[0]``),
+    looked at after every slave's work."""
+    ref, c = CspCycle(N), CspCycle(N)
+    first = ref.step()
+    assert c.step() == first
+    waiting = [False]
+    c.seg.schedule.frame_waiting = lambda: waiting[0]
+    c.seg.schedule.probe_ns = 0
+    return ref, c, waiting, [inputs(first, i) for i in range(N)]
+
+
+def test_a_frame_that_waits_reads_the_inputs_written_before_and_the_work_goes_on_after_it() -> None:
+    ref, c, waiting, last = twins()
+    moved = 0
+    for k in range(40):
+        ref.pulse()
+        waiting[0] = True  # a frame arrives while the pulses' work runs
+        c.pulse()
+        # slave 0 was served before the look; the look found the frame, the other pulses
+        # only latched; one more slave's work ran before the next look
+        assert latched(c) == [False, False, True, True]
+        assert c.seg.schedule.sync0_deferred == 3 * (k + 1)
+        waiting[0] = False
+        want, got = ref.exchange(), c.exchange()
+        assert without_inputs(got) == without_inputs(want)  # WKCs, system time, outputs
+        for i in (0, 1):
+            assert inputs(got, i) == inputs(want, i)
+        for i in (2, 3):  # the inputs of the last pulse their firmware finished
+            assert inputs(got, i) == last[i]
+        assert latched(c) == [False] * N  # run after the reply, with the pulse's outputs
+        assert c.seg.schedule.deferred == []
+        moved += inputs(want, 3) != last[3]
+        last = [inputs(want, i) for i in range(N)]
+    assert moved > 30  # the drives move: a stale input or a wrong output would show
+    assert c.seg.schedule.sync0_merged == 0
+    assert c.seg.schedule.yielded == 40
+
+
+def test_the_pulses_due_before_a_frame_hold_it_up_for_at_most_probe_ns_of_work() -> None:
+    ref, c, _, last = twins()  # no frame waits behind it: the work after it runs to its end
+    for _ in range(20):
+        # no timer ran: the pulse is due when the frame arrives and comes before its walk;
+        # after probe_ns (0 here) of that work, the frame first
+        want, got = ref.exchange(), c.exchange()
+        assert without_inputs(got) == without_inputs(want)
+        assert inputs(got, 0) == inputs(want, 0)  # served before the walk
+        for i in (1, 2, 3):
+            assert inputs(got, i) == last[i]  # their work ran after the reply
+        assert latched(c) == [False] * N
+        last = [inputs(want, i) for i in range(N)]
+    assert c.seg.schedule.sync0_deferred == 3 * 20
+
+
+def test_a_pulse_that_comes_while_the_last_ones_work_waits_replaces_it() -> None:
+    _, c, waiting, _ = twins()
+    waiting[0] = True
+    c.clock.t = c.t + MS + 20_000  # two pulses due: the host got to them late
+    c.daemon._service_timers()
+    s = c.seg.schedule
+    # slave 0: the first pulse served, the second latched; slaves 1-3: the first latched
+    # and replaced by the second (their cycle overran), no work run for it
+    assert s.sync0_deferred == 1 + 3 + 3
+    assert s.sync0_merged == 3
+    # then slave 0's latched work ran before the next look, which found the frame
+    assert latched(c) == [False, True, True, True]
+    assert all(c.t + MS <= fw.sync_ns < c.t + MS + 20_000 for fw in c.seg.firmware[1:])
+    waiting[0] = False
+    c.seg.service_at(c.clock.t)
+    assert latched(c) == [False] * N
+    assert [fw.device.state.name for fw in c.seg.firmware] == ["OPERATION_ENABLED"] * N
+
+
+def test_without_the_daemons_link_the_work_is_never_deferred() -> None:
+    c = CspCycle(N)  # in process: no frame_waiting, the pulses' work runs at once
+    assert c.seg.schedule.frame_waiting is None
+    c.pulse()
+    c.exchange()
+    c.clock.t = c.t + 3 * MS
+    c.exchange()
+    assert c.seg.schedule.sync0_deferred == 0
+    assert latched(c) == [False] * N
