@@ -138,6 +138,15 @@ NO_PYSOEM = "ecatsim bench needs pysoem: pip install 'ecatsim[bench]'"
     help="--bringup: pin the master to this CPU (with --cpu for the daemon: a core each).",
 )
 @click.option(
+    "--master",
+    type=click.Choice(["pysoem", "soem"]),
+    default="pysoem",
+    show_default=True,
+    help="--bringup's master: pysoem (up to 199 slaves, a 4096-byte IO map, SYNC0, drives "
+    "enabled and moving) or soem: SOEM's own DC sample red_test built from pysoem's sdist "
+    "with 1023 slaves and a 64 KiB IO map (no SYNC0, drives not enabled; needs 'cc').",
+)
+@click.option(
     "--results",
     type=click.Path(file_okay=False, path_type=Path),
     default=DEFAULT_DIR,
