@@ -71,6 +71,13 @@ def bring_up(m: Any, cap: Capture, pair: NetnsPair, n: int, period_us: int,
         raise SystemExit("bench: the segment did not reach OP")
 
 
+def scheduling_text(rt: int | None, cpu: int | None) -> str:
+    """How the master is scheduled, as the results record it."""
+    return (f"SCHED_FIFO {rt}" if rt is not None else "ordinary") + (
+        f", CPU {cpu}" if cpu is not None else ", unpinned"
+    )
+
+
 @contextmanager
 def master_scheduling(rt: int | None, cpu: int | None) -> Iterator[str]:
     """The master's thread SCHED_FIFO at ``rt`` and pinned to ``cpu`` (each if given) for
@@ -82,9 +89,7 @@ def master_scheduling(rt: int | None, cpu: int | None) -> Iterator[str]:
             os.sched_setaffinity(0, {cpu})
         if rt is not None:
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt))
-        yield (f"SCHED_FIFO {rt}" if rt is not None else "ordinary") + (
-            f", CPU {cpu}" if cpu is not None else ", unpinned"
-        )
+        yield scheduling_text(rt, cpu)
     finally:
         os.sched_setscheduler(0, policy, param)
         os.sched_setaffinity(0, affinity)
@@ -143,9 +148,7 @@ def run_bringup_soem(n: int, cycles_k: int, period_us: int, overlap: bool,
         prefix += ("taskset", "-c", str(master_cpu))
     if master_rt is not None:
         prefix += ("chrt", "-f", str(master_rt))
-    sched = (f"SCHED_FIFO {master_rt}" if master_rt is not None else "ordinary") + (
-        f", CPU {master_cpu}" if master_cpu is not None else ", unpinned"
-    ) + "; cycle thread SCHED_FIFO 40"
+    sched = scheduling_text(master_rt, master_cpu) + "; cycle thread SCHED_FIFO 40"
     tmp = Path(tempfile.mkdtemp(prefix="ecatsim-bringup-"))
     with NetnsPair() as pair:
         d = Daemon(pair, ("--slaves", str(n), *extra), tmp / f"daemon{n}.log")
@@ -159,23 +162,26 @@ def run_bringup_soem(n: int, cycles_k: int, period_us: int, overlap: bool,
         finally:
             d.stop()
     marks = dict((name, t) for t, name in cap.marks)
-    if rt.slaves != n or not rt.all_op:
+    if rt.slaves != n or "safeop_dc" not in marks:
         tail = "\n  ".join(rt.tail)
-        raise SystemExit(f"bench: red_test configured {rt.slaves} of {n} slaves, all in OP: "
-                         f"{rt.all_op}; its last lines:\n  {tail}")  # fmt: skip
+        raise SystemExit(f"bench: red_test configured {rt.slaves} of {n} slaves; its last "
+                         f"lines:\n  {tail}")  # fmt: skip
     found = cap.frames()
     frames = analyse(found, cap.marks)
     frames.get("phases", {}).pop("end", None)
-    cyc = process_cycles(found, marks["cycles"], marks.get("end", time.time_ns()),
-                         rt.expected_wkc)  # fmt: skip
+    # without OP the cycles are the ones red_test ran while it waited for OP
+    start = marks["cycles"] if rt.all_op else marks["op"]
+    cyc = process_cycles(found, start, marks.get("end", time.time_ns()), rt.expected_wkc,
+                         redtest.timeout_ns(period_us))  # fmt: skip
     wall_s = rt.cycles_wall_ns / 1e9
     cyc.update(cpu_percent=round(rt.cycles_cpu_s / wall_s * 100, 1) if wall_s else None,
-               drives_enabled=None, master_reports=rt.trouble)  # fmt: skip
+               drives_enabled=None, all_op=rt.all_op, master_reports=rt.trouble)  # fmt: skip
     return {"slaves": n, "overlap": overlap, "period_us": period_us, "master": sched,
             "master_name": f"{redtest.NAME} (pysoem {soem.pysoem_version()} sdist)",
             "master_limits": redtest.limits(), "daemon_flags": list(extra),
-            "bring_up_s": round((marks["cycles"] - marks["config"]) / 1e9, 2),
-            "run_s": round(time.perf_counter() - t0, 2), "frames": frames, "cycles": cyc}  # fmt: skip
+            "bring_up_s": round((marks.get("cycles", marks["op"]) - marks["config"]) / 1e9, 2),
+            "run_s": round(time.perf_counter() - t0, 2), "frames": frames,
+            "cycles": cyc}  # fmt: skip
 
 
 def summary(r: dict[str, Any]) -> str:
@@ -183,12 +189,14 @@ def summary(r: dict[str, Any]) -> str:
     f, c = r["frames"], r["cycles"]
     enabled = c["drives_enabled"]
     lines = [f"N={r['slaves']} ({'overlap map' if r['overlap'] else 'map'}, master "
-             f"{r.get('master_name', 'pysoem')} {r['master']}, daemon {' '.join(r['daemon_flags']) or 'default flags'}) bring-up "
+             f"{r.get('master_name', 'pysoem')} {r['master']}, daemon "
+             f"{' '.join(r['daemon_flags']) or 'default flags'}) bring-up "
              f"{r['bring_up_s']} s, {c['cycles']} cycles: {f['frames']} frames, reply p50 "
              f"{f['p50_us']} p99.9 {f['p999_us']} max {f['max_us']} us, over 1 ms "
              f"{f['over_1ms']}, over 2 ms {f['over_2ms']}, resends {f['resends']}, "
              f"unanswered {f['unanswered']}; cycles lost {c['lost']}, WKC short "
              f"{c['wkc_errors']} (expected {c['expected_wkc']}), daemon {c['cpu_percent']} %, "
+             f"{'' if c.get('all_op', True) else 'NOT ALL IN OP, '}"
              f"enabled {'not asked' if enabled is None else enabled}/{r['slaves']}"]  # fmt: skip
     for name, p in f.get("phases", {}).items():
         lines.append(f"  {name:12s} {p['frames']:6d} frames  p50 {p['p50_us']:8.1f}  p99.9 "

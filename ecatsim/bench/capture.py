@@ -219,22 +219,24 @@ def reply_stats(frames: Sequence[Frame]) -> dict[str, Any]:
 
 
 def process_cycles(frames: Sequence[Frame], start_ns: int, end_ns: int, expected: int,
-                   keep: int = 20) -> dict[str, Any]:  # fmt: skip
+                   timeout_ns: int, keep: int = 20) -> dict[str, Any]:  # fmt: skip
     """The process-data cycles a master sent between ``start_ns`` and ``end_ns`` as the
     wire shows them, whatever the master: its logical requests (LRD, LWR, LRW) in time
     order, a cycle starting at each request to the lowest logical address among them (a
     master splits its process image over frames by address); each reply is paired with
-    the request of its index. A cycle's WKC is the sum of its replies' first-datagram WKCs,
-    as SOEM sums them (a frame with no reply adds nothing). Returns how many cycles and
-    frames, the frames never answered (``lost``), the cycles whose WKC is not ``expected``
-    (``wkc_errors``) and the first ``keep`` of those WKCs. The frames need their WKC
-    (a capture with ``keep_wkc``). Ref: ETG.1000.4 §5.4.1.2, Table 11."""
+    the request of its index. A reply later than ``timeout_ns`` after its request comes
+    after the master stopped waiting for it: that frame is lost as well as one never
+    answered. A cycle's WKC is the sum of its frames' first-datagram WKCs, as SOEM sums
+    them (a lost frame adds nothing). Returns how many cycles and frames, the frames lost
+    (``lost``; ``late`` of them answered too late), the cycles whose WKC is not
+    ``expected`` (``wkc_errors``) and the first ``keep`` of those WKCs. The frames need
+    their WKC (a capture with ``keep_wkc``). Ref: ETG.1000.4 §5.4.1.2, Table 11."""
     window = sorted((f for f in frames if start_ns <= f.t_ns), key=lambda f: f.t_ns)
     logical = [f for f in window if not f.reply and f.cmd in LOGICAL and f.t_ns < end_ns]
     low = min((f.adp | f.ado << 16 for f in logical), default=0)
     sums: list[int] = []
-    pending: dict[int, int] = {}  # index -> cycle of the request waiting for its reply
-    lost = 0
+    pending: dict[int, tuple[int, int]] = {}  # index -> (cycle, time) of a request waiting
+    lost = late = 0
     for f in window:
         if not f.reply:
             if f.t_ns >= end_ns:
@@ -245,16 +247,19 @@ def process_cycles(frames: Sequence[Frame], start_ns: int, end_ns: int, expected
                 if (f.adp | f.ado << 16) == low:
                     sums.append(0)
                 if sums:
-                    pending[f.idx] = len(sums) - 1
+                    pending[f.idx] = (len(sums) - 1, f.t_ns)
         else:
-            c = pending.pop(f.idx, None)
-            if c is not None:
+            waiting = pending.pop(f.idx, None)
+            if waiting is not None:
                 if f.wkc < 0:
                     raise ValueError("the capture kept no WKC: Capture(keep_wkc=True)")
-                sums[c] += f.wkc
-    lost += len(pending)
+                if f.t_ns - waiting[1] > timeout_ns:
+                    late += 1
+                else:
+                    sums[waiting[0]] += f.wkc
+    lost += len(pending) + late
     short = [w for w in sums if w != expected]
-    return {"cycles": len(sums), "frames": len(logical), "lost": lost,
+    return {"cycles": len(sums), "frames": len(logical), "lost": lost, "late": late,
             "wkc_errors": len(short), "expected_wkc": expected,
             "wkc_error_seen": short[:keep]}  # fmt: skip
 
@@ -317,8 +322,9 @@ class Capture:
 
     def frames(self) -> list[Frame]:
         """The EtherCAT frames captured so far."""
-        if self._keep_wkc:
-            kept = (parse(data, t, reply, w) for (t, reply, data), w in zip(self.raw, self.wkcs))
+        if self._keep_wkc:  # the thread may be one WKC ahead: zip stops at the shorter
+            pairs = zip(self.raw, self.wkcs, strict=False)
+            kept = (parse(data, t, reply, w) for (t, reply, data), w in pairs)
             return [f for f in kept if f is not None]
         out = (parse(data, t, reply) for t, reply, data in self.raw)
         return [f for f in out if f is not None]

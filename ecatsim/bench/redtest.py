@@ -10,7 +10,8 @@ every 20 ms a line with the last WKC. It does not start SYNC0 (no ec_dcsync0) an
 not enable the drives (they answer in OP without). Its phases are marked in the capture
 as its lines arrive; the cycles, their lost frames and WKCs are read off the wire by the
 capture on the master's end (:func:`ecatsim.bench.capture.process_cycles`): SOEM's sum of
-the WKCs of each cycle's frames against the WKC red_test prints as expected.
+the WKCs of each cycle's frames against the WKC red_test prints as expected, a reply later
+than red_test waits (:func:`timeout_ns`) lost.
 Ref: docs/performance.md "How to measure".
 """
 
@@ -36,6 +37,12 @@ def limits() -> dict[str, object]:
     return {"max_slaves": RED_MAXSLAVE - 1, "iomap_bytes": RED_IOMAP,
             "soem": f"pysoem {pysoem_version()} sdist", "sync0": False,
             "drives_enabled": False}  # fmt: skip
+
+
+def timeout_ns(period_us: int) -> int:
+    """How long after sending a frame red_test still takes its reply: its cycle thread
+    receives a cycle's frames at the next cycle, waiting up to SOEM's EC_TIMEOUTRET (2 ms)."""
+    return (period_us + 2000) * 1000
 
 
 #: red_test's lines and the phase each starts (its output, as SOEM ships it)
@@ -78,7 +85,7 @@ def run(exe: Path, pair: NetnsPair, cap: Capture, period_us: int, daemon_pid: in
                             stderr=subprocess.STDOUT, text=True)  # fmt: skip
     watchdog = threading.Timer(timeout, proc.kill)
     watchdog.start()
-    cpu0 = 0.0
+    cpu0, t0 = 0.0, 0
     try:
         assert proc.stdout is not None
         for line in proc.stdout:  # universal newlines: its "\r" progress lines too
@@ -93,13 +100,12 @@ def run(exe: Path, pair: NetnsPair, cap: Capture, period_us: int, daemon_pid: in
                 cap.mark(phase)
                 if phase == "safeop_dc":
                     out.slaves = int(m.group(1))
-                elif phase == "cycles":
-                    out.all_op = True
-                    cpu0 = cpu_seconds(daemon_pid)
-                elif phase == "end" and out.all_op:
+                elif phase in ("op", "cycles"):  # the cycles: from OP (from the request without)
+                    out.all_op = phase == "cycles"
+                    cpu0, t0 = cpu_seconds(daemon_pid), cap.marks[-1][0]
+                elif phase == "end":
                     out.cycles_cpu_s = cpu_seconds(daemon_pid) - cpu0
-                    marks = dict((name, t) for t, name in cap.marks)
-                    out.cycles_wall_ns = marks["end"] - marks["cycles"]
+                    out.cycles_wall_ns = cap.marks[-1][0] - t0
             m = EXPECTED.match(line)
             if m is not None:
                 out.expected_wkc = int(m.group(1))
