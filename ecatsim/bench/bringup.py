@@ -137,12 +137,13 @@ def run_bringup(n: int, cycles_k: int, period_us: int, overlap: bool,
 
 def run_bringup_soem(n: int, cycles_k: int, period_us: int, overlap: bool,
                      extra: tuple[str, ...], master_rt: int | None = None,
-                     master_cpu: int | None = None) -> dict[str, Any]:  # fmt: skip
+                     master_cpu: int | None = None, sync0: bool = False
+                     ) -> dict[str, Any]:  # fmt: skip
     """One bring-up of ``n`` drives and about ``cycles_k`` cycles (red_test's 20 ms
     loops) on a fresh daemon with SOEM's red_test as the master
     (:mod:`ecatsim.bench.redtest`); ``master_rt``/``master_cpu`` as ``chrt``/``taskset``
     (its cycle thread sets SCHED_FIFO 40 itself)."""
-    exe = soem.red_test(cycles_k, period_us, overlap)
+    exe = soem.red_test(cycles_k, period_us, overlap, sync0)
     prefix: tuple[str, ...] = ()
     if master_cpu is not None:
         prefix += ("taskset", "-c", str(master_cpu))
@@ -178,7 +179,7 @@ def run_bringup_soem(n: int, cycles_k: int, period_us: int, overlap: bool,
                drives_enabled=None, all_op=rt.all_op, master_reports=rt.trouble)  # fmt: skip
     return {"slaves": n, "overlap": overlap, "period_us": period_us, "master": sched,
             "master_name": f"{redtest.NAME} (pysoem {soem.pysoem_version()} sdist)",
-            "master_limits": redtest.limits(), "daemon_flags": list(extra),
+            "master_limits": redtest.limits(sync0), "daemon_flags": list(extra),
             "bring_up_s": round((marks.get("cycles", marks["op"]) - marks["config"]) / 1e9, 2),
             "run_s": round(time.perf_counter() - t0, 2), "frames": frames,
             "cycles": cyc}  # fmt: skip
@@ -189,7 +190,9 @@ def summary(r: dict[str, Any]) -> str:
     f, c = r["frames"], r["cycles"]
     enabled = c["drives_enabled"]
     lines = [f"N={r['slaves']} ({'overlap map' if r['overlap'] else 'map'}, master "
-             f"{r.get('master_name', 'pysoem')} {r['master']}, daemon "
+             f"{r.get('master_name', 'pysoem')}"
+             f"{'' if r.get('master_limits', {}).get('sync0', True) else ' without SYNC0'} "
+             f"{r['master']}, daemon "
              f"{' '.join(r['daemon_flags']) or 'default flags'}) bring-up "
              f"{r['bring_up_s']} s, {c['cycles']} cycles: {f['frames']} frames, reply p50 "
              f"{f['p50_us']} p99.9 {f['p999_us']} max {f['max_us']} us, over 1 ms "
@@ -220,7 +223,7 @@ def run(args: BenchOptions) -> int:
     for n in [n for n in args.bringup for _ in range(args.repeat)]:
         if args.master == "soem":
             r = run_bringup_soem(n, args.cycles, args.period_us, args.overlap, extra,
-                                 args.master_rt, args.master_cpu)  # fmt: skip
+                                 args.master_rt, args.master_cpu, args.sync0)  # fmt: skip
         else:
             r = run_bringup(n, args.cycles, args.period_us, args.overlap, extra,
                             args.master_spin, args.master_rt, args.master_cpu)  # fmt: skip

@@ -147,6 +147,12 @@ NO_PYSOEM = "ecatsim bench needs pysoem: pip install 'ecatsim[bench]'"
     "with 1023 slaves and a 64 KiB IO map (no SYNC0, drives not enabled; needs 'cc').",
 )
 @click.option(
+    "--sync0",
+    is_flag=True,
+    help="--master soem: start every slave's SYNC0 at --period-us (SOEM's ec_dcsync0 added "
+    "after red_test's ec_configdc; red_test itself starts none).",
+)
+@click.option(
     "--results",
     type=click.Path(file_okay=False, path_type=Path),
     default=DEFAULT_DIR,

@@ -6,12 +6,14 @@ red_test (built from pysoem's sdist with a larger slave table and IO map,
 config_map; ec_config_overlap with ``--overlap``), SAFEOP, ec_configdc, OP requested with
 its real-time cycle thread running (SCHED_FIFO 40, clock_nanosleep to absolute times,
 receive then send, the cycle kept locked to the DC time of the replies with ec_sync), and
-every 20 ms a line with the last WKC. It does not start SYNC0 (no ec_dcsync0) and does
+every 20 ms a line with the last WKC. It does not start SYNC0 (no ec_dcsync0; with
+``--sync0`` the build adds SOEM's ec_dcsync0 for every slave after ec_configdc) and does
 not enable the drives (they answer in OP without). Its phases are marked in the capture
-as its lines arrive; the cycles, their lost frames and WKCs are read off the wire by the
-capture on the master's end (:func:`ecatsim.bench.capture.process_cycles`): SOEM's sum of
-the WKCs of each cycle's frames against the WKC red_test prints as expected, a reply later
-than red_test waits (:func:`timeout_ns`) lost.
+as its lines arrive (a phase's first frames may fall in the one before); the cycles, their
+lost frames and WKCs are read off the wire by the capture on the master's end
+(:func:`ecatsim.bench.capture.process_cycles`): SOEM's sum of the WKCs of each cycle's
+frames against the WKC red_test prints as expected, a reply later than red_test waits
+(:func:`timeout_ns`) lost.
 Ref: docs/performance.md "How to measure".
 """
 
@@ -32,10 +34,11 @@ from ecatsim.bench.soem import RED_IOMAP, RED_MAXSLAVE, pysoem_version
 NAME = "SOEM red_test"
 
 
-def limits() -> dict[str, object]:
-    """The master's limits as built: slaves, IO map bytes, SOEM's version source."""
+def limits(sync0: bool) -> dict[str, object]:
+    """The master's limits as built: slaves, IO map bytes, SOEM's version source, SYNC0
+    started or not (``--sync0``), the drives not enabled."""
     return {"max_slaves": RED_MAXSLAVE - 1, "iomap_bytes": RED_IOMAP,
-            "soem": f"pysoem {pysoem_version()} sdist", "sync0": False,
+            "soem": f"pysoem {pysoem_version()} sdist", "sync0": sync0,
             "drives_enabled": False}  # fmt: skip
 
 

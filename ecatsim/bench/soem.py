@@ -198,13 +198,15 @@ def build_sample(sample: str, patches: Sequence[Patch] = (), libs: Sequence[str]
     return build_program(sample, [src], libs, patches)
 
 
-def red_test_patches(loops: int, overlap: bool) -> list[Patch]:
+def red_test_patches(loops: int, overlap: bool, sync0_ns: int = 0) -> list[Patch]:
     """The constants of red_test and SOEM changed for a large segment: the slave table
     (:data:`RED_MAXSLAVE`), the frames in flight (:data:`RED_MAXBUF`), the IO map
     (:data:`RED_IOMAP`) and the main loop's count (``loops`` of 20 ms; the sample's own is
     5000, 100 s). With ``overlap`` the sample maps and exchanges with SOEM's overlap calls
     (ec_config_overlap, ec_send_overlap_processdata) instead of ec_config and
-    ec_send_processdata."""
+    ec_send_processdata. With ``sync0_ns`` every slave's SYNC0 is started at that period
+    right after ec_configdc (SOEM's ec_dcsync0, as pysoem's ``dc_sync`` does; the sample
+    itself starts none)."""
     patches: list[Patch] = [
         ("ethercatmain.h", "#define EC_MAXSLAVE       200", f"#define EC_MAXSLAVE {RED_MAXSLAVE}"),
         ("ethercattype.h", "#define EC_MAXBUF          16", f"#define EC_MAXBUF {RED_MAXBUF}"),
@@ -216,11 +218,16 @@ def red_test_patches(loops: int, overlap: bool) -> list[Patch]:
             ("red_test.c", "ec_config(FALSE, &IOmap)", "ec_config_overlap(FALSE, &IOmap)"),
             ("red_test.c", "ec_send_processdata()", "ec_send_overlap_processdata()"),
         ]
+    if sync0_ns:
+        start = f"for (int s = 1; s <= ec_slavecount; s++) ec_dcsync0(s, TRUE, {sync0_ns}, 0);"
+        patches.append(("red_test.c", "ec_configdc();", "ec_configdc(); " + start))
     return patches
 
 
-def red_test(cycles: int, period_us: int, overlap: bool) -> Path:
+def red_test(cycles: int, period_us: int, overlap: bool, sync0: bool = False) -> Path:
     """SOEM's red_test built for a large segment (:func:`red_test_patches`), its main
-    loop long enough for ``cycles`` cycles of ``period_us``."""
+    loop long enough for ``cycles`` cycles of ``period_us``; with ``sync0`` SYNC0 runs at
+    the period."""
     loops = max(1, -(-cycles * period_us // RED_LOOP_US))
-    return build_sample("red_test", red_test_patches(loops, overlap), libs=("-lm",))
+    patches = red_test_patches(loops, overlap, period_us * 1000 if sync0 else 0)
+    return build_sample("red_test", patches, libs=("-lm",))
