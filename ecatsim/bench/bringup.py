@@ -158,7 +158,8 @@ def run_bringup_soem(n: int, cycles_k: int, period_us: int, overlap: bool,
             with Capture.master_end(pair.master_ns, pair.master_if, keep_wkc=True) as cap:
                 assert d.pid is not None
                 t0 = time.perf_counter()
-                rt = redtest.run(exe, pair, cap, period_us, d.pid, prefix)
+                rt = redtest.run(exe, pair, cap, period_us, d.pid, prefix,
+                                 redtest.run_timeout(cycles_k, period_us))  # fmt: skip
                 time.sleep(0.05)
         finally:
             d.stop()
@@ -176,7 +177,8 @@ def run_bringup_soem(n: int, cycles_k: int, period_us: int, overlap: bool,
                          redtest.timeout_ns(period_us))  # fmt: skip
     wall_s = rt.cycles_wall_ns / 1e9
     cyc.update(cpu_percent=round(rt.cycles_cpu_s / wall_s * 100, 1) if wall_s else None,
-               drives_enabled=None, all_op=rt.all_op, master_reports=rt.trouble)  # fmt: skip
+               drives_enabled=None, all_op=rt.all_op, master_exit=rt.returncode,
+               master_reports=rt.trouble)  # fmt: skip
     return {"slaves": n, "overlap": overlap, "period_us": period_us, "master": sched,
             "master_name": f"{redtest.NAME} (pysoem {soem.pysoem_version()} sdist)",
             "master_limits": redtest.limits(sync0), "daemon_flags": list(extra),
@@ -200,6 +202,7 @@ def summary(r: dict[str, Any]) -> str:
              f"unanswered {f['unanswered']}; cycles lost {c['lost']}, WKC short "
              f"{c['wkc_errors']} (expected {c['expected_wkc']}), daemon {c['cpu_percent']} %, "
              f"{'' if c.get('all_op', True) else 'NOT ALL IN OP, '}"
+             f"{'MASTER KILLED, ' if c.get('master_exit', 0) == -9 else ''}"
              f"enabled {'not asked' if enabled is None else enabled}/{r['slaves']}"]  # fmt: skip
     for name, p in f.get("phases", {}).items():
         lines.append(f"  {name:12s} {p['frames']:6d} frames  p50 {p['p50_us']:8.1f}  p99.9 "

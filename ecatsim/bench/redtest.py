@@ -48,6 +48,13 @@ def timeout_ns(period_us: int) -> int:
     return (period_us + 2000) * 1000
 
 
+def run_timeout(cycles: int, period_us: int) -> float:
+    """How long red_test may run before it is killed: five minutes for the bring-up and
+    three times its cycles' time (its cycle thread, SCHED_FIFO and always behind when the
+    replies are late, can starve its main loop on the same CPU: ``--master-cpu``)."""
+    return 300.0 + 3 * cycles * period_us / 1e6
+
+
 #: red_test's lines and the phase each starts (its output, as SOEM ships it)
 PHASES = (
     (re.compile(r"^(\d+) slaves found and configured"), "safeop_dc"),
