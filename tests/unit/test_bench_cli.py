@@ -35,7 +35,8 @@ def test_every_option_has_help() -> None:
     assert r.exit_code == 0
     assert r.output.startswith("Usage: cli bench [OPTIONS]")
     assert "p99.99" in r.output
-    for option in ("--bringup", "--cycles", "--overlap", "--repeat", "--results", "--master-rt"):
+    for option in ("--bringup", "--cycles", "--overlap", "--repeat", "--results", "--master-rt",
+                   "--master", "--sync0"):  # fmt: skip
         assert option in r.output
 
 
