@@ -99,7 +99,11 @@ def soem_tree() -> Path:
                 capture_output=True, text=True, timeout=DOWNLOAD_TIMEOUT, check=False,
             )  # fmt: skip
             if r.returncode != 0 or not sdist.exists():
-                raise RuntimeError(f"pip download pysoem=={version} failed: {r.stderr[-800:]}")
+                last = (r.stderr.strip().splitlines() or ["no output"])[-1]
+                raise UserError(
+                    f"the SOEM sources: 'pip download pysoem=={version} --no-binary pysoem' "
+                    f"failed ({last}): check the network or pip's index"
+                )
         tmp = base / "src.tmp"
         shutil.rmtree(tmp, ignore_errors=True)
         with tarfile.open(sdist) as tf:
