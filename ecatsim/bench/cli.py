@@ -170,6 +170,10 @@ def bench(**kw: object) -> None:
     over 1 ms and 2 ms, resends, unanswered, the slowest frames) and the cycles' WKC.
     """
     opts = BenchOptions(**kw)  # type: ignore[arg-type]
+    if opts.master == "soem" and not opts.bringup:
+        raise UserError("--master soem is the master of --bringup N: add --bringup N")
+    if opts.sync0 and opts.master != "soem":
+        raise UserError("--sync0 is for --master soem (the pysoem master starts SYNC0 itself)")
     try:
         import pysoem  # noqa: F401
     except ImportError:
