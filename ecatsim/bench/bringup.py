@@ -11,7 +11,12 @@ is paired and timed, per phase and overall: p50, p99.9, max, how many over 1 ms 
 2 ms (SOEM's, pysoem's and KickCAT's default timeout), resends, unanswered frames and the
 slowest frames by command and address. The cycles add lost frames and cycles whose WKC
 fell short of the expected one. Results: a summary on stdout and bringup-<N>-<time>.json
-in the results directory. Ref: docs/performance.md "How to measure".
+in the results directory.
+
+With ``--master soem`` SOEM's own DC sample red_test is the master instead
+(:mod:`ecatsim.bench.redtest`): up to 1023 slaves and a 64 KiB IO map, the cycles' lost
+frames and WKCs read off the wire. Each run records its master, the master's limits,
+overlap or not, and the daemon's flags. Ref: docs/performance.md "How to measure".
 """
 
 from __future__ import annotations
@@ -25,11 +30,14 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from ecatsim.bench import results
-from ecatsim.bench.capture import Capture, analyse
+from ecatsim.bench import redtest, results, soem
+from ecatsim.bench.capture import Capture, analyse, process_cycles
 from ecatsim.bench.master import CSP, cycles, request_op
 from ecatsim.bench.netns import Daemon, NetnsPair, in_netns
 from ecatsim.bench.options import BenchOptions
+
+#: pysoem's limits: SOEM's EC_MAXSLAVE 200 (entry 0 is the master's) and its fixed IO map
+PYSOEM_LIMITS = {"max_slaves": 199, "iomap_bytes": 4096, "sync0": True, "drives_enabled": True}
 
 
 def bring_up(m: Any, cap: Capture, pair: NetnsPair, n: int, period_us: int,
@@ -63,6 +71,13 @@ def bring_up(m: Any, cap: Capture, pair: NetnsPair, n: int, period_us: int,
         raise SystemExit("bench: the segment did not reach OP")
 
 
+def scheduling_text(rt: int | None, cpu: int | None) -> str:
+    """How the master is scheduled, as the results record it."""
+    return (f"SCHED_FIFO {rt}" if rt is not None else "ordinary") + (
+        f", CPU {cpu}" if cpu is not None else ", unpinned"
+    )
+
+
 @contextmanager
 def master_scheduling(rt: int | None, cpu: int | None) -> Iterator[str]:
     """The master's thread SCHED_FIFO at ``rt`` and pinned to ``cpu`` (each if given) for
@@ -74,9 +89,7 @@ def master_scheduling(rt: int | None, cpu: int | None) -> Iterator[str]:
             os.sched_setaffinity(0, {cpu})
         if rt is not None:
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt))
-        yield (f"SCHED_FIFO {rt}" if rt is not None else "ordinary") + (
-            f", CPU {cpu}" if cpu is not None else ", unpinned"
-        )
+        yield scheduling_text(rt, cpu)
     finally:
         os.sched_setscheduler(0, policy, param)
         os.sched_setaffinity(0, affinity)
@@ -113,6 +126,7 @@ def run_bringup(n: int, cycles_k: int, period_us: int, overlap: bool,
     frames = analyse(cap.frames(), cap.marks)
     frames.get("phases", {}).pop("end", None)
     return {"slaves": n, "overlap": overlap, "period_us": period_us, "master": master,
+            "master_name": f"pysoem {soem.pysoem_version()}", "master_limits": PYSOEM_LIMITS,
             "daemon_flags": list(extra),
             "bring_up_s": round(bring_up_s, 2), "frames": frames,
             "cycles": {k: cyc[k] for k in ("cycles", "lost", "wkc_errors", "expected_wkc",
@@ -121,17 +135,75 @@ def run_bringup(n: int, cycles_k: int, period_us: int, overlap: bool,
                                            "drives_enabled", "steal_s")}}  # fmt: skip
 
 
+def run_bringup_soem(n: int, cycles_k: int, period_us: int, overlap: bool,
+                     extra: tuple[str, ...], master_rt: int | None = None,
+                     master_cpu: int | None = None, sync0: bool = False
+                     ) -> dict[str, Any]:  # fmt: skip
+    """One bring-up of ``n`` drives and about ``cycles_k`` cycles (red_test's 20 ms
+    loops) on a fresh daemon with SOEM's red_test as the master
+    (:mod:`ecatsim.bench.redtest`); ``master_rt``/``master_cpu`` as ``chrt``/``taskset``
+    (its cycle thread sets SCHED_FIFO 40 itself)."""
+    exe = soem.red_test(cycles_k, period_us, overlap, sync0)
+    prefix: tuple[str, ...] = ()
+    if master_cpu is not None:
+        prefix += ("taskset", "-c", str(master_cpu))
+    if master_rt is not None:
+        prefix += ("chrt", "-f", str(master_rt))
+    sched = scheduling_text(master_rt, master_cpu) + "; cycle thread SCHED_FIFO 40"
+    tmp = Path(tempfile.mkdtemp(prefix="ecatsim-bringup-"))
+    with NetnsPair() as pair:
+        d = Daemon(pair, ("--slaves", str(n), *extra), tmp / f"daemon{n}.log")
+        d.start(timeout=120)
+        try:
+            with Capture.master_end(pair.master_ns, pair.master_if, keep_wkc=True) as cap:
+                assert d.pid is not None
+                t0 = time.perf_counter()
+                rt = redtest.run(exe, pair, cap, period_us, d.pid, prefix,
+                                 redtest.run_timeout(cycles_k, period_us))  # fmt: skip
+                time.sleep(0.05)
+        finally:
+            d.stop()
+    marks = dict((name, t) for t, name in cap.marks)
+    if rt.slaves != n or "safeop_dc" not in marks:
+        tail = "\n  ".join(rt.tail)
+        raise SystemExit(f"bench: red_test configured {rt.slaves} of {n} slaves; its last "
+                         f"lines:\n  {tail}")  # fmt: skip
+    found = cap.frames()
+    frames = analyse(found, cap.marks)
+    frames.get("phases", {}).pop("end", None)
+    # without OP the cycles are the ones red_test ran while it waited for OP
+    start = marks["cycles"] if rt.all_op else marks["op"]
+    cyc = process_cycles(found, start, marks.get("end", time.time_ns()), rt.expected_wkc,
+                         redtest.timeout_ns(period_us))  # fmt: skip
+    wall_s = rt.cycles_wall_ns / 1e9
+    cyc.update(cpu_percent=round(rt.cycles_cpu_s / wall_s * 100, 1) if wall_s else None,
+               drives_enabled=None, all_op=rt.all_op, master_exit=rt.returncode,
+               master_reports=rt.trouble)  # fmt: skip
+    return {"slaves": n, "overlap": overlap, "period_us": period_us, "master": sched,
+            "master_name": f"{redtest.NAME} (pysoem {soem.pysoem_version()} sdist)",
+            "master_limits": redtest.limits(sync0), "daemon_flags": list(extra),
+            "bring_up_s": round((marks.get("cycles", marks["op"]) - marks["config"]) / 1e9, 2),
+            "run_s": round(time.perf_counter() - t0, 2), "frames": frames,
+            "cycles": cyc}  # fmt: skip
+
+
 def summary(r: dict[str, Any]) -> str:
     """One bring-up's figures: the totals, each phase, the five slowest frames."""
     f, c = r["frames"], r["cycles"]
+    enabled = c["drives_enabled"]
     lines = [f"N={r['slaves']} ({'overlap map' if r['overlap'] else 'map'}, master "
-             f"{r['master']}, daemon {' '.join(r['daemon_flags']) or 'default flags'}) bring-up "
+             f"{r.get('master_name', 'pysoem')}"
+             f"{'' if r.get('master_limits', {}).get('sync0', True) else ' without SYNC0'} "
+             f"{r['master']}, daemon "
+             f"{' '.join(r['daemon_flags']) or 'default flags'}) bring-up "
              f"{r['bring_up_s']} s, {c['cycles']} cycles: {f['frames']} frames, reply p50 "
              f"{f['p50_us']} p99.9 {f['p999_us']} max {f['max_us']} us, over 1 ms "
              f"{f['over_1ms']}, over 2 ms {f['over_2ms']}, resends {f['resends']}, "
              f"unanswered {f['unanswered']}; cycles lost {c['lost']}, WKC short "
              f"{c['wkc_errors']} (expected {c['expected_wkc']}), daemon {c['cpu_percent']} %, "
-             f"enabled {c['drives_enabled']}/{r['slaves']}"]  # fmt: skip
+             f"{'' if c.get('all_op', True) else 'NOT ALL IN OP, '}"
+             f"{'MASTER KILLED, ' if c.get('master_exit', 0) == -9 else ''}"
+             f"enabled {'not asked' if enabled is None else enabled}/{r['slaves']}"]  # fmt: skip
     for name, p in f.get("phases", {}).items():
         lines.append(f"  {name:12s} {p['frames']:6d} frames  p50 {p['p50_us']:8.1f}  p99.9 "
                      f"{p['p999_us']:8.1f}  max {p['max_us']:8.1f} us  >1ms {p['over_1ms']}  "
@@ -152,8 +224,12 @@ def run(args: BenchOptions) -> int:
                            "load_1min": os.getloadavg()[0],
                            "python": platform.python_version(), "runs": []}  # fmt: skip
     for n in [n for n in args.bringup for _ in range(args.repeat)]:
-        r = run_bringup(n, args.cycles, args.period_us, args.overlap, extra, args.master_spin,
-                        args.master_rt, args.master_cpu)  # fmt: skip
+        if args.master == "soem":
+            r = run_bringup_soem(n, args.cycles, args.period_us, args.overlap, extra,
+                                 args.master_rt, args.master_cpu, args.sync0)  # fmt: skip
+        else:
+            r = run_bringup(n, args.cycles, args.period_us, args.overlap, extra,
+                            args.master_spin, args.master_rt, args.master_cpu)  # fmt: skip
         out["runs"].append(r)
         print(summary(r), flush=True)
     results.write(args.results, f"bringup-{'-'.join(str(n) for n in args.bringup)}", out)

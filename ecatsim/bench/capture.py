@@ -59,6 +59,10 @@ RESEND_WINDOW_NS = 20_000_000
 #: bytes of each frame kept: Ethernet + EtherCAT header + the first datagram's header and
 #: up to 48 bytes of its data (enough to tell a resend from a new request)
 SNAP = 14 + 2 + 10 + 48
+#: the longest frame read whole (``keep_wkc``): Ethernet with an 802.1Q tag, no FCS
+FRAME_MAX = 1518
+#: logical addressing: LRD, LWR, LRW (ETG.1000.4 Table 11)
+LOGICAL = (10, 11, 12)
 #: ETG.1000.4 Table 11
 CMD_NAMES = ("NOP", "APRD", "APWR", "APRW", "FPRD", "FPWR", "FPRW", "BRD", "BWR", "BRW",
              "LRD", "LWR", "LRW", "ARMW", "FRMW")  # fmt: skip
@@ -81,23 +85,47 @@ class Frame:
     length: int
     #: the datagram bytes kept (without the reply's changes for a request)
     body: bytes
+    #: the first datagram's working counter (-1: the capture did not keep it)
+    wkc: int = -1
 
 
-def parse(data: bytes, t_ns: int, reply: bool | None = None) -> Frame | None:
-    """A captured frame as a :class:`Frame`, None if it is not EtherCAT with a datagram
-    (an 802.1Q tag is stepped over). A reply if ``reply`` says so, or without it if bit 1
-    of the source MAC is set (the slaves set it, ETG.1000.4 §5.2)."""
+def _first_datagram(data: bytes) -> int:
+    """Where the first datagram of an EtherCAT frame starts (an 802.1Q tag is stepped
+    over), -1 if ``data`` is not EtherCAT with a datagram header."""
     off = 12
     if len(data) >= off + 2 and data[off : off + 2] == b"\x81\x00":
         off += 4
     if len(data) < off + 2 + 2 + 10 or data[off : off + 2] != b"\x88\xa4":
+        return -1
+    return off + 2 + 2
+
+
+def first_wkc(data: bytes) -> int:
+    """The working counter of a frame's first datagram, -1 if ``data`` does not hold it
+    (not EtherCAT, or cut short). Ref: ETG.1000.4 §5.4.1.2 (the WKC follows the data)."""
+    p = _first_datagram(data)
+    if p < 0:
+        return -1
+    end = p + 10 + (_HDR.unpack_from(data, p)[4] & 0x7FF)
+    return int.from_bytes(data[end : end + 2], "little") if len(data) >= end + 2 else -1
+
+
+def parse(data: bytes, t_ns: int, reply: bool | None = None, wkc: int | None = None
+          ) -> Frame | None:  # fmt: skip
+    """A captured frame as a :class:`Frame`, None if it is not EtherCAT with a datagram
+    (an 802.1Q tag is stepped over). A reply if ``reply`` says so, or without it if bit 1
+    of the source MAC is set (the slaves set it, ETG.1000.4 §5.2). Its first datagram's
+    WKC is ``wkc`` if given (the capture read it before it cut the frame short), else
+    :func:`first_wkc` of ``data``."""
+    p = _first_datagram(data)
+    if p < 0:
         return None
-    p = off + 2 + 2
     cmd, idx, adp, ado, lf = _HDR.unpack_from(data, p)
     if reply is None:
         reply = bool(data[6] & 0x02)
     return Frame(t_ns, reply, idx, cmd, adp, ado, lf & 0x7FF,
-                 bytes(data[p : p + 10 + min(lf & 0x7FF, 48)]))  # fmt: skip
+                 bytes(data[p : p + 10 + min(lf & 0x7FF, 48)]),
+                 first_wkc(data) if wkc is None else wkc)  # fmt: skip
 
 
 def percentile(values: Sequence[float], q: float) -> float:
@@ -190,6 +218,52 @@ def reply_stats(frames: Sequence[Frame]) -> dict[str, Any]:
     return out
 
 
+def process_cycles(frames: Sequence[Frame], start_ns: int, end_ns: int, expected: int,
+                   timeout_ns: int, keep: int = 20) -> dict[str, Any]:  # fmt: skip
+    """The process-data cycles a master sent between ``start_ns`` and ``end_ns`` as the
+    wire shows them, whatever the master: its logical requests (LRD, LWR, LRW) in time
+    order, a cycle starting at each request to the lowest logical address among them (a
+    master splits its process image over frames by address); each reply is paired with
+    the request of its index. A reply later than ``timeout_ns`` after its request comes
+    after the master stopped waiting for it: that frame is lost as well as one never
+    answered. A cycle's WKC is the sum of its frames' first-datagram WKCs, as SOEM sums
+    them (a lost frame adds nothing). Returns how many cycles and frames, the frames lost
+    (``lost``; ``late`` of them answered too late), the cycles whose WKC is not
+    ``expected`` (``wkc_errors``) and the first ``keep`` of those WKCs. The frames need
+    their WKC (a capture with ``keep_wkc``). Ref: ETG.1000.4 §5.4.1.2, Table 11."""
+    window = sorted((f for f in frames if start_ns <= f.t_ns), key=lambda f: f.t_ns)
+    logical = [f for f in window if not f.reply and f.cmd in LOGICAL and f.t_ns < end_ns]
+    low = min((f.adp | f.ado << 16 for f in logical), default=0)
+    sums: list[int] = []
+    pending: dict[int, tuple[int, int]] = {}  # index -> (cycle, time) of a request waiting
+    lost = late = 0
+    for f in window:
+        if not f.reply:
+            if f.t_ns >= end_ns:
+                continue
+            if pending.pop(f.idx, None) is not None:
+                lost += 1  # the index again: the request before had no reply
+            if f.cmd in LOGICAL:
+                if (f.adp | f.ado << 16) == low:
+                    sums.append(0)
+                if sums:
+                    pending[f.idx] = (len(sums) - 1, f.t_ns)
+        else:
+            waiting = pending.pop(f.idx, None)
+            if waiting is not None:
+                if f.wkc < 0:
+                    raise ValueError("the capture kept no WKC: Capture(keep_wkc=True)")
+                if f.t_ns - waiting[1] > timeout_ns:
+                    late += 1
+                else:
+                    sums[waiting[0]] += f.wkc
+    lost += len(pending) + late
+    short = [w for w in sums if w != expected]
+    return {"cycles": len(sums), "frames": len(logical), "lost": lost, "late": late,
+            "wkc_errors": len(short), "expected_wkc": expected,
+            "wkc_error_seen": short[:keep]}  # fmt: skip
+
+
 def _name(cmd: int) -> str:
     return CMD_NAMES[cmd] if cmd < len(CMD_NAMES) else f"0x{cmd:02X}"
 
@@ -217,23 +291,29 @@ class Capture:
     """Packet sockets on ``ends`` stamping EtherCAT frames, read by a thread; with
     ``outgoing`` a tap of every protocol that keeps the frames the host sends too, else a
     tap of EtherCAT that keeps the frames arriving; of each frame its first ``snap``
-    bytes. ``mark(name)`` starts a phase now."""
+    bytes, and with ``keep_wkc`` its first datagram's WKC read from the whole frame
+    (:attr:`wkcs`). ``mark(name)`` starts a phase now."""
 
-    def __init__(self, ends: Sequence[End], outgoing: bool, snap: int = SNAP) -> None:
+    def __init__(self, ends: Sequence[End], outgoing: bool, snap: int = SNAP,
+                 keep_wkc: bool = False) -> None:  # fmt: skip
         self._ends = tuple(ends)
         self._outgoing = outgoing
         self._snap = snap
+        self._keep_wkc = keep_wkc
         #: (kernel time ns, a reply or not, the frame's first ``snap`` bytes) as read
         self.raw: list[tuple[int, bool, bytes]] = []
+        #: with ``keep_wkc``: the first datagram's WKC of each frame of :attr:`raw`
+        self.wkcs: list[int] = []
         self.marks: list[tuple[int, str]] = []
         self._stop = threading.Event()
         self._socks: list[socket.socket] = []
         self._thread: threading.Thread | None = None
 
     @classmethod
-    def master_end(cls, netns: str | None, iface: str, snap: int = SNAP) -> Capture:
+    def master_end(cls, netns: str | None, iface: str, snap: int = SNAP,
+                   keep_wkc: bool = False) -> Capture:  # fmt: skip
         """The master's requests going out and the replies coming in, on its interface."""
-        return cls(((netns, iface),), outgoing=True, snap=snap)
+        return cls(((netns, iface),), outgoing=True, snap=snap, keep_wkc=keep_wkc)
 
     @classmethod
     def both_ends(cls, master: End, daemon: End) -> Capture:
@@ -242,6 +322,10 @@ class Capture:
 
     def frames(self) -> list[Frame]:
         """The EtherCAT frames captured so far."""
+        if self._keep_wkc:  # the thread may be one WKC ahead: zip stops at the shorter
+            pairs = zip(self.raw, self.wkcs, strict=False)
+            kept = (parse(data, t, reply, w) for (t, reply, data), w in pairs)
+            return [f for f in kept if f is not None]
         out = (parse(data, t, reply) for t, reply, data in self.raw)
         return [f for f in out if f is not None]
 
@@ -287,9 +371,10 @@ class Capture:
 
     def _run(self) -> None:
         space = socket.CMSG_SPACE(_STAMP.size)
-        keep_outgoing, snap = self._outgoing, self._snap
+        keep_outgoing, snap, keep_wkc = self._outgoing, self._snap, self._keep_wkc
+        size = FRAME_MAX if keep_wkc else snap
         master = self._socks[0]  # the master's end comes first
-        raw = self.raw
+        raw, wkcs = self.raw, self.wkcs
         while True:
             ready = select.select(self._socks, [], [], 0.05)[0]
             if not ready:
@@ -297,7 +382,7 @@ class Capture:
                     return
                 continue
             for s in ready:
-                data, anc, _flags, addr = s.recvmsg(snap, space)
+                data, anc, _flags, addr = s.recvmsg(size, space)
                 sent = addr[2] == PACKET_OUTGOING
                 if sent and not keep_outgoing:
                     continue
@@ -306,4 +391,7 @@ class Capture:
                 for lvl, typ, d in anc:
                     if lvl == socket.SOL_SOCKET and typ == SO_TIMESTAMPNS:
                         sec, nsec = _STAMP.unpack_from(d)
+                        if keep_wkc:
+                            wkcs.append(first_wkc(data))
+                            data = data[:snap]
                         raw.append((sec * 1_000_000_000 + nsec, reply, data))

@@ -138,6 +138,21 @@ NO_PYSOEM = "ecatsim bench needs pysoem: pip install 'ecatsim[bench]'"
     help="--bringup: pin the master to this CPU (with --cpu for the daemon: a core each).",
 )
 @click.option(
+    "--master",
+    type=click.Choice(["pysoem", "soem"]),
+    default="pysoem",
+    show_default=True,
+    help="--bringup's master: pysoem (up to 199 slaves, a 4096-byte IO map, SYNC0, drives "
+    "enabled and moving) or soem: SOEM's own DC sample red_test built from pysoem's sdist "
+    "with 1023 slaves and a 64 KiB IO map (no SYNC0, drives not enabled; needs 'cc').",
+)
+@click.option(
+    "--sync0",
+    is_flag=True,
+    help="--master soem: start every slave's SYNC0 at --period-us (SOEM's ec_dcsync0 added "
+    "after red_test's ec_configdc; red_test itself starts none).",
+)
+@click.option(
     "--results",
     type=click.Path(file_okay=False, path_type=Path),
     default=DEFAULT_DIR,
@@ -155,6 +170,10 @@ def bench(**kw: object) -> None:
     over 1 ms and 2 ms, resends, unanswered, the slowest frames) and the cycles' WKC.
     """
     opts = BenchOptions(**kw)  # type: ignore[arg-type]
+    if opts.master == "soem" and not opts.bringup:
+        raise UserError("--master soem is the master of --bringup N: add --bringup N")
+    if opts.sync0 and opts.master != "soem":
+        raise UserError("--sync0 is for --master soem (the pysoem master starts SYNC0 itself)")
     try:
         import pysoem  # noqa: F401
     except ImportError:

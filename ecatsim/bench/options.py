@@ -33,6 +33,10 @@ class BenchOptions:
     #: the master's SCHED_FIFO priority and CPU (--bringup; None: ordinary, unpinned)
     master_rt: int | None = None
     master_cpu: int | None = None
+    #: --bringup's master: "pysoem" or "soem" (SOEM's red_test, :mod:`ecatsim.bench.redtest`)
+    master: str = "pysoem"
+    #: --master soem: start SYNC0 on every slave (SOEM's ec_dcsync0 added after ec_configdc)
+    sync0: bool = False
     results: Path = DEFAULT_DIR
 
     def scheduling_flags(self) -> tuple[str, ...]:

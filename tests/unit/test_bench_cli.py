@@ -35,7 +35,8 @@ def test_every_option_has_help() -> None:
     assert r.exit_code == 0
     assert r.output.startswith("Usage: cli bench [OPTIONS]")
     assert "p99.99" in r.output
-    for option in ("--bringup", "--cycles", "--overlap", "--repeat", "--results", "--master-rt"):
+    for option in ("--bringup", "--cycles", "--overlap", "--repeat", "--results", "--master-rt",
+                   "--master", "--sync0"):  # fmt: skip
         assert option in r.output
 
 
@@ -195,3 +196,13 @@ def test_the_bringup_master_runs_real_time_on_its_cpu_and_is_restored() -> None:
     assert (os.sched_getscheduler(0), os.sched_getaffinity(0)) == before
     with master_scheduling(None, None) as said:
         assert said == "ordinary, unpinned"
+
+
+def test_the_soem_master_options_go_with_bringup_and_soem() -> None:
+    from ecatsim.errors import UserError
+
+    cases = [(["--master", "soem"], "add --bringup N"),
+             (["--bringup", "2", "--sync0"], "--sync0 is for --master soem")]  # fmt: skip
+    for args, text in cases:
+        r = CliRunner().invoke(cli, ["bench", *args])
+        assert isinstance(r.exception, UserError) and text in str(r.exception), r.output

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import struct
 
-from ecatsim.bench.capture import Frame, analyse, parse
+from ecatsim.bench.capture import Frame, analyse, first_wkc, parse, process_cycles
 from ecatsim.wire import datagram as dg
 
 MS = 1_000_000
@@ -92,3 +92,41 @@ def test_the_same_request_much_later_is_a_new_one() -> None:
     datagram 30 ms later is a new request (the first one was not answered)."""
     a = analyse([req(0, 9), req(30 * MS, 9), rep(30 * MS + 50_000, 9)])
     assert (a["frames"], a["max_us"], a["resends"], a["unanswered"]) == (1, 50.0, 0, 1)
+
+
+def test_the_first_datagrams_wkc_is_read_from_the_whole_frame() -> None:
+    lrw = dg.build_logical(dg.Cmd.LRW, 0x100, bytes(1400), idx=7, wkc=141)
+    dc = dg.build(dg.Cmd.FRMW, 1, 0x0910, bytes(8), idx=7)
+    raw = dg.ethernet_frame([lrw, dg.build(dg.Cmd.NOP, 0, 0, b"")])
+    assert first_wkc(raw) == 141
+    assert first_wkc(dg.ethernet_frame([lrw, dc], vlan=5)) == 141  # behind an 802.1Q tag
+    assert first_wkc(raw[:200]) == -1  # cut short before the WKC
+    assert first_wkc(b"\x00" * 12 + b"\x08\x00" + bytes(40)) == -1  # not EtherCAT
+    f = parse(raw, 3)
+    assert f is not None and (f.wkc, f.length, len(f.body)) == (141, 1400, 10 + 48)
+    g = parse(raw[:80], 3, True, 141)  # the capture kept the WKC, then cut the frame
+    assert g is not None and (g.wkc, g.reply, g.adp, g.ado) == (141, True, 0x100, 0)
+
+
+def lrw(t: int, idx: int, lad: int, reply: bool = False, wkc: int = 0) -> Frame:
+    return Frame(t, reply, idx, 12, lad & 0xFFFF, lad >> 16, 1400, b"", wkc)
+
+
+def test_cycles_are_summed_off_the_wire_lost_and_late_frames_add_nothing() -> None:
+    """A cycle is the frames from the one to the lowest logical address on; its WKC is
+    the sum of the WKCs that came back in time (3 ms here), as SOEM sums them."""
+    frames = [
+        lrw(0, 1, 0x0), lrw(10_000, 2, 0x5C0),  # sent before the window: not counted
+        lrw(1 * MS, 3, 0x0), lrw(1 * MS + 10_000, 4, 0x5C0),
+        lrw(1 * MS + 90_000, 3, 0x0, True, 141), lrw(1 * MS + 95_000, 4, 0x5C0, True, 15),
+        lrw(2 * MS, 5, 0x0), lrw(2 * MS + 10_000, 6, 0x5C0),
+        lrw(2 * MS + 90_000, 5, 0x0, True, 141),  # 6: never answered
+        lrw(3 * MS, 7, 0x0), lrw(3 * MS + 10_000, 8, 0x5C0),
+        lrw(3 * MS + 90_000, 7, 0x0, True, 141), lrw(7 * MS, 8, 0x5C0, True, 15),  # 8: late
+        lrw(4 * MS, 9, 0x0), lrw(4 * MS + 10_000, 10, 0x5C0),
+        lrw(4 * MS + 90_000, 9, 0x0, True, 140), lrw(4 * MS + 95_000, 10, 0x5C0, True, 15),
+        lrw(5 * MS, 11, 0x0), lrw(5 * MS + 90_000, 11, 0x0, True, 141),  # sent after the end
+    ]  # fmt: skip
+    c = process_cycles(frames, 500_000, 5 * MS, 156, 3 * MS)
+    assert (c["cycles"], c["frames"], c["lost"], c["late"]) == (4, 8, 2, 1)
+    assert (c["wkc_errors"], c["wkc_error_seen"], c["expected_wkc"]) == (3, [141, 141, 155], 156)

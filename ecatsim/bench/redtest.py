@@ -1,0 +1,130 @@
+"""``ecatsim bench --bringup N --master soem``: SOEM's own DC sample, red_test, as the
+bring-up's master, for segments beyond pysoem's (199 slaves, a 4096-byte IO map).
+
+red_test (built from pysoem's sdist with a larger slave table and IO map,
+:func:`ecatsim.bench.soem.red_test`) does, as SOEM ships it: ec_config (config_init and
+config_map; ec_config_overlap with ``--overlap``), SAFEOP, ec_configdc, OP requested with
+its real-time cycle thread running (SCHED_FIFO 40, clock_nanosleep to absolute times,
+receive then send, the cycle kept locked to the DC time of the replies with ec_sync), and
+every 20 ms a line with the last WKC. It does not start SYNC0 (no ec_dcsync0; with
+``--sync0`` the build adds SOEM's ec_dcsync0 for every slave after ec_configdc) and does
+not enable the drives (they answer in OP without). Its phases are marked in the capture
+as its lines arrive (a phase's first frames may fall in the one before); the cycles, their
+lost frames and WKCs are read off the wire by the capture on the master's end
+(:func:`ecatsim.bench.capture.process_cycles`): SOEM's sum of the WKCs of each cycle's
+frames against the WKC red_test prints as expected, a reply later than red_test waits
+(:func:`timeout_ns`) lost.
+Ref: docs/performance.md "How to measure".
+"""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ecatsim.bench.capture import Capture
+from ecatsim.bench.master import cpu_seconds
+from ecatsim.bench.netns import NetnsPair
+from ecatsim.bench.soem import RED_IOMAP, RED_MAXSLAVE, pysoem_version
+
+#: what the bench records of this master (``master_name`` and ``master_limits``)
+NAME = "SOEM red_test"
+
+
+def limits(sync0: bool) -> dict[str, object]:
+    """The master's limits as built: slaves, IO map bytes, SOEM's version source, SYNC0
+    started or not (``--sync0``), the drives not enabled."""
+    return {"max_slaves": RED_MAXSLAVE - 1, "iomap_bytes": RED_IOMAP,
+            "soem": f"pysoem {pysoem_version()} sdist", "sync0": sync0,
+            "drives_enabled": False}  # fmt: skip
+
+
+def timeout_ns(period_us: int) -> int:
+    """How long after sending a frame red_test still takes its reply: its cycle thread
+    receives a cycle's frames at the next cycle, waiting up to SOEM's EC_TIMEOUTRET (2 ms)."""
+    return (period_us + 2000) * 1000
+
+
+def run_timeout(cycles: int, period_us: int) -> float:
+    """How long red_test may run before it is killed: five minutes for the bring-up and
+    three times its cycles' time (its cycle thread, SCHED_FIFO and always behind when the
+    replies are late, can starve its main loop on the same CPU: ``--master-cpu``)."""
+    return 300.0 + 3 * cycles * period_us / 1e6
+
+
+#: red_test's lines and the phase each starts (its output, as SOEM ships it)
+PHASES = (
+    (re.compile(r"^(\d+) slaves found and configured"), "safeop_dc"),
+    (re.compile(r"^Request operational state"), "op"),
+    (re.compile(r"^Operational state reached for all slaves"), "cycles"),
+    (re.compile(r"^Request safe operational state"), "end"),
+)
+EXPECTED = re.compile(r"^Calculated workcounter (\d+)")
+#: red_test's check thread reports slaves out of OP, lost, recovered
+TROUBLE = re.compile(r"^(ERROR|WARNING|MESSAGE|Slave \d+ State=)")
+
+
+@dataclass
+class RedTestRun:
+    """What one red_test run printed: the slaves it configured, the WKC it expects, whether
+    every slave reached OP, its check thread's reports, the daemon's CPU seconds over the
+    cycles, and the output's last lines (for a failure)."""
+
+    slaves: int = 0
+    expected_wkc: int = 0
+    all_op: bool = False
+    trouble: list[str] = field(default_factory=list)
+    cycles_cpu_s: float = 0.0
+    cycles_wall_ns: int = 0
+    tail: list[str] = field(default_factory=list)
+    returncode: int | None = None
+
+
+def run(exe: Path, pair: NetnsPair, cap: Capture, period_us: int, daemon_pid: int,
+        prefix: tuple[str, ...] = (), timeout: float = 900.0) -> RedTestRun:  # fmt: skip
+    """Run red_test on the master's interface (``prefix``: taskset/chrt before it), each
+    phase marked in ``cap`` as its line arrives; killed after ``timeout`` seconds."""
+    cmd = ["ip", "netns", "exec", pair.master_ns, *prefix, "stdbuf", "-oL", str(exe),
+           pair.master_if, pair.master_if, str(period_us)]  # fmt: skip
+    out = RedTestRun()
+    cap.mark("config")
+    proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)  # fmt: skip
+    watchdog = threading.Timer(timeout, proc.kill)
+    watchdog.start()
+    cpu0, t0 = 0.0, 0
+    try:
+        assert proc.stdout is not None
+        for line in proc.stdout:  # universal newlines: its "\r" progress lines too
+            line = line.strip()
+            if not line:
+                continue
+            out.tail = [*out.tail[-19:], line]
+            for pattern, phase in PHASES:
+                m = pattern.match(line)
+                if m is None:
+                    continue
+                cap.mark(phase)
+                if phase == "safeop_dc":
+                    out.slaves = int(m.group(1))
+                elif phase in ("op", "cycles"):  # the cycles: from OP (from the request without)
+                    out.all_op = phase == "cycles"
+                    cpu0, t0 = cpu_seconds(daemon_pid), cap.marks[-1][0]
+                elif phase == "end":
+                    out.cycles_cpu_s = cpu_seconds(daemon_pid) - cpu0
+                    out.cycles_wall_ns = cap.marks[-1][0] - t0
+            m = EXPECTED.match(line)
+            if m is not None:
+                out.expected_wkc = int(m.group(1))
+            if TROUBLE.match(line) and len(out.trouble) < 50:
+                out.trouble.append(line)
+        out.returncode = proc.wait()
+    finally:
+        watchdog.cancel()
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    return out

@@ -1,0 +1,61 @@
+"""``ecatsim bench --bringup N --master soem``: SOEM's own DC sample red_test, built from
+pysoem's source distribution with a 1023-slave table and a 64 KiB IO map, brings the
+daemon's drives to OP and cycles at 1 kHz; the capture on the master's end reads every
+cycle's WKC off the wire.
+
+Ref: docs/performance.md "How to measure"; ETG.1000.4 §5.4.1.2 (WKC), ETG.1000.6 §6.4
+(AL state machine); SOEM red_test.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from ecatsim.bench import redtest
+from ecatsim.bench.capture import Capture, process_cycles
+from tests.integration.conftest import DaemonFactory
+from tests.integration.netns import NetnsPair
+from tests.support.soem_build import red_test
+
+DRIVES = 4
+CYCLES = 300
+PERIOD_US = 1000
+#: a TMC8670 maps outputs and inputs: an LRW counts 1 for the read and 2 for the write
+EXPECTED_WKC = 3 * DRIVES
+FPWR, BWR, LRW = 5, 8, 12
+
+
+@pytest.mark.parametrize("sync0", [False, True], ids=["stock", "sync0"])
+def test_red_test_takes_four_drives_to_op_and_cycles_with_every_wkc(
+    netns_pair: NetnsPair, daemon_factory: DaemonFactory, sync0: bool
+) -> None:
+    """config, SAFEOP, ec_configdc (with ``sync0``: every slave's SYNC0 started, 0x0981
+    written 3), OP; then about 300 cycles at 1 ms, each one LRW whose reply carries the
+    full WKC, none lost; red_test's check thread reports nothing."""
+    exe = red_test(CYCLES, PERIOD_US, overlap=False, sync0=sync0)
+    d = daemon_factory("--slaves", str(DRIVES))
+    assert d.pid is not None
+    with Capture.master_end(netns_pair.master_ns, netns_pair.master_if, keep_wkc=True) as cap:
+        rt = redtest.run(exe, netns_pair, cap, PERIOD_US, d.pid, timeout=60)
+    assert rt.returncode == 0, rt.tail
+    assert (rt.slaves, rt.expected_wkc, rt.all_op, rt.trouble) == (
+        DRIVES, EXPECTED_WKC, True, []
+    ), rt.tail  # fmt: skip
+    assert [name for _, name in cap.marks] == ["config", "safeop_dc", "op", "cycles", "end"]
+    marks = {name: t for t, name in cap.marks}
+    frames = cap.frames()
+    # ec_configdc: a BWR to 0x0900 latches every port's receive time (before the OP request;
+    # a phase is marked as red_test's line is read, its first frames may come before)
+    dc = [f for f in frames if f.t_ns < marks["op"] and not f.reply]
+    assert any(f.cmd == BWR and f.ado == 0x0900 for f in dc)
+    started = [f.adp for f in dc if f.cmd == FPWR and f.ado == 0x0981 and f.body[10:11] == b"\x03"]
+    assert len(started) == (DRIVES if sync0 else 0)
+    cyc = process_cycles(frames, marks["cycles"], marks["end"], EXPECTED_WKC,
+                         redtest.timeout_ns(PERIOD_US))  # fmt: skip
+    assert (cyc["lost"], cyc["late"], cyc["wkc_errors"], cyc["wkc_error_seen"]) == (0, 0, 0, [])
+    assert cyc["frames"] == cyc["cycles"]  # 4 x 29 bytes: one LRW a cycle
+    # red_test's main loop runs CYCLES / 20 loops of 20 ms while the cycle thread runs
+    assert CYCLES * 0.9 <= cyc["cycles"] <= CYCLES * 2, cyc
+    during = [f for f in frames if marks["cycles"] <= f.t_ns < marks["end"]]
+    replies = [f.wkc for f in during if f.reply and f.cmd == LRW]
+    assert set(replies) == {EXPECTED_WKC}
