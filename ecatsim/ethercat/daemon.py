@@ -350,6 +350,7 @@ class Daemon:
             # the work after a reply stops for a frame that came meanwhile (decision P19)
             waiting = lambda: bool(select.select((link_fd,), (), (), 0)[0])  # noqa: E731
             self.segment.schedule.frame_waiting = waiting
+            self.segment.schedule.now_ns = self.segment.clock.now_ns  # P30
         out_fd = self.out.link.fileno() if self.out is not None else -1
         watch = [f for f in (self._fd, out_fd, *self._watch, follow_fd) if f >= 0]
         clock = self.segment.clock
@@ -384,6 +385,7 @@ class Daemon:
         srv = self._make_responder()
         # the work after a reply stops for a frame that came meanwhile (decision P19)
         self.segment.schedule.frame_waiting = srv.frame_waiting
+        self.segment.schedule.now_ns = clock.now_ns  # pulses due meanwhile (decision P30)
         while not self._stop:
             fast = self._fast_ok()
             now = clock.now_ns()

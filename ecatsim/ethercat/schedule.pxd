@@ -16,7 +16,7 @@ cdef class Schedule:
     cdef public object awake
     cdef public FrameContext ctx
     cdef public list escs, firmware, deferred
-    cdef public object frame_waiting
+    cdef public object frame_waiting, now_ns
     cdef public object persist
     cdef public object held_logs, write_logs
     cdef public long long probe_ns, resume_pos, yielded
@@ -29,9 +29,11 @@ cdef class Schedule:
                    d="long long", d1="long long", cfw=Firmware, defer=bint, look="long long",
                    waiting=bint)
     cpdef void sync_until(self, long long t, bint frame_first=*) except *
-    @cython.locals(lst=list, fw=Firmware, look="long long", ctx=FrameContext, n=Py_ssize_t,
+    @cython.locals(lst=list, fw=Firmware, look="long long", ctx=FrameContext, now="long long",
                    i=Py_ssize_t)
     cpdef bint run_deferred(self) except *
+    @cython.locals(now="long long")
+    cpdef void pulses_meanwhile(self) except *
     @cython.locals(best="long long")
     cpdef object next_deadline(self)
     @cython.locals(best="long long", d="long long", e=Esc)

@@ -60,6 +60,7 @@ class Schedule:
         "firmware",
         "frame_waiting",
         "held_logs",
+        "now_ns",
         "persist",
         "probe_ns",
         "resume_pos",
@@ -87,6 +88,10 @@ class Schedule:
         #: after a reply stops for it and goes on after that frame's reply (decision P19);
         #: None: the work runs to its end
         self.frame_waiting: Callable[[], bool] | None = None
+        #: the segment clock's time (the daemon's link): SYNC pulses that fall due while
+        #: firmware works fire at their time, not when the next frame comes (P30); None:
+        #: only at the start of the work and before a frame
+        self.now_ns: Callable[[], int] | None = None
         #: log lines held while the daemon serves (ecatsim/logqueue.py), written by
         #: ``write_logs(frame_waiting)`` once the firmware's work is done (decision P37)
         self.held_logs: Sized = ()
@@ -144,6 +149,7 @@ class Schedule:
                         self.yielded += 1
                         self.resume_pos = pos + 1
                         return
+                    self.pulses_meanwhile()
                     look = time.monotonic_ns() + self.probe_ns
             self.resume_pos = 0
         if ctx.flush and self.persist is not None:
@@ -224,29 +230,42 @@ class Schedule:
 
     def run_deferred(self) -> bool:
         """Run the pulses' work latched for after a frame (``deferred``, in pulse order),
-        each at its pulse's time, looking every ``probe_ns`` whether a frame waits. False
-        if it stopped for one (the rest stays latched). Decision P30."""
+        each at its pulse's time, looking every ``probe_ns`` whether a frame waits and
+        whether SYNC pulses fell due meanwhile (they fire then, at their own time, not
+        when the next frame comes). False if it stopped for a frame (the rest stays
+        latched). Decision P30."""
         lst = self.deferred
         probe = self.frame_waiting
         look = time.monotonic_ns() + self.probe_ns if probe is not None else NO_DEADLINE
         ctx = self.ctx
-        n = len(lst)
         i = 0
-        while i < n:
+        while i < len(lst):  # pulses that fall due meanwhile may add to it
             fw = lst[i]
             i += 1
             if fw.sync_ns < 0:
                 continue  # run already, before a later pulse or event of its slave
             ctx.pdi_ns = fw.sync_ns
             fw.sync0_run()
-            if look != NO_DEADLINE and time.monotonic_ns() >= look:
-                if probe is not None and probe():
-                    self.yielded += 1
-                    del lst[:i]
-                    return False
-                look = time.monotonic_ns() + self.probe_ns
+            if look != NO_DEADLINE:
+                now = time.monotonic_ns()
+                if now >= look:
+                    if probe is not None and probe():
+                        self.yielded += 1
+                        del lst[:i]
+                        return False
+                    self.pulses_meanwhile()
+                    look = time.monotonic_ns() + self.probe_ns
         lst.clear()
         return True
+
+    def pulses_meanwhile(self) -> None:
+        """The SYNC pulses that fell due while the firmware worked, fired now, each at its
+        own time (``now_ns`` set: the daemon's link; decision P30)."""
+        clock = self.now_ns
+        if clock is not None:
+            now = clock()
+            if now >= self._pulse_hint or self.ctx.timers_dirty:
+                self.sync_until(now, False)
 
     def _set_next_sync(self, nxt: int) -> None:
         self._next_sync = nxt

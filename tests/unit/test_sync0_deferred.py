@@ -110,3 +110,31 @@ def test_without_the_daemons_link_the_work_is_never_deferred() -> None:
     c.exchange()
     assert c.seg.schedule.sync0_deferred == 0
     assert latched(c) == [False] * N
+
+
+def test_pulses_that_fall_due_while_the_latched_work_runs_fire_at_their_time() -> None:
+    _, c, waiting, _ = twins()
+    s = c.seg.schedule
+    waiting[0] = True
+    c.pulse()
+    assert latched(c) == [False, False, True, True]
+    waiting[0] = False
+    ticks = s.sync0_ticks
+    c.clock.t = c.t + MS + 20_000  # the next pulse falls due while the work runs
+    assert s.run_deferred()
+    assert s.sync0_ticks == ticks  # the segment's time is not known: no pulse fires
+    c.t += MS
+    waiting[0] = True
+    c.pulse()  # the timer: that pulse, and a frame waits again
+    waiting[0] = False
+    ticks = s.sync0_ticks
+    assert latched(c) == [False, False, True, True]
+    c.seg.schedule.now_ns = lambda: c.clock.t
+    c.clock.t = c.t + MS + 20_000
+    assert s.run_deferred()
+    # slave 2's latched work ran, then the look found the pulse due: every slave's, at
+    # its time (slave 3's latched work first), none replaced
+    assert s.sync0_ticks == ticks + N
+    assert latched(c) == [False] * N
+    assert s.deferred == []
+    assert s.sync0_merged == 0
