@@ -67,7 +67,7 @@ def bring_up(m: Any, cap: Capture, pair: NetnsPair, n: int, period_us: int,
     if m.state_check(pysoem.SAFEOP_STATE, 5_000_000) != pysoem.SAFEOP_STATE:
         raise SystemExit("bench: the segment did not reach SAFEOP")
     cap.mark("op")
-    if not request_op(m, 5000, 2000, 2000):
+    if not request_op(m, 5000, 2000, 2000, overlap):
         raise SystemExit("bench: the segment did not reach OP")
 
 
@@ -117,7 +117,9 @@ def run_bringup(n: int, cycles_k: int, period_us: int, overlap: bool,
                 bring_up_s = time.perf_counter() - t0
                 cap.mark("cycles")
                 assert d.pid is not None
-                cyc = cycles(m, cycles_k * period_us / 1e6, period_us, d.pid, spin=spin)
+                cyc = cycles(
+                    m, cycles_k * period_us / 1e6, period_us, d.pid, spin=spin, overlap=overlap
+                )
                 cap.mark("end")
                 time.sleep(0.05)
         finally:

@@ -51,18 +51,26 @@ def steal_seconds() -> list[float]:
             if ln.startswith("cpu") and ln[3:4].isdigit()]  # fmt: skip
 
 
-def request_op(m: Any, tries: int, recv_us: int, check_us: int) -> bool:
+def sender(m: Any, overlap: bool) -> Any:
+    """The master's send of the process data: SOEM's overlapped one after
+    config_overlap_map (``overlap``; the plain one would send the inputs of the last reply
+    back as outputs), else the plain one. ``m``: a pysoem master."""
+    return m.send_overlap_processdata if overlap else m.send_processdata
+
+
+def request_op(m: Any, tries: int, recv_us: int, check_us: int, overlap: bool = False) -> bool:
     """Request OP from SAFEOP as a master does (ETG.1000.6 §6.4: the slaves take OP once
     valid outputs arrive): one exchange, the AL control write, then exchanges until every
     slave reports OP or ``tries`` run out. ``m``: a pysoem master; True if they are in OP."""
     import pysoem
 
+    send = sender(m, overlap)
     m.state = pysoem.OP_STATE
-    m.send_processdata()
+    send()
     m.receive_processdata(recv_us)
     m.write_state()
     for _ in range(tries):
-        m.send_processdata()
+        send()
         m.receive_processdata(recv_us)
         if m.state_check(pysoem.OP_STATE, check_us) == pysoem.OP_STATE:
             break
@@ -124,7 +132,7 @@ class CspMotion:
 
 
 def cycles(m: Any, seconds: float, period_us: int, pid: int, lock: bool = True,
-           spin: bool = False) -> dict[str, Any]:  # fmt: skip
+           spin: bool = False, overlap: bool = False) -> dict[str, Any]:  # fmt: skip
     """Cyclic exchange for ``seconds``: round trips, lost frames (no reply within two
     periods), WKC mismatches, the daemon's CPU per cycle and in % of one core, the VM's
     steal time per CPU. A lost frame whose receive call took more than a millisecond past
@@ -150,6 +158,7 @@ def cycles(m: Any, seconds: float, period_us: int, pid: int, lock: bool = True,
     t_next = wall0
     n = max(1, int(seconds * 1e6 / period_us))
     motion = CspMotion(m, period_us)
+    send = sender(m, overlap)
     done, behind = 0, False
     for _ in range(n):
         if time.perf_counter() - t_next > 1.0:
@@ -158,7 +167,7 @@ def cycles(m: Any, seconds: float, period_us: int, pid: int, lock: bool = True,
         done += 1
         motion.outputs()
         t = time.perf_counter()
-        m.send_processdata()
+        send()
         w = m.receive_processdata(2 * period_us)
         rtts.append(time.perf_counter() - t)
         if w < 0:

@@ -18,7 +18,10 @@ frame. When one arrives elsewhere the set becomes readable and the daemon calls
 followed from its next frame on. A daemon with much work per cycle on the master's CPU
 drives the scheduler to move the master away, again and again: more than ``CHASE_MOVES``
 moves within a second stop the following for ``CHASE_PAUSE_NS`` and give the daemon all its
-CPUs back; while stopped (and for ``BACKOFF_NS`` after a failed move) no probe is watched,
+CPUs back, and so does a daemon that used more than ``BUSY_SHARE`` of a CPU since its last
+look (a large segment's SYNC0 work): on the master's CPU it would leave the master too
+little of it, and a master that runs late loses frames however fast the replies come; while
+stopped (and for ``BACKOFF_NS`` after a failed move) no probe is watched,
 and the daemon looks again at :attr:`CpuFollower.look_ns`. Only while the daemon runs
 SCHED_FIFO: an ordinary task woken on the master's CPU would wait behind it.
 """
@@ -28,6 +31,8 @@ from __future__ import annotations
 import os
 import select
 import socket
+import time
+from collections.abc import Callable
 
 from ecatsim.link.raw import (
     ETH_P_8021Q,
@@ -46,6 +51,10 @@ BACKOFF_NS = 10_000_000_000
 #: more moves than this within one second are a chase: the following pauses
 CHASE_MOVES = 20
 CHASE_PAUSE_NS = 10_000_000_000
+#: a daemon that used more than this share of a CPU since its last look (measured over at
+#: least BUSY_WINDOW_NS) does not follow, and pauses as after a chase
+BUSY_SHARE = 0.5
+BUSY_WINDOW_NS = 100_000_000
 #: each probe's receive buffer (the kernel doubles it): a few dozen one-byte frames. The
 #: probe of the daemon's own CPU is read only when a frame comes from elsewhere; until then
 #: it fills and drops, and what it holds is drained at that look.
@@ -80,6 +89,13 @@ class CpuFollower:
         self.pauses = 0
         self._window_ns = 0  # start of the second the recent moves are counted in
         self._window_moves = 0
+        #: the daemon's CPU time (ns; process-wide), and the host time and CPU time of the
+        #: start of the window its busy share is measured over (0: not started)
+        self.cpu_time: Callable[[], int] = time.process_time_ns
+        self._busy_t = 0
+        self._busy_cpu = 0
+        #: pauses because the daemon was busier than BUSY_SHARE
+        self.busy_pauses = 0
         self._buf = bytearray(1)
         self.probes: list[socket.socket] = []
         #: the probes whose frames call for a look (:meth:`fileno`), by CPU
@@ -161,6 +177,10 @@ class CpuFollower:
         )
         if best is None or not counts[best]:
             return None
+        if self.busy(now_ns):
+            self.busy_pauses += 1
+            self._pause(now_ns)
+            return None
         try:
             os.sched_setaffinity(0, {best})
         except OSError:
@@ -176,6 +196,21 @@ class CpuFollower:
             return None
         self._watch()
         return best
+
+    def busy(self, now_ns: int) -> bool:
+        """Whether the daemon used more than BUSY_SHARE of a CPU since the window began
+        (at least BUSY_WINDOW_NS ago; a new window begins then). False while the window is
+        shorter."""
+        cpu = self.cpu_time()
+        if not self._busy_t:
+            self._busy_t, self._busy_cpu = now_ns, cpu
+            return False
+        dt = now_ns - self._busy_t
+        if dt < BUSY_WINDOW_NS:
+            return False
+        share = (cpu - self._busy_cpu) / dt
+        self._busy_t, self._busy_cpu = now_ns, cpu
+        return share > BUSY_SHARE
 
     def _pause(self, now_ns: int) -> None:
         """Stop following for CHASE_PAUSE_NS; the daemon may run on all its CPUs again."""

@@ -188,3 +188,28 @@ def test_a_master_that_keeps_moving_away_pauses_the_following(
     assert f.poll(due) == b and f.look_ns == 0  # following again
     send_from(a, master, ECAT)
     assert readable(f)
+
+
+def test_a_daemon_busier_than_half_a_cpu_does_not_follow(
+    rig: tuple[CpuFollower, Sender, Sender],
+) -> None:
+    """On the master's CPU a daemon with a large segment's SYNC0 work would leave the
+    master too little of it: busier than BUSY_SHARE since its last look, it pauses the
+    following as after a chase and may run on all its CPUs."""
+    f, master, _ = rig
+    a, b = two_cpus()
+    used = [0]
+    f.cpu_time = lambda: used[0]
+    t = 7_000_000_000
+    send_from(b, master, ECAT)
+    assert f.poll(t) == b  # the window starts: nothing measured yet
+    used[0] += 40_000_000  # 40 % of the next 100 ms
+    send_from(a, master, ECAT)
+    assert f.poll(t + follow.BUSY_WINDOW_NS) == a and f.busy_pauses == 0
+    used[0] += 60_000_000  # 60 % of the next 100 ms
+    send_from(b, master, ECAT)
+    now = t + 2 * follow.BUSY_WINDOW_NS
+    assert f.poll(now) is None
+    due = now + follow.CHASE_PAUSE_NS
+    assert (f.busy_pauses, f.pauses, f.cpu, f.look_ns) == (1, 1, None, due)
+    assert os.sched_getaffinity(0) == f.allowed
