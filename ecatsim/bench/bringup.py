@@ -59,10 +59,14 @@ def bring_up(m: Any, cap: Capture, pair: NetnsPair, n: int, period_us: int,
     for s in m.slaves:
         s.sdo_write(0x6060, 0, bytes([CSP]))  # cyclic synchronous position
     cap.mark("config_map")
-    if overlap:
-        m.config_overlap_map()
-    else:
-        m.config_map()
+    used = m.config_overlap_map() if overlap else m.config_map()
+    if used > PYSOEM_LIMITS["iomap_bytes"]:
+        # SOEM keeps the inputs after the outputs in the IO map in both modes (overlap
+        # only shortens the frames): pysoem's fixed map would be overrun by the replies
+        raise SystemExit(
+            f"bench: {n} drives need {used} bytes of IO map, pysoem's holds "
+            f"{PYSOEM_LIMITS['iomap_bytes']}: use --master soem"
+        )
     cap.mark("safeop")
     if m.state_check(pysoem.SAFEOP_STATE, 5_000_000) != pysoem.SAFEOP_STATE:
         raise SystemExit("bench: the segment did not reach SAFEOP")
