@@ -203,7 +203,7 @@ class Schedule:
                 self.sync0_ticks += 1
                 if t - d > self.sync0_late_ns:
                     self.sync0_late_ns = t - d
-                if fw is not None and esc.position in ctx.pending:
+                if fw is not None and esc.irq_line:  # in ctx.pending (a C field)
                     ctx.pdi_ns = d
                     if cfw is None:
                         fw.service(d)
@@ -264,7 +264,10 @@ class Schedule:
         clock = self.now_ns
         if clock is not None:
             now = clock()
-            if now >= self._pulse_hint or self.ctx.timers_dirty:
+            # the earliest deadline itself, not the frames' hint before it: a look in the
+            # hint's margin would scan every ESC for nothing (a pulse a clock correction
+            # moved earlier still fires at its own time, only found a little later)
+            if now >= self._next_sync or self.ctx.timers_dirty:
                 self.sync_until(now, False)
 
     def _set_next_sync(self, nxt: int) -> None:
