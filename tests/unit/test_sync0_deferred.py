@@ -138,3 +138,27 @@ def test_pulses_that_fall_due_while_the_latched_work_runs_fire_at_their_time() -
     assert latched(c) == [False] * N
     assert s.deferred == []
     assert s.sync0_merged == 0
+
+
+def test_an_emcy_the_latched_work_queues_behind_a_full_sm1_unmasks_the_sm1_event() -> None:
+    """A following error in a drive's latched cycle while SM1 still holds an earlier
+    reply: its EMCY waits in the queue, and the firmware wants the SM1 event (the master's
+    read of SM1) to send it then, as after a cycle run at once."""
+    _, c, waiting, _ = twins()
+    fw = c.seg.firmware[3]
+    esc = c.seg.escs[3]
+    fw.emergency.clear()  # EMCY 0000h: SM1 full until the master reads it
+    sm1_status, al_event_mask, ev_sm1 = 0x0805 + 8, 0x0204, 0x0200
+    assert esc.mem[sm1_status] & 0x08
+    assert not int.from_bytes(esc.mem[al_event_mask : al_event_mask + 4], "little") & ev_sm1
+    fw.od.set(0x6065, 0, 1)  # following error window: 1 count
+    c.t += 20 * MS  # the cosine target is well under way 20 ms on: the error is larger
+    c.clock.t = c.t + 20_000
+    waiting[0] = True
+    c.daemon._service_timers()
+    assert latched(c)[3]
+    waiting[0] = False
+    assert c.seg.schedule.run_deferred()
+    assert fw.device.state.name == "FAULT"
+    assert fw.mbx.held is not None  # the following error's EMCY, behind the first
+    assert int.from_bytes(esc.mem[al_event_mask : al_event_mask + 4], "little") & ev_sm1
