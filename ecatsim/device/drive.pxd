@@ -47,6 +47,7 @@ cdef class Drive(CycleDevice):
     cdef int _d_kind
     cdef double _d_ref, _d_vff, _d_window
     cdef public object params
+    cdef double _ppr
     cdef public long long substep_ns
     cdef public Servo servo
     cdef public object profile

@@ -179,6 +179,9 @@ class Drive(CycleDevice):
         self._d_kind = 0
         self._d_ref = self._d_vff = self._d_window = 0.0
         self.params = params or MotorParams()
+        #: the encoder's counts per revolution as a C double (params is fixed for the
+        #: drive's life, as substep_ns and the servo derived from it are)
+        self._ppr = float(self.params.ppr)
         self.substep_ns = round(self.params.substep * 1e9)
         self.servo = Servo(self.params)
         self.profile = Profile()
@@ -310,7 +313,7 @@ class Drive(CycleDevice):
                 dt = (now - then) * 1e-9
                 if dt > 0:
                     prev = last_target
-                    ppr = self.params.ppr
+                    ppr = self._ppr
                     self.v_ff_rpm = (target - prev) / dt * 60.0 / ppr
             self.last_target = target
             self.last_t_ns = now_ns

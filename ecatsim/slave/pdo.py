@@ -377,6 +377,8 @@ class PdoImage:
         rx, tx = plan.rx_codec, plan.tx_codec
         #: the one-struct codecs' parts, bound once per plan (the DC cycle's hot path)
         self._rx_st = rx.st if rx is not None else None
+        #: the output struct's size (-1: no struct), a C integer for the per-cycle test
+        self._rx_need = rx.st.size if rx is not None else -1
         self._rx_entries = rx.entries if rx is not None else ()
         self._rx_layout = rx.layout if rx is not None else None
         self._tx_st = tx.st if tx is not None else None
@@ -406,19 +408,20 @@ class PdoImage:
 
     def set_outputs(self, data: bytes, now_ns: int) -> None:
         st = self._rx_st
-        if st is not None and len(data) >= st.size:
+        if st is not None and len(data) >= self._rx_need:
             entries: tuple[Entry, ...] = self._rx_entries
             layout = self._rx_layout
             if layout is not None and type(data) is bytes:
                 # the struct's values, decoded in C from the bytes (decision P33)
                 buf: bytes = data
+                q = buf  # compiled: a pointer to the bytes (the struct fits: tested above)
                 for i in range(len(entries)):
                     spec = layout[i]
                     off = spec >> 4
                     n = (spec >> 1) & 7
                     raw = 0
                     for k in range(n):
-                        raw |= buf[off + k] << (8 * k)
+                        raw |= q[off + k] << (8 * k)
                     half = 1  # the sign bit's value: a C long long shifted in the core
                     half <<= 8 * n - 1
                     if spec & 1 and raw >= half:
@@ -487,6 +490,7 @@ class PdoImage:
         A value the device keeps for its entry is taken from the device (P38)."""
         entries: tuple[Entry, ...] = self._tx_entries
         out = self._tx_buf
+        p = out  # compiled: a pointer to the buffer (every field lies inside it)
         dev = self._dev
         slots = self._tx_slot
         pending = slots is not None and dev is not None and dev.pub_pending
@@ -518,7 +522,7 @@ class PdoImage:
             elif c < 0 or c >= half << 1:
                 return None
             for k in range(n):
-                out[off + k] = (c >> (8 * k)) & 0xFF
+                p[off + k] = (c >> (8 * k)) & 0xFF
         return out
 
     def al_state_changed(self, state: AlState, now_ns: int) -> None:
