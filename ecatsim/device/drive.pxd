@@ -15,6 +15,8 @@ cdef long long SW_VOLTAGE, SW_WARNING, SW_REMOTE, SW_TARGET_REACHED, SW_INTERNAL
 cdef long long SW_OMS12, SW_OMS13, SW_MOTOR_ACTIVE, SW_DIRECTION
 # the modes as C constants (PP... stay Python ints for other modules)
 cdef long long _PP, _PV, _HM, _CSP, _CSV, _CST
+cdef int _STOP_FOLLOWING, _STOP_OVERCURRENT, _STOP_INDEX
+cdef long long _NO_WINDOW
 cdef tuple _STATUS_BITS
 
 
@@ -30,8 +32,7 @@ cdef bint _powered(object st)
 cdef bint _no_voltage(object st)
 
 
-@cython.locals(e=Entry)
-cdef long long _int_of(tuple hit) except? -1
+cdef long long _int_of(Entry e) except? -1
 
 
 cdef class Drive(CycleDevice):
@@ -76,6 +77,7 @@ cdef class Drive(CycleDevice):
     cdef public object log
 
     cpdef object _entry(self, int index, int sub)
+    cdef Entry _entry_only(self, int index)
     @cython.locals(e=Entry)
     cpdef object _v(self, int index, int sub=*)
     @cython.locals(hits=tuple)

@@ -40,6 +40,9 @@ MODES = (0, PP, PV, HM, CSP, CSV, CST)
 #: the modes as C integers in the compiled core, for the per-cycle tests (the public names
 #: stay Python ints: a module global compared with a C integer converts it every time)
 _PP, _PV, _HM, _CSP, _CSV, _CST = PP, PV, HM, CSP, CSV, CST
+#: the servo's stop reasons and "no window" (6065h FFFFFFFFh) as C integers, likewise
+_STOP_FOLLOWING, _STOP_OVERCURRENT, _STOP_INDEX = STOP_FOLLOWING, STOP_OVERCURRENT, STOP_INDEX
+_NO_WINDOW = 0xFFFFFFFF
 
 # Statusword bits. Ref: TMC8670 Tables 80-83, 81 (Trinamic bits 14/15).
 SW_VOLTAGE = 0x0010
@@ -135,11 +138,10 @@ def _no_voltage(st: PdsState) -> bool:
     return st is _NRTSO or st is _SOD or st is _FAULT
 
 
-def _int_of(hit: tuple[Entry, int, int] | None) -> int:
-    """An entry's value if it is an int, else 0 (no entry: 0); see Drive._entry."""
-    if hit is None:
+def _int_of(e: Entry | None) -> int:
+    """An entry's value if it is an int, else 0 (no entry: 0)."""
+    if e is None:
         return 0
-    e = hit[0]
     v = e.value
     return v if isinstance(v, int) else 0
 
@@ -162,8 +164,9 @@ class Drive(CycleDevice):
         self._entries: dict[int, tuple[Entry, int, int] | None] = {}
         #: the entries _publish() writes every cycle, in PUBLISHED order (looked up once)
         self._published: tuple[tuple[Entry, int, int] | None, ...] | None = None
-        self._snapshot_hits: tuple[tuple[Entry, int, int] | None, ...] | None = None
-        self._control_hits: tuple[tuple[Entry, int, int] | None, ...] | None = None
+        #: the entries of SNAPSHOT and CONTROLS (None: not in the OD), looked up once
+        self._snapshot_hits: tuple[Entry | None, ...] | None = None
+        self._control_hits: tuple[Entry | None, ...] | None = None
         #: the published entries' ranges as C integers (decision P34); set with _published
         self._pub_c = False
         self._pub_lo = self._pub_hi = array("q")
@@ -242,11 +245,16 @@ class Drive(CycleDevice):
         v = e.value
         return v if isinstance(v, int) else 0
 
-    def _controls(self) -> tuple[tuple[Entry, int, int] | None, ...]:
+    def _entry_only(self, index: int) -> Entry | None:
+        """The entry of ``index`` subindex 0 (None: not in the OD)."""
+        hit = self._entry(index, 0)
+        return hit[0] if hit is not None else None
+
+    def _controls(self) -> tuple[Entry | None, ...]:
         """The entries of CONTROLS, looked up once."""
         hits = self._control_hits
         if hits is None:
-            hits = self._control_hits = tuple([self._entry(i, 0) for i in CONTROLS])
+            hits = self._control_hits = tuple([self._entry_only(i) for i in CONTROLS])
         return hits
 
     def _set(self, index: int, value: int, sub: int = 0) -> None:
@@ -404,7 +412,7 @@ class Drive(CycleDevice):
             return
         tr = cia402.step(self.state, cmd)
         if tr is None:
-            if self.state is _OE and self.mode == PP:
+            if self.state is _OE and self.mode == _PP:
                 self._pp_setpoint()
             return
         number, nxt = tr
@@ -480,15 +488,15 @@ class Drive(CycleDevice):
                 kind, ref, v_ff, window = self._substep_demand(self.params.substep)
                 steps = 1
             done, why = s.run(steps, kind, ref, v_ff, window, self._trip(), index is not None)
-            if why == STOP_FOLLOWING:
+            if why == _STOP_FOLLOWING:
                 self._fault("following_error")  # this substep still runs on the demand
                 more, why = s.run(1, kind, ref, v_ff, 0.0, self._trip(), index is not None)
                 done += more
             left -= done
             t += done * dt_ns
-            if why == STOP_OVERCURRENT:
+            if why == _STOP_OVERCURRENT:
                 self._fault("overcurrent")
-            elif why == STOP_INDEX and index is not None:
+            elif why == _STOP_INDEX and index is not None:
                 self._index_pulse(index, t)
         if self.state is _OE and self.mode != _PP and self.mode != _CSP:
             self.p_demand = s.angle / TWO_PI * self.params.ppr  # follows the actual
@@ -511,7 +519,7 @@ class Drive(CycleDevice):
         outputs and SDO writes are applied after advancing), so read them once."""
         hits = self._snapshot_hits
         if hits is None:
-            hits = self._snapshot_hits = tuple([self._entry(i, 0) for i in SNAPSHOT])
+            hits = self._snapshot_hits = tuple([self._entry_only(i) for i in SNAPSHOT])
         self.q_60ff = _int_of(hits[0])
         self.q_6083 = _int_of(hits[1])
         self.q_6084 = _int_of(hits[2])
@@ -597,7 +605,7 @@ class Drive(CycleDevice):
     def _window(self) -> float:
         """Following error window 6065h (0 or FFFFFFFFh: not checked). Ref: CiA 402-2."""
         w = self.q_6065
-        return 0.0 if w == 0xFFFFFFFF else float(w)
+        return 0.0 if w == _NO_WINDOW else float(w)
 
     def _pp_setpoint(self) -> None:
         """New set point on the rising edge of bit 4; bit 6 relative. Ref: TMC8670 Table 76."""
