@@ -58,7 +58,8 @@ cdef class Drive(CycleDevice):
     cdef public object t_ns
     cdef public long long prev_cw
     cdef public long long mode
-    cdef public object al_state
+    cdef object _al_state
+    cdef bint _al_op
     cdef public double v_demand_rpm
     cdef public double p_demand
     cdef public double v_ff_rpm

@@ -194,6 +194,9 @@ class Drive(CycleDevice):
         self.t_ns: int | None = None
         self.prev_cw = 0
         self.mode = 0
+        self._al_state = AlState.INIT
+        #: whether the AL state is OP (kept with it: the cycle tests a C flag)
+        self._al_op = False
         self.al_state = AlState.INIT
         self.v_demand_rpm = 0.0  # pv / stop ramps
         self.p_demand = 0.0  # counts, position modes
@@ -355,6 +358,16 @@ class Drive(CycleDevice):
             self._v(0x6077),
         )
 
+    @property
+    def al_state(self) -> AlState:
+        """The slave's AL state, as the firmware last reported it."""
+        return self._al_state
+
+    @al_state.setter
+    def al_state(self, state: AlState) -> None:
+        self._al_state = state
+        self._al_op = state == _AL_OP
+
     def al_state_changed(self, state: AlState, now_ns: int) -> None:
         """Leaving OP stops the motor (TMC8670 §3.2): quick-stop ramp, voltage off."""
         self.advance(now_ns)
@@ -398,7 +411,7 @@ class Drive(CycleDevice):
         mode = _int_of(hits[1])  # 6060h
         if mode != self.mode and mode in MODES:
             self._mode_change(mode)
-        if self.al_state != _AL_OP:
+        if not self._al_op:
             return
         # decode() returns Command members and the state is a PdsState member: identity
         # decides (P23, P36)
@@ -677,7 +690,7 @@ class Drive(CycleDevice):
         sw = _STATUS_BITS[si]
         if not _no_voltage(st):
             sw |= SW_VOLTAGE
-        if self.al_state == _AL_OP:
+        if self._al_op:
             sw |= SW_REMOTE
         # the position as a whole float (read_counts() is its int): int(pos_f) where an
         # int is needed, pos_f itself where Python's int - float took it as a double
