@@ -7,5 +7,5 @@ cimport cython
 
 cpdef object decode(long long controlword, long long previous)
 
-@cython.locals(transitions=dict)
+@cython.locals(table=tuple, s="long long", c="long long")
 cpdef object step(object state, object cmd)

@@ -109,7 +109,24 @@ _QUICK_STOP = Command.QUICK_STOP
 _FAULT_RESET = Command.FAULT_RESET
 
 
+def _step_table() -> tuple[tuple[int, PdsState] | None, ...]:
+    """TRANSITIONS by ``state * 8 + command``: a tuple index instead of a dict lookup
+    whose key hashes two enum members through Python (Enum.__hash__) every cycle."""
+    table: list[tuple[int, PdsState] | None] = [None] * (8 * 8)
+    for (st, cmd), tr in TRANSITIONS.items():
+        table[int(st) * 8 + int(cmd)] = tr
+    return tuple(table)
+
+
+#: TRANSITIONS as a table (see _step_table)
+STEP_TABLE = _step_table()
+
+
 def step(state: PdsState, cmd: Command) -> tuple[int, PdsState] | None:
     """The transition for (state, command), or None if the command does nothing there."""
-    transitions = TRANSITIONS
-    return transitions.get((state, cmd))
+    s = state  # the members' values: C integers in the compiled core
+    c = cmd
+    if not 0 <= s < 8 or not 0 <= c < 8:
+        return None
+    table = STEP_TABLE
+    return table[s * 8 + c]

@@ -13,20 +13,26 @@ from ecatsim.slave.pdo cimport CycleDevice
 # the statusword bits as C constants (drive.py uses them only within itself)
 cdef long long SW_VOLTAGE, SW_WARNING, SW_REMOTE, SW_TARGET_REACHED, SW_INTERNAL_LIMIT
 cdef long long SW_OMS12, SW_OMS13, SW_MOTOR_ACTIVE, SW_DIRECTION
+# the modes as C constants (PP... stay Python ints for other modules)
+cdef long long _PP, _PV, _HM, _CSP, _CSV, _CST
+cdef int _STOP_FOLLOWING, _STOP_OVERCURRENT, _STOP_INDEX
+cdef long long _NO_WINDOW
+cdef tuple _STATUS_BITS
 
 
 cdef object _round(double x)
 @cython.locals(k="long long", f=double)
 cdef long long _round_c(double x)
 cdef bint _small(double x)
+@cython.locals(k="long long")
+cdef long long _trunc_c(double x)
 
 
 cdef bint _powered(object st)
 cdef bint _no_voltage(object st)
 
 
-@cython.locals(e=Entry)
-cdef long long _int_of(tuple hit) except? -1
+cdef long long _int_of(Entry e) except? -1
 
 
 cdef class Drive(CycleDevice):
@@ -36,13 +42,13 @@ cdef class Drive(CycleDevice):
     cdef public object _snapshot_hits
     cdef public object _control_hits
     cdef public bint _pub_c
-    cdef public long long[::1] _pub_lo, _pub_hi, _pub_last
-    cdef public list _pub_obj
+    cdef public long long[::1] _pub_lo, _pub_hi
     cdef public long long q_60ff, q_6083, q_6084, q_607a, q_60b0, q_60b1, q_6071, q_60b2
     cdef public long long q_6065, q_6085, q_605a
     cdef int _d_kind
     cdef double _d_ref, _d_vff, _d_window
     cdef public object params
+    cdef double _ppr
     cdef public long long substep_ns
     cdef public Servo servo
     cdef public object profile
@@ -52,7 +58,8 @@ cdef class Drive(CycleDevice):
     cdef public object t_ns
     cdef public long long prev_cw
     cdef public long long mode
-    cdef public object al_state
+    cdef object _al_state
+    cdef bint _al_op
     cdef public double v_demand_rpm
     cdef public double p_demand
     cdef public double v_ff_rpm
@@ -71,6 +78,7 @@ cdef class Drive(CycleDevice):
     cdef public object log
 
     cpdef object _entry(self, int index, int sub)
+    cdef Entry _entry_only(self, int index)
     @cython.locals(e=Entry)
     cpdef object _v(self, int index, int sub=*)
     @cython.locals(hits=tuple)
@@ -101,10 +109,11 @@ cdef class Drive(CycleDevice):
     cpdef _controlword(self)
 
     @cython.locals(s=Servo, sw="long long", rpm=double, mode="long long", hits=tuple,
-                   values=tuple, k=Py_ssize_t, hit=tuple, e=Entry, fast=bint,
+                   values=tuple, k=Py_ssize_t, hit=tuple, e=Entry, pos_f=double,
                    pos_c="long long", p_demand=double, err=double, v_demand=double,
-                   iq=double, iq_ref=double)
+                   iq=double, iq_ref=double, si="long long")
     cpdef _publish(self)
-    @cython.locals(hits=tuple, hit=tuple, e=Entry, lo="long long", hi="long long",
-                   w="long long")
+    @cython.locals(lo="long long", hi="long long")
     cdef void _put(self, Py_ssize_t k, long long v) except *
+    @cython.locals(hits=tuple, hit=tuple, e=Entry, k=Py_ssize_t)
+    cpdef pub_flush(self)

@@ -37,6 +37,12 @@ log = structlog.get_logger("ecatsim.drive")
 # Modes of operation (6060h). Ref: CiA 402-2 Table 35; TMC8670 §6.1.1.
 PP, PV, HM, CSP, CSV, CST = 1, 3, 6, 8, 9, 10
 MODES = (0, PP, PV, HM, CSP, CSV, CST)
+#: the modes as C integers in the compiled core, for the per-cycle tests (the public names
+#: stay Python ints: a module global compared with a C integer converts it every time)
+_PP, _PV, _HM, _CSP, _CSV, _CST = PP, PV, HM, CSP, CSV, CST
+#: the servo's stop reasons and "no window" (6065h FFFFFFFFh) as C integers, likewise
+_STOP_FOLLOWING, _STOP_OVERCURRENT, _STOP_INDEX = STOP_FOLLOWING, STOP_OVERCURRENT, STOP_INDEX
+_NO_WINDOW = 0xFFFFFFFF
 
 # Statusword bits. Ref: TMC8670 Tables 80-83, 81 (Trinamic bits 14/15).
 SW_VOLTAGE = 0x0010
@@ -73,7 +79,8 @@ _NRTSO = PdsState.NOT_READY_TO_SWITCH_ON
 _NO_VOLTAGE = (PdsState.NOT_READY_TO_SWITCH_ON, PdsState.SWITCH_ON_DISABLED, PdsState.FAULT)
 _AL_OP = AlState.OP
 _POWERED = cia402.POWERED
-_STATUS_BITS = cia402.STATUS_BITS
+#: statusword bits 0-3, 5, 6 by the state's value (a tuple index, not an enum's hash)
+_STATUS_BITS = tuple([cia402.STATUS_BITS[PdsState(i)] for i in range(len(PdsState))])
 _FAULT_RESET = Command.FAULT_RESET
 _SWITCH_ON_ENABLE = Command.SWITCH_ON_ENABLE
 
@@ -109,6 +116,12 @@ def _round_c(x: float) -> int:
     return k
 
 
+def _trunc_c(x: float) -> int:
+    """``int(x)`` for -4e18 < x < 4e18, as a C integer in the compiled core."""
+    k = int(x)
+    return k
+
+
 def _small(x: float) -> bool:
     """Whether ``_round_c`` takes ``x`` (nan is not)."""
     return -4.0e18 < x < 4.0e18
@@ -125,11 +138,10 @@ def _no_voltage(st: PdsState) -> bool:
     return st is _NRTSO or st is _SOD or st is _FAULT
 
 
-def _int_of(hit: tuple[Entry, int, int] | None) -> int:
-    """An entry's value if it is an int, else 0 (no entry: 0); see Drive._entry."""
-    if hit is None:
+def _int_of(e: Entry | None) -> int:
+    """An entry's value if it is an int, else 0 (no entry: 0)."""
+    if e is None:
         return 0
-    e = hit[0]
     v = e.value
     return v if isinstance(v, int) else 0
 
@@ -152,13 +164,16 @@ class Drive(CycleDevice):
         self._entries: dict[int, tuple[Entry, int, int] | None] = {}
         #: the entries _publish() writes every cycle, in PUBLISHED order (looked up once)
         self._published: tuple[tuple[Entry, int, int] | None, ...] | None = None
-        self._snapshot_hits: tuple[tuple[Entry, int, int] | None, ...] | None = None
-        self._control_hits: tuple[tuple[Entry, int, int] | None, ...] | None = None
-        #: the published entries' ranges, the ints _publish() wrote last and their values
-        #: (decision P34); set with _published
+        #: the entries of SNAPSHOT and CONTROLS (None: not in the OD), looked up once
+        self._snapshot_hits: tuple[Entry | None, ...] | None = None
+        self._control_hits: tuple[Entry | None, ...] | None = None
+        #: the published entries' ranges as C integers (decision P34); set with _published
         self._pub_c = False
-        self._pub_lo = self._pub_hi = self._pub_last = array("q")
-        self._pub_obj: list[object] = []
+        self._pub_lo = self._pub_hi = array("q")
+        #: the values _publish() computed last, in PUBLISHED order, and whether the OD
+        #: entries still wait for them (P38: written when something reads the OD)
+        self.pub_values = array("q")
+        self.pub_pending = False
         # OD values the substeps use, read once per advance() (see _snapshot)
         self.q_60ff = self.q_6083 = self.q_6084 = self.q_607a = self.q_60b0 = 0
         self.q_60b1 = self.q_6071 = self.q_60b2 = self.q_6065 = self.q_6085 = 0
@@ -167,6 +182,9 @@ class Drive(CycleDevice):
         self._d_kind = 0
         self._d_ref = self._d_vff = self._d_window = 0.0
         self.params = params or MotorParams()
+        #: the encoder's counts per revolution as a C double (params is fixed for the
+        #: drive's life, as substep_ns and the servo derived from it are)
+        self._ppr = float(self.params.ppr)
         self.substep_ns = round(self.params.substep * 1e9)
         self.servo = Servo(self.params)
         self.profile = Profile()
@@ -176,6 +194,9 @@ class Drive(CycleDevice):
         self.t_ns: int | None = None
         self.prev_cw = 0
         self.mode = 0
+        self._al_state = AlState.INIT
+        #: whether the AL state is OP (kept with it: the cycle tests a C flag)
+        self._al_op = False
         self.al_state = AlState.INIT
         self.v_demand_rpm = 0.0  # pv / stop ramps
         self.p_demand = 0.0  # counts, position modes
@@ -196,6 +217,7 @@ class Drive(CycleDevice):
         self.tracer: Callable[[int, tuple[int | str, ...]], None] | None = None
         self._init_od()
         od.refresh = self._publish_sdo_only
+        od.flush = self.pub_flush
 
     # ----------------------------------------------------------------- OD helpers
     def _entry(self, index: int, sub: int) -> tuple[Entry, int, int] | None:
@@ -217,6 +239,8 @@ class Drive(CycleDevice):
         return found
 
     def _v(self, index: int, sub: int = 0) -> int:
+        if self.pub_pending:
+            self.pub_flush()
         hit = self._entry(index, sub)
         if hit is None:
             return 0
@@ -224,11 +248,16 @@ class Drive(CycleDevice):
         v = e.value
         return v if isinstance(v, int) else 0
 
-    def _controls(self) -> tuple[tuple[Entry, int, int] | None, ...]:
+    def _entry_only(self, index: int) -> Entry | None:
+        """The entry of ``index`` subindex 0 (None: not in the OD)."""
+        hit = self._entry(index, 0)
+        return hit[0] if hit is not None else None
+
+    def _controls(self) -> tuple[Entry | None, ...]:
         """The entries of CONTROLS, looked up once."""
         hits = self._control_hits
         if hits is None:
-            hits = self._control_hits = tuple([self._entry(i, 0) for i in CONTROLS])
+            hits = self._control_hits = tuple([self._entry_only(i) for i in CONTROLS])
         return hits
 
     def _set(self, index: int, value: int, sub: int = 0) -> None:
@@ -284,7 +313,7 @@ class Drive(CycleDevice):
     def outputs_applied(self, now_ns: int) -> None:
         """New RxPDO values: advance to now, then act on controlword and targets."""
         self.advance(now_ns)
-        if self.mode == CSP:
+        if self.mode == _CSP:
             target = float(_int_of(self._controls()[2]))  # 607Ah
             last_target = self.last_target
             last_t_ns = self.last_t_ns
@@ -295,7 +324,7 @@ class Drive(CycleDevice):
                 dt = (now - then) * 1e-9
                 if dt > 0:
                     prev = last_target
-                    ppr = self.params.ppr
+                    ppr = self._ppr
                     self.v_ff_rpm = (target - prev) / dt * 60.0 / ppr
             self.last_target = target
             self.last_t_ns = now_ns
@@ -328,6 +357,16 @@ class Drive(CycleDevice):
             self._v(0x6071) if mode == CST else round(self.servo.iq_ref_ma),
             self._v(0x6077),
         )
+
+    @property
+    def al_state(self) -> AlState:
+        """The slave's AL state, as the firmware last reported it."""
+        return self._al_state
+
+    @al_state.setter
+    def al_state(self, state: AlState) -> None:
+        self._al_state = state
+        self._al_op = state == _AL_OP
 
     def al_state_changed(self, state: AlState, now_ns: int) -> None:
         """Leaving OP stops the motor (TMC8670 §3.2): quick-stop ramp, voltage off."""
@@ -372,7 +411,7 @@ class Drive(CycleDevice):
         mode = _int_of(hits[1])  # 6060h
         if mode != self.mode and mode in MODES:
             self._mode_change(mode)
-        if self.al_state != _AL_OP:
+        if not self._al_op:
             return
         # decode() returns Command members and the state is a PdsState member: identity
         # decides (P23, P36)
@@ -386,7 +425,7 @@ class Drive(CycleDevice):
             return
         tr = cia402.step(self.state, cmd)
         if tr is None:
-            if self.state is _OE and self.mode == PP:
+            if self.state is _OE and self.mode == _PP:
                 self._pp_setpoint()
             return
         number, nxt = tr
@@ -462,17 +501,17 @@ class Drive(CycleDevice):
                 kind, ref, v_ff, window = self._substep_demand(self.params.substep)
                 steps = 1
             done, why = s.run(steps, kind, ref, v_ff, window, self._trip(), index is not None)
-            if why == STOP_FOLLOWING:
+            if why == _STOP_FOLLOWING:
                 self._fault("following_error")  # this substep still runs on the demand
                 more, why = s.run(1, kind, ref, v_ff, 0.0, self._trip(), index is not None)
                 done += more
             left -= done
             t += done * dt_ns
-            if why == STOP_OVERCURRENT:
+            if why == _STOP_OVERCURRENT:
                 self._fault("overcurrent")
-            elif why == STOP_INDEX and index is not None:
+            elif why == _STOP_INDEX and index is not None:
                 self._index_pulse(index, t)
-        if self.state is _OE and self.mode not in (PP, CSP):
+        if self.state is _OE and self.mode != _PP and self.mode != _CSP:
             self.p_demand = s.angle / TWO_PI * self.params.ppr  # follows the actual
         self.t_ns = start + n * dt_ns if n < 200_000 else now
 
@@ -493,7 +532,7 @@ class Drive(CycleDevice):
         outputs and SDO writes are applied after advancing), so read them once."""
         hits = self._snapshot_hits
         if hits is None:
-            hits = self._snapshot_hits = tuple([self._entry(i, 0) for i in SNAPSHOT])
+            hits = self._snapshot_hits = tuple([self._entry_only(i) for i in SNAPSHOT])
         self.q_60ff = _int_of(hits[0])
         self.q_6083 = _int_of(hits[1])
         self.q_6084 = _int_of(hits[2])
@@ -517,19 +556,19 @@ class Drive(CycleDevice):
         if st is not _OE:  # a PdsState member (P23)
             return False  # quick stop / fault reaction ramps
         mode = self.mode
-        if mode == CSP:
+        if mode == _CSP:
             self.p_demand = float(self.q_607a + self.q_60b0)
             return self._demand(POSITION, self.p_demand, self.v_ff_rpm, self._window())
-        if mode == CSV:
+        if mode == _CSV:
             v = float(self.q_60ff + self.q_60b1)
             self.v_demand_rpm = v
             return self._demand(VELOCITY, v, 0.0, 0.0)
-        if mode == CST:
+        if mode == _CST:
             return self._demand(TORQUE, float(self.q_6071 + self.q_60b2), 0.0, 0.0)
-        if mode == PV:
+        if mode == _PV:
             target = 0.0 if self.prev_cw & 0x0100 else float(self.q_60ff)
             return self.v_demand_rpm == target and self._demand(VELOCITY, target, 0.0, 0.0)
-        if mode in (PP, HM):
+        if mode in (_PP, _HM):
             return False
         return self._demand(VELOCITY, 0.0, 0.0, 0.0)
 
@@ -579,7 +618,7 @@ class Drive(CycleDevice):
     def _window(self) -> float:
         """Following error window 6065h (0 or FFFFFFFFh: not checked). Ref: CiA 402-2."""
         w = self.q_6065
-        return 0.0 if w == 0xFFFFFFFF else float(w)
+        return 0.0 if w == _NO_WINDOW else float(w)
 
     def _pp_setpoint(self) -> None:
         """New set point on the rising edge of bit 4; bit 6 relative. Ref: TMC8670 Table 76."""
@@ -647,16 +686,19 @@ class Drive(CycleDevice):
         """Actual values and the statusword into the OD. Ref: TMC8670 Tables 80-83."""
         s = self.servo
         st = self.state
-        sw = _STATUS_BITS[st]
+        si = st  # the state's value: a C integer in the compiled core
+        sw = _STATUS_BITS[si]
         if not _no_voltage(st):
             sw |= SW_VOLTAGE
-        if self.al_state == _AL_OP:
+        if self._al_op:
             sw |= SW_REMOTE
-        pos = s.read_counts()
+        # the position as a whole float (read_counts() is its int): int(pos_f) where an
+        # int is needed, pos_f itself where Python's int - float took it as a double
+        pos_f = s.floor_counts()
         rpm = s.read_rpm()
         mode = self.mode
         if st is _OE:
-            if mode == PP:
+            if mode == _PP:
                 prof = self.profile
                 window = self._v(0x6067)
                 if window == 0xFFFFFFFF:
@@ -664,20 +706,20 @@ class Drive(CycleDevice):
                 elif window == 0:
                     reached = prof.pos == prof.target
                 else:
-                    reached = prof.pos == prof.target and abs(prof.target - pos) <= window
+                    reached = prof.pos == prof.target and abs(prof.target - pos_f) <= window
                 if reached:
                     sw |= SW_TARGET_REACHED
                 if self.set_point_ack:
                     sw |= SW_OMS12
-            elif mode == PV:
+            elif mode == _PV:
                 if abs(rpm - self._v(0x60FF)) <= max(1.0, 0.01 * abs(self._v(0x60FF))):
                     sw |= SW_TARGET_REACHED
                 if abs(rpm) < 1.0:
                     sw |= SW_OMS12
-            elif mode == HM:
+            elif mode == _HM:
                 if self.homing_done:
                     sw |= SW_TARGET_REACHED | SW_OMS12
-            elif mode in (CSP, CSV, CST):
+            elif mode in (_CSP, _CSV, _CST):
                 sw |= SW_OMS12  # drive follows the command value
         if abs(s.iq_ref_ma) >= s.i_limit_ma - 1e-6 and _powered(st):
             sw |= SW_INTERNAL_LIMIT
@@ -690,14 +732,8 @@ class Drive(CycleDevice):
         hits = self._published
         if hits is None:
             hits = self._publish_hits()
-        fast = self._pub_c and type(pos) is int
-        pos_c = 0
-        if fast:
-            try:
-                pos_c = pos
-            except OverflowError:  # compiled: beyond a C integer
-                fast = False
-        if fast:
+        if self._pub_c and _small(pos_f):
+            pos_c = _trunc_c(pos_f)
             p_demand = self.p_demand
             err = p_demand - pos_c  # Python's float - int: the int as a double
             v_demand = self.v_demand_rpm
@@ -711,7 +747,8 @@ class Drive(CycleDevice):
                 and _small(iq_ref)
                 and _small(err)
             ):
-                # the values below as C integers, each written only if it changed (P34)
+                # the values below as C integers, kept in the drive (P34); the OD entries
+                # get them when something reads the OD, the TxPDO takes them from here (P38)
                 self._put(0, sw)
                 self._put(1, mode)
                 self._put(2, pos_c)
@@ -722,7 +759,9 @@ class Drive(CycleDevice):
                 self._put(7, _round_c(iq_ref))
                 self._put(8, _round_c(err))
                 self._put(9, self.fault_code)
+                self.pub_pending = True
                 return
+        pos = int(pos_f)
         values = (
             sw,
             mode,
@@ -735,6 +774,7 @@ class Drive(CycleDevice):
             _round(self.p_demand - pos),
             self.fault_code,
         )
+        self.pub_pending = False  # the entries get these values now
         for k in range(len(values)):
             hit = hits[k]
             if hit is not None:
@@ -745,23 +785,42 @@ class Drive(CycleDevice):
                 e.value = lo if v < lo else hi if v > hi else v
 
     def _put(self, k: int, v: int) -> None:
-        """Write ``v``, clamped to its range, into the k-th published entry (none:
-        nothing), unless the entry still holds the very int this wrote last with that
-        value: then it holds ``v`` already (decision P34)."""
-        hits = self._published
-        assert hits is not None
-        hit = hits[k]
-        if hit is None:
-            return
+        """Keep ``v``, clamped to the k-th published entry's range, as the k-th published
+        value (decisions P34, P38)."""
         lo = self._pub_lo[k]
         hi = self._pub_hi[k]
-        w = lo if v < lo else hi if v > hi else v
-        e = hit[0]
-        if e.value is self._pub_obj[k] and self._pub_last[k] == w:
+        self.pub_values[k] = lo if v < lo else hi if v > hi else v
+
+    def pub_flush(self) -> None:
+        """Write the values _publish() kept into their OD entries, if they wait for them:
+        whatever reads the OD (the OD's own accessors, SDO, the control socket, the
+        trace) sees the values of the last update, as if they had been written then (P38)."""
+        if not self.pub_pending:
             return
-        e.value = w
-        self._pub_obj[k] = e.value
-        self._pub_last[k] = w
+        self.pub_pending = False
+        hits = self._published
+        assert hits is not None
+        for k in range(len(hits)):
+            hit = hits[k]
+            if hit is not None:
+                e = hit[0]
+                e.value = self.pub_values[k]
+
+    def tx_slots(self, entries: tuple[Entry, ...]) -> tuple[int, ...] | None:
+        """For each entry of a TxPDO image, its index in ``pub_values`` (-1: not one the
+        drive publishes), or None if the drive keeps no value as a C integer (P38)."""
+        hits = self._published
+        if hits is None or not self._pub_c:
+            return None
+        slots = []
+        for e in entries:
+            slot = -1
+            for k in range(len(hits)):
+                hit = hits[k]
+                if hit is not None and hit[0] is e:
+                    slot = k
+            slots.append(slot)
+        return tuple(slots)
 
     def _publish_hits(self) -> tuple[tuple[Entry, int, int] | None, ...]:
         """The PUBLISHED entries, looked up once, with their ranges as C integers where
@@ -772,13 +831,13 @@ class Drive(CycleDevice):
         if self._pub_c:
             self._pub_lo = array("q", [lo for lo, _ in ranges])
             self._pub_hi = array("q", [hi for _, hi in ranges])
-            self._pub_last = array("q", [0] * len(hits))
-            self._pub_obj = [_MISSING] * len(hits)
+            self.pub_values = array("q", [0] * len(hits))
         return hits
 
     def _publish_sdo_only(self) -> None:
         """Values no PDO can carry, refreshed when the OD is read (SDO upload, control
         socket) rather than every cycle. Ref: TMC8670 §5.1.7-5.1.14 (PDO mapping: no)."""
+        self.pub_flush()
         s = self.servo
         pos = s.counts
         self._set(0x6063, pos)

@@ -4,6 +4,9 @@
 cimport cython
 
 
+cdef double _TWO_PI, _RPM
+
+
 cdef class Gains:
     cdef public double cur_kp, cur_ki, flux_kp, flux_ki, vel_kp, vel_ki, pos_kp
 
@@ -26,6 +29,7 @@ cdef class Servo:
     cdef public tuple motor
 
     cpdef object read_counts(self)
+    cpdef double floor_counts(self) except? -1.0
     cpdef double read_rpm(self)
 
     @cython.locals(

@@ -16,6 +16,9 @@ from dataclasses import dataclass
 
 TWO_PI = 2.0 * math.pi
 RPM = TWO_PI / 60.0  # rad/s per rpm
+#: the two as C doubles in the compiled core (the public names stay Python floats)
+_TWO_PI = TWO_PI
+_RPM = RPM
 
 # What Servo.run's reference is, and why it stopped early.
 TORQUE, VELOCITY, POSITION = 0, 1, 2
@@ -151,11 +154,15 @@ class Servo:
     def read_counts(self) -> int:
         """``counts`` as a method: the compiled drive calls it in C (a property of another
         module's class is a Python attribute lookup there)."""
-        return int(_floor(self.angle / TWO_PI * self.motor[1]))  # motor[1]: float(ppr)
+        return int(self.floor_counts())
+
+    def floor_counts(self) -> float:
+        """``counts`` as a whole float (a C double to the compiled drive, no int object)."""
+        return _floor(self.angle / _TWO_PI * self.motor[1])  # motor[1]: float(ppr)
 
     def read_rpm(self) -> float:
         """``rpm`` as a method (see read_counts)."""
-        return self.omega / RPM
+        return self.omega / _RPM
 
     def counts_per_s(self, rpm: float) -> float:
         return rpm * self.p.ppr / 60.0

@@ -290,15 +290,22 @@ class ObjectDictionary:
         self.objects = {o.index: o for o in sorted(objects, key=lambda o: o.index)}
         #: set by the application: brings values no PDO carries up to date before a read
         self.refresh: Callable[[], None] | None = None
+        #: set by the application: writes the values it keeps for entries (as C integers,
+        #: between cycles) into them; called before any entry is handed out (decision P38)
+        self.flush: Callable[[], None] | None = None
 
     def __contains__(self, index: int) -> bool:
         return index in self.objects
 
     def __getitem__(self, index: int) -> OdObject:
+        if self.flush is not None:
+            self.flush()
         return self.objects[index]
 
     def entry(self, index: int, sub: int) -> Entry:
         """The entry or the matching abort (object / subindex does not exist)."""
+        if self.flush is not None:
+            self.flush()
         obj = self.objects.get(index)
         if obj is None:
             raise SdoAbort(ABORT_NO_OBJECT, f"0x{index:04X}")
@@ -340,6 +347,8 @@ class ObjectDictionary:
 
         Ref: ETG.1000.6 §5.6.2.4 (complete access); SOEM's ecx_readPDOassignCA.
         """
+        if self.flush is not None:
+            self.flush()
         if self.refresh is not None:
             self.refresh()
         obj = self.objects.get(index)
@@ -366,6 +375,8 @@ class ObjectDictionary:
         The whole write is validated before anything is stored.
         Ref: ETG.1000.6 §5.6.2.1 (complete access).
         """
+        if self.flush is not None:
+            self.flush()
         obj = self.objects.get(index)
         if obj is None:
             raise SdoAbort(ABORT_NO_OBJECT)

@@ -12,6 +12,7 @@ entries), §4.1.7-4.1.11.
 from __future__ import annotations
 
 import struct
+from array import array
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -304,13 +305,30 @@ class CycleDevice:
     """The base of a CoeDevice whose cycle the compiled process image calls as C calls
     (pdo.pxd declares both methods cpdef: a subclass's overrides are found through the
     extension type's method table, not by Python attribute lookup; decision P32). A
-    CoeDevice that does not derive from it is called through Python as before."""
+    CoeDevice that does not derive from it is called through Python as before.
+
+    A device may keep values the TxPDO carries as C integers (``pub_values``) and write
+    them into their OD entries only when something reads the OD (``pub_flush``):
+    ``tx_slots`` says which; while ``pub_pending``, the image takes those values from the
+    device, not from the entries (decision P38)."""
+
+    #: values the device keeps for OD entries (see tx_slots); set by a device that does
+    pub_values: array[int]
+    #: whether those values are newer than their entries
+    pub_pending: bool
 
     def outputs_applied(self, now_ns: int) -> None:
         raise NotImplementedError
 
     def update_inputs(self, now_ns: int) -> None:
         raise NotImplementedError
+
+    def pub_flush(self) -> None:
+        """Write the kept values into their entries (none kept: nothing)."""
+
+    def tx_slots(self, entries: tuple[Entry, ...]) -> tuple[int, ...] | None:
+        """Per entry, its index in ``pub_values`` or -1; None: the device keeps none."""
+        return None
 
 
 class PdoImage:
@@ -322,6 +340,9 @@ class PdoImage:
         self.od = od
         self._device: CoeDevice
         self._dev: CycleDevice | None = None
+        self._tx_entries: tuple[Entry, ...] = ()
+        #: per TxPDO entry, where the device keeps its value (-1: the entry), or None (P38)
+        self._tx_slot: array[int] | None = None
         self.device = device
         self.rules = rules
         self.plan = compile_plan(od, rules)
@@ -337,6 +358,13 @@ class PdoImage:
         self._device = device
         #: the same device as a CycleDevice, called in C (None: through Python)
         self._dev = device if isinstance(device, CycleDevice) else None
+        self._bind_slots()
+
+    def _bind_slots(self) -> None:
+        """Where the device keeps the TxPDO entries' values (decision P38)."""
+        dev = self._dev
+        slots = dev.tx_slots(self._tx_entries) if dev is not None else None
+        self._tx_slot = array("q", slots) if slots is not None else None
 
     @property
     def plan(self) -> Plan:
@@ -349,6 +377,8 @@ class PdoImage:
         rx, tx = plan.rx_codec, plan.tx_codec
         #: the one-struct codecs' parts, bound once per plan (the DC cycle's hot path)
         self._rx_st = rx.st if rx is not None else None
+        #: the output struct's size (-1: no struct), a C integer for the per-cycle test
+        self._rx_need = rx.st.size if rx is not None else -1
         self._rx_entries = rx.entries if rx is not None else ()
         self._rx_layout = rx.layout if rx is not None else None
         self._tx_st = tx.st if tx is not None else None
@@ -357,6 +387,7 @@ class PdoImage:
         #: the input image the C encoder fills: its padding stays zero, its entries'
         #: bytes are all written by every fill (decision P33)
         self._tx_buf = bytearray(plan.tx_size)
+        self._bind_slots()
 
     def prepare(self) -> int:
         """Compile the plan at PREOP->SAFEOP; an invalid mapping is an AL status code.
@@ -377,19 +408,20 @@ class PdoImage:
 
     def set_outputs(self, data: bytes, now_ns: int) -> None:
         st = self._rx_st
-        if st is not None and len(data) >= st.size:
+        if st is not None and len(data) >= self._rx_need:
             entries: tuple[Entry, ...] = self._rx_entries
             layout = self._rx_layout
             if layout is not None and type(data) is bytes:
                 # the struct's values, decoded in C from the bytes (decision P33)
                 buf: bytes = data
+                q = buf  # compiled: a pointer to the bytes (the struct fits: tested above)
                 for i in range(len(entries)):
                     spec = layout[i]
                     off = spec >> 4
                     n = (spec >> 1) & 7
                     raw = 0
                     for k in range(n):
-                        raw |= buf[off + k] << (8 * k)
+                        raw |= q[off + k] << (8 * k)
                     half = 1  # the sign bit's value: a C long long shifted in the core
                     half <<= 8 * n - 1
                     if spec & 1 and raw >= half:
@@ -429,7 +461,10 @@ class PdoImage:
         if layout is not None:
             fast = self._pack_small(layout)
             if fast is not None:
-                return bytes(fast)
+                return b"" + fast  # bytes: compiled, no call of the type bytes()
+        dev = self._dev
+        if dev is not None:
+            dev.pub_flush()  # the entries as the device has them now (P38)
         if st is not None:
             entries: tuple[Entry, ...] = self._tx_entries
             values = []
@@ -451,18 +486,31 @@ class PdoImage:
 
     def _pack_small(self, layout: tuple[int, ...]) -> bytearray | None:
         """The struct's bytes in the image buffer, encoded in C where every value is an
-        int within its field's type; None (the struct path decides) for any other (P33)."""
+        int within its field's type; None (the struct path decides) for any other (P33).
+        A value the device keeps for its entry is taken from the device (P38)."""
         entries: tuple[Entry, ...] = self._tx_entries
         out = self._tx_buf
+        p = out  # compiled: a pointer to the buffer (every field lies inside it)
+        dev = self._dev
+        slots = self._tx_slot
+        pending = slots is not None and dev is not None and dev.pub_pending
         for i in range(len(entries)):
-            e = entries[i]
-            v = e.value
-            if type(v) is not int:
-                return None
-            try:
-                c = _c_int(v)
-            except OverflowError:
-                return None
+            slot = -1
+            if pending:
+                assert slots is not None and dev is not None
+                slot = slots[i]
+            if slot >= 0:
+                assert dev is not None
+                c = dev.pub_values[slot]
+            else:
+                e = entries[i]
+                v = e.value
+                if type(v) is not int:
+                    return None
+                try:
+                    c = _c_int(v)
+                except OverflowError:
+                    return None
             spec = layout[i]
             off = spec >> 4
             n = (spec >> 1) & 7
@@ -474,7 +522,7 @@ class PdoImage:
             elif c < 0 or c >= half << 1:
                 return None
             for k in range(n):
-                out[off + k] = (c >> (8 * k)) & 0xFF
+                p[off + k] = (c >> (8 * k)) & 0xFF
         return out
 
     def al_state_changed(self, state: AlState, now_ns: int) -> None:

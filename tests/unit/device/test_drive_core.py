@@ -57,6 +57,7 @@ def make(module: Any) -> tuple[Any, list[int]]:
 
 def snapshot(d: Any) -> tuple[object, ...]:
     od = d.od
+    d.pub_flush()  # the values the drive keeps for its entries, as any OD read sees them
     values = [(o.index, s, e.value) for o in od.objects.values() for s, e in o.entries.items()]
     return (
         values,

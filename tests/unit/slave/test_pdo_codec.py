@@ -9,6 +9,7 @@ from dataclasses import replace
 
 from ecatsim.device.description import default_description
 from ecatsim.device.drive import Drive
+from ecatsim.slave.al import AlState
 from ecatsim.slave.od import ObjectDictionary
 from ecatsim.slave.od_build import build_od
 from ecatsim.slave.pdo import CycleDevice, Field, PdoImage, Plan, codec, compile_plan
@@ -184,3 +185,75 @@ def test_the_c_codec_is_the_struct_and_the_per_entry_path_for_every_mapping() ->
                 img.plan = plan
                 assert img.pack_inputs() == packed[0]  # the buffer's earlier bytes overwritten
                 assert len(packed[0]) == plan.tx_size
+
+
+def _enabled_drive(od: ObjectDictionary) -> tuple[Drive, PdoImage]:
+    """A drive in OP, enabled in csp, behind its process image."""
+    d = Drive(od)
+    img = PdoImage(od, d)
+    d.al_state_changed(AlState.OP, 0)
+    od.set(0x6060, 0, 8)  # csp
+    for k, cw in enumerate((0x06, 0x07, 0x0F)):
+        img.set_outputs(struct.pack("<HihI", cw, 0, 0, 0), (k + 1) * 1_000_000)
+        img.get_inputs((k + 1) * 1_000_000 + 500_000)
+    assert d.state.name == "OPERATION_ENABLED"
+    return d, img
+
+
+def test_every_reader_of_the_od_sees_the_values_the_txpdo_carries() -> None:
+    """The drive keeps its published values as C integers and the TxPDO takes them from
+    there (P38): after every cycle the SDO upload, complete access, the OD's accessors and
+    the per-entry image (which reads the entries) give exactly the TxPDO's values; a value
+    set into a published entry between cycles is read back until the next cycle
+    publishes over it, as when every cycle wrote the entries."""
+    od = build_od(default_description())
+    d, img = _enabled_drive(od)
+    plan = img.plan
+    fields = {f.entry.name: f for f in plan.tx if f.entry is not None}
+    for k in range(4, 40):
+        t = k * 1_000_000
+        target = (k % 7) * 150 - k * 40  # moving without a following error
+        img.set_outputs(struct.pack("<HihI", 0x0F, target, 0, 0), t)
+        inputs = img.get_inputs(t + 500_000)
+        assert d.pub_pending  # the entries wait: nothing has read the OD since
+        for index in (0x6041, 0x6061, 0x6064, 0x6077, 0x606C):
+            e = od.objects[index].entries[0]
+            f = fields[e.name]
+            carried = inputs[f.offset : f.offset + f.size]
+            sdo = od.read(index, 0)
+            assert sdo[: f.size] == carried, (k, hex(index))  # 6077h maps its low 16 bits
+            assert od.value(index) == e.decode(sdo) and e.encode() == sdo
+        assert not d.pub_pending
+        img.plan = slow(plan)  # the per-entry path: the entries themselves
+        assert img.pack_inputs() == inputs
+        img.plan = plan
+        assert img.pack_inputs() == inputs
+    od.set(0x6064, 0, 12345)
+    assert od.value(0x6064) == 12345 and od.read(0x6064, 0) == (12345).to_bytes(4, "little")
+    inputs = img.get_inputs(41_000_000)
+    assert od.value(0x6064) == int.from_bytes(inputs[3:7], "little", signed=True) != 12345
+
+
+def test_every_published_value_in_any_mapping_is_the_entry_path() -> None:
+    """Each TxPDO mapping the TMC8670 allows, behind a moving drive: the bytes taken from
+    the drive's C values are the bytes of the struct and per-entry paths (P38)."""
+    od = build_od(default_description())
+    d, img = _enabled_drive(od)
+    t = 4_000_000
+    for mapping in _mappings(od, False):
+        _map(od, 0x1A00, mapping)
+        plan = compile_plan(od)
+        assert plan.tx_codec is not None
+        for _ in range(3):
+            img.plan = plan
+            img.set_outputs(struct.pack("<HihI", 0x0F, t // 50, 0, 0), t)
+            fast = img.get_inputs(t + 500_000)
+            t += 1_000_000
+            assert d.pub_pending or not any(
+                f.entry is not None and f.entry.name == "Statusword" for f in plan.tx
+            )
+            packed = [fast]
+            for p in (replace(plan, tx_codec=replace(plan.tx_codec, layout=None)), slow(plan)):
+                img.plan = p
+                packed.append(img.pack_inputs())
+            assert packed[0] == packed[1] == packed[2], mapping
