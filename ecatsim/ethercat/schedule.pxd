@@ -30,7 +30,7 @@ cdef class Schedule:
                    waiting=bint)
     cpdef void sync_until(self, long long t, bint frame_first=*) except *
     @cython.locals(lst=list, fw=Firmware, look="long long", ctx=FrameContext, now="long long",
-                   i=Py_ssize_t, t="long long")
+                   i=Py_ssize_t)
     cpdef bint run_deferred(self) except *
     @cython.locals(now="long long")
     cpdef void pulses_meanwhile(self) except *

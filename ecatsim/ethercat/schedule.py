@@ -244,13 +244,8 @@ class Schedule:
             i += 1
             if fw.sync_ns < 0:
                 continue  # run already, before a later pulse or event of its slave
-            t = fw.sync_ns
-            ctx.pdi_ns = t
-            fw.sync0_run()
-            mbx = fw.mbx
-            if mbx is not None and (mbx.out or mbx.held is not None):
-                # the cycle posted (an EMCY) behind a full SM1: the firmware wants its event
-                fw.service_mailbox(0, t)
+            ctx.pdi_ns = fw.sync_ns
+            fw.run_latched()
             if look != NO_DEADLINE:
                 now = time.monotonic_ns()
                 if now >= look:

@@ -41,6 +41,10 @@ cdef class Firmware:
     cdef void _latch(self, Pdi p, long long ev, long long now_ns) except *
     @cython.locals(pdo=PdoImage, now_ns="long long")
     cpdef void sync0_run(self) except *
+    @cython.locals(now_ns="long long")
+    cpdef void run_latched(self) except *
+    @cython.locals(pdo=PdoImage)
+    cdef void _apply_outputs(self, object out, long long now_ns) except *
     @cython.locals(want="long long", pending=bint)
     cpdef void service_mailbox(self, long long ev, long long now_ns) except *
     cpdef void _outputs_received(self, long long now_ns) except *

@@ -208,13 +208,7 @@ class Firmware:
             if ev & (EV_SM0 << SM_PD_OUT):
                 out = p.sm_read(SM_PD_OUT)
                 if out is not None:
-                    self._outputs_received(now_ns)
-                    if self.state is _OP:  # free run: applied when SM2 is written
-                        pdo = self._pdo
-                        if pdo is not None:
-                            pdo.set_outputs(out, now_ns)
-                        else:
-                            self._app.set_outputs(out, now_ns)
+                    self._apply_outputs(out, now_ns)  # free run: when SM2 is written
             if ev & EV_SYNC0:
                 p.u8(DC_SYNC0_STATUS)
             if pd_events:
@@ -260,14 +254,27 @@ class Firmware:
         self.sync_ns = -1
         self.sync_out = None
         if out is not None:
-            self._outputs_received(now_ns)
-            if self.state is _OP:
-                pdo = self._pdo
-                if pdo is not None:
-                    pdo.set_outputs(out, now_ns)
-                else:
-                    self._app.set_outputs(out, now_ns)
+            self._apply_outputs(out, now_ns)
         self._write_inputs(now_ns)
+
+    def run_latched(self) -> None:
+        """``sync0_run`` after a frame (decision P30), then what the full service does when
+        the cycle queued a reply behind a full SM1 (an EMCY): the SM1 event unmasked."""
+        now_ns = self.sync_ns
+        self.sync0_run()
+        mbx = self.mbx
+        if mbx is not None and mbx.queued():
+            self.service_mailbox(0, now_ns)
+
+    def _apply_outputs(self, out: bytes, now_ns: int) -> None:
+        """Outputs taken from SM2: valid from now on (F5), applied in OP."""
+        self._outputs_received(now_ns)
+        if self.state is _OP:
+            pdo = self._pdo
+            if pdo is not None:
+                pdo.set_outputs(out, now_ns)
+            else:
+                self._app.set_outputs(out, now_ns)
 
     def service_mailbox(self, ev: int, now_ns: int) -> None:
         """Serve SM0 (requests) and SM1 (replies taken by the master), then set the event

@@ -106,10 +106,14 @@ class MailboxEngine:
     def add_source(self, src: Source) -> None:
         self.sources.append(src)
 
+    def queued(self) -> bool:
+        """Replies of the engine's own queue wait for SM1 (not asking the sources)."""
+        return bool(self.out) or self.held is not None
+
     def pending(self) -> bool:
         """Replies wait for SM1 (the firmware then wants the SM1 event). Asked at every
         firmware service: a plain loop, not ``any()`` over a generator (decision P22)."""
-        if self.out or self.held is not None:
+        if self.out or self.held is not None:  # queued(), inline: asked every cycle
             return True
         for src in self.sources:  # noqa: SIM110 (a generator per call costs 3 k instructions)
             if src.pending():
