@@ -14,8 +14,10 @@
  *   setip A.B.C.D/LEN  -> "setip WKC"            (EoE Set IP Parameter)
  *   getip              -> "getip WKC A.B.C.D M.M.M.M"   (EoE Get IP Parameter)
  *   stats              -> "stats cycles=N mismatch=N noframe=N expected=N to_slave=N
- *                          to_master=N" (mismatch: a reply with another working counter;
- *                          noframe: no reply within the receive timeout)
+ *                          to_master=N send_failed=N rx_broken=N" (mismatch: a reply with
+ *                          another working counter; noframe: no reply within the receive
+ *                          timeout; send_failed: ecx_EOEsend attempts that failed, each
+ *                          retried up to 3 times; rx_broken: fragments out of sequence)
  *   quit
  * "ready expected=N slaves=N" is printed once the slaves are in OP.
  * Written for this project against the SOEM 1.4 API that pysoem's sdist carries.
@@ -40,7 +42,7 @@ static int tapfd = -1;
 static int eoe_slave = 1;
 static int expected_wkc;
 static volatile int running = 1;
-static volatile long cycles, mismatches, noframes, to_slave, to_master;
+static volatile long cycles, mismatches, noframes, to_slave, to_master, send_failed, rx_broken;
 
 /* a command for the mailbox thread, which owns the mailbox */
 static pthread_mutex_t cmd_lock = PTHREAD_MUTEX_INITIALIZER;
@@ -85,6 +87,8 @@ static int eoe_hook(ecx_contextt *context, uint16 slave, void *eoembx)
       if (write(tapfd, rx_buf, size) == size)
          to_master++;
    }
+   else if (r < 0)
+      rx_broken++; /* a fragment out of sequence: the frame it belonged to is lost */
    return 1;
 }
 
@@ -173,8 +177,17 @@ static void *mailbox(void *arg)
          ssize_t n = read(tapfd, frame, sizeof(frame));
          if (n <= 0)
             break;
-         if (ecx_EOEsend(&ecx_context, eoe_slave, 0, (int)n, frame, EC_TIMEOUTRXM) > 0)
-            to_slave++;
+         /* a frame whose mailbox write got no answer in time is sent again, as a master's
+            retry; each failed attempt is counted */
+         for (int tries = 0; tries < 3; tries++)
+         {
+            if (ecx_EOEsend(&ecx_context, eoe_slave, 0, (int)n, frame, EC_TIMEOUTRXM) > 0)
+            {
+               to_slave++;
+               break;
+            }
+            send_failed++;
+         }
          busy = 1;
       }
       ec_clearmbx(&in);
@@ -247,8 +260,8 @@ int main(int argc, char *argv[])
       if (strncmp(line, "stats", 5) == 0)
       {
          printf("stats cycles=%ld mismatch=%ld noframe=%ld expected=%d to_slave=%ld "
-                "to_master=%ld\n", cycles, mismatches, noframes, expected_wkc, to_slave,
-                to_master);
+                "to_master=%ld send_failed=%ld rx_broken=%ld\n", cycles, mismatches, noframes,
+                expected_wkc, to_slave, to_master, send_failed, rx_broken);
          continue;
       }
       pthread_mutex_lock(&cmd_lock);
