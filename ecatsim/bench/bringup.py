@@ -30,7 +30,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from ecatsim.bench import redtest, results, soem
+from ecatsim.bench import redtest, results, soem, steadiness
 from ecatsim.bench.capture import Capture, analyse, process_cycles
 from ecatsim.bench.master import CSP, cycles, request_op
 from ecatsim.bench.netns import Daemon, NetnsPair, in_netns
@@ -194,7 +194,8 @@ def run_bringup_soem(n: int, cycles_k: int, period_us: int, overlap: bool,
 
 
 def summary(r: dict[str, Any]) -> str:
-    """One bring-up's figures: the totals, each phase, the five slowest frames."""
+    """One bring-up's figures: the totals, each phase, the host's steadiness before the run,
+    the five slowest frames."""
     f, c = r["frames"], r["cycles"]
     enabled = c["drives_enabled"]
     lines = [f"N={r['slaves']} ({'overlap map' if r['overlap'] else 'map'}, master "
@@ -214,6 +215,8 @@ def summary(r: dict[str, Any]) -> str:
         lines.append(f"  {name:12s} {p['frames']:6d} frames  p50 {p['p50_us']:8.1f}  p99.9 "
                      f"{p['p999_us']:8.1f}  max {p['max_us']:8.1f} us  >1ms {p['over_1ms']}  "
                      f">2ms {p['over_2ms']}")  # fmt: skip
+    if "host_steadiness" in r:
+        lines.append("  " + steadiness.text(r["host_steadiness"]))
     for s in f["slowest"][:5]:
         lines.append(f"  slowest: {s['us']} us {s['cmd']} adp {s['adp']} ado {s['ado']} "
                      f"len {s['length']}")  # fmt: skip
@@ -230,12 +233,14 @@ def run(args: BenchOptions) -> int:
                            "load_1min": os.getloadavg()[0],
                            "python": platform.python_version(), "runs": []}  # fmt: skip
     for n in [n for n in args.bringup for _ in range(args.repeat)]:
+        host = steadiness.measure()  # what the host's CPUs did just before (decision B7)
         if args.master == "soem":
             r = run_bringup_soem(n, args.cycles, args.period_us, args.overlap, extra,
                                  args.master_rt, args.master_cpu, args.sync0)  # fmt: skip
         else:
             r = run_bringup(n, args.cycles, args.period_us, args.overlap, extra,
                             args.master_spin, args.master_rt, args.master_cpu)  # fmt: skip
+        r["host_steadiness"] = host
         out["runs"].append(r)
         print(summary(r), flush=True)
     results.write(args.results, f"bringup-{'-'.join(str(n) for n in args.bringup)}", out)

@@ -16,19 +16,30 @@ from ecatsim.errors import UserError
 SOURCE = "echo.c"
 
 
+def c_source(name: str) -> str:
+    """The C source ``name`` shipped with the package (the floor, the host probe)."""
+    return resources.files("ecatsim.bench").joinpath(name).read_text()
+
+
 def echo_source() -> str:
     """The C source of the floor, from the installed package."""
-    return resources.files("ecatsim.bench").joinpath(SOURCE).read_text()
+    return c_source(SOURCE)
+
+
+def build_c(name: str, out: Path) -> Path:
+    """Compile the package's C source ``name`` to ``out`` with ``cc -O2``; a missing
+    compiler is one line."""
+    cc = shutil.which("cc")
+    if cc is None:
+        raise UserError("ecatsim bench builds its C programs with 'cc': install a C compiler")
+    subprocess.run([cc, "-O2", "-o", str(out), "-x", "c", "-"], input=c_source(name).encode(),
+                   check=True)  # fmt: skip
+    return out
 
 
 def build_echo(out: Path) -> Path:
-    """Compile the floor to ``out`` with ``cc -O2``; a missing compiler is one line."""
-    cc = shutil.which("cc")
-    if cc is None:
-        raise UserError("ecatsim bench builds its C floor with 'cc': install a C compiler")
-    subprocess.run([cc, "-O2", "-o", str(out), "-x", "c", "-"], input=echo_source().encode(),
-                   check=True)  # fmt: skip
-    return out
+    """Compile the floor to ``out``."""
+    return build_c(SOURCE, out)
 
 
 def echo_command(ns: str, iface: str, echo: Path, mode: str, pin: list[str]) -> list[str]:
