@@ -183,7 +183,7 @@ def run_bringup_soem(n: int, cycles_k: int, period_us: int, overlap: bool,
                          redtest.timeout_ns(period_us))  # fmt: skip
     wall_s = rt.cycles_wall_ns / 1e9
     cyc.update(cpu_percent=round(rt.cycles_cpu_s / wall_s * 100, 1) if wall_s else None,
-               drives_enabled=None, all_op=rt.all_op, master_exit=rt.returncode,
+               drives_enabled=rt.drives_enabled, all_op=rt.all_op, master_exit=rt.returncode,
                master_reports=rt.trouble)  # fmt: skip
     return {"slaves": n, "overlap": overlap, "period_us": period_us, "master": sched,
             "master_name": f"{redtest.NAME} (pysoem {soem.pysoem_version()} sdist)",

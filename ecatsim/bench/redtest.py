@@ -7,8 +7,10 @@ config_map; ec_config_overlap with ``--overlap``), SAFEOP, ec_configdc, OP reque
 its real-time cycle thread running (SCHED_FIFO 40, clock_nanosleep to absolute times,
 receive then send, the cycle kept locked to the DC time of the replies with ec_sync), and
 every 20 ms a line with the last WKC. It does not start SYNC0 (no ec_dcsync0; with
-``--sync0`` the build adds SOEM's ec_dcsync0 for every slave after ec_configdc) and does
-not enable the drives (they answer in OP without). Its phases are marked in the capture
+``--sync0`` the build adds SOEM's ec_dcsync0 for every slave after ec_configdc). The build
+also runs the drives as the pysoem master does (:func:`ecatsim.bench.soem.drive_patches`:
+csp by SDO, enabled from its main loop, holding their positions) and prints how many are
+enabled in csp after its cycles. Its phases are marked in the capture
 as its lines arrive (a phase's first frames may fall in the one before); the cycles, their
 lost frames and WKCs are read off the wire by the capture on the master's end
 (:func:`ecatsim.bench.capture.process_cycles`): SOEM's sum of the WKCs of each cycle's
@@ -36,10 +38,10 @@ NAME = "SOEM red_test"
 
 def limits(sync0: bool) -> dict[str, object]:
     """The master's limits as built: slaves, IO map bytes, SOEM's version source, SYNC0
-    started or not (``--sync0``), the drives not enabled."""
+    started or not (``--sync0``), the drives enabled in csp."""
     return {"max_slaves": RED_MAXSLAVE - 1, "iomap_bytes": RED_IOMAP,
             "soem": f"pysoem {pysoem_version()} sdist", "sync0": sync0,
-            "drives_enabled": False}  # fmt: skip
+            "drives_enabled": True}  # fmt: skip
 
 
 def timeout_ns(period_us: int) -> int:
@@ -63,6 +65,8 @@ PHASES = (
     (re.compile(r"^Request safe operational state"), "end"),
 )
 EXPECTED = re.compile(r"^Calculated workcounter (\d+)")
+#: the build's line after the cycles (:func:`ecatsim.bench.soem.drive_patches`)
+ENABLED = re.compile(r"^Enabled drives (\d+) csp (\d+)")
 #: red_test's check thread reports slaves out of OP, lost, recovered
 TROUBLE = re.compile(r"^(ERROR|WARNING|MESSAGE|Slave \d+ State=)")
 
@@ -70,12 +74,15 @@ TROUBLE = re.compile(r"^(ERROR|WARNING|MESSAGE|Slave \d+ State=)")
 @dataclass
 class RedTestRun:
     """What one red_test run printed: the slaves it configured, the WKC it expects, whether
-    every slave reached OP, its check thread's reports, the daemon's CPU seconds over the
-    cycles, and the output's last lines (for a failure)."""
+    every slave reached OP, the drives enabled and in csp after the cycles (None: no such
+    line), its check thread's reports, the daemon's CPU seconds over the cycles, and the
+    output's last lines (for a failure)."""
 
     slaves: int = 0
     expected_wkc: int = 0
     all_op: bool = False
+    drives_enabled: int | None = None
+    drives_csp: int | None = None
     trouble: list[str] = field(default_factory=list)
     cycles_cpu_s: float = 0.0
     cycles_wall_ns: int = 0
@@ -119,6 +126,9 @@ def run(exe: Path, pair: NetnsPair, cap: Capture, period_us: int, daemon_pid: in
             m = EXPECTED.match(line)
             if m is not None:
                 out.expected_wkc = int(m.group(1))
+            m = ENABLED.match(line)
+            if m is not None:
+                out.drives_enabled, out.drives_csp = int(m.group(1)), int(m.group(2))
             if TROUBLE.match(line) and len(out.trouble) < 50:
                 out.trouble.append(line)
         out.returncode = proc.wait()

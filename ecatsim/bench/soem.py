@@ -217,6 +217,7 @@ def red_test_patches(loops: int, overlap: bool, sync0_ns: int = 0) -> list[Patch
         ("red_test.c", "char IOmap[4096];", f"char IOmap[{RED_IOMAP}];"),
         ("red_test.c", "i <= 5000;", f"i <= {loops};"),
     ]  # fmt: skip
+    patches += drive_patches()
     if overlap:
         patches += [
             ("red_test.c", "ec_config(FALSE, &IOmap)", "ec_config_overlap(FALSE, &IOmap)"),
@@ -226,6 +227,46 @@ def red_test_patches(loops: int, overlap: bool, sync0_ns: int = 0) -> list[Patch
         start = f"for (int s = 1; s <= ec_slavecount; s++) ec_dcsync0(s, TRUE, {sync0_ns}, 0);"
         patches.append(("red_test.c", "ec_configdc();", "ec_configdc(); " + start))
     return patches
+
+
+#: every drive in cyclic synchronous position (6060h = 8) by SDO, in SAFEOP after ec_configdc
+_CSP = (
+    "for (int s = 1; s <= ec_slavecount; s++) { int8 csp = 8; "
+    "ec_SDOwrite(s, 0x6060, 0, FALSE, sizeof(csp), &csp, EC_TIMEOUTRXM); }"
+)
+#: the cycle thread, between receiving a cycle and sending the next (SOEM's receive copies
+#: the LRW's reply over the outputs too, so another thread's writes would be lost): the
+#: main loop's step (one per 20 ms) gives controlword 6, 7, then 15 (five steps each), the
+#: target position kept at the actual one until enabled; only slaves that map a TMC8670's
+#: PDOs (controlword and target position out, statusword, mode display, position in)
+_ENABLE = (
+    "if (drive_step > 0) { for (int s = 1; s <= ec_slavecount; s++) { if (ec_slave[s].Obytes "
+    ">= 6 && ec_slave[s].Ibytes >= 7) { uint16 cw = drive_step <= 5 ? 6 : (drive_step <= 10 ? "
+    "7 : 15); if (drive_step <= 10) memcpy(ec_slave[s].outputs + 2, ec_slave[s].inputs + 3, "
+    "4); ec_slave[s].outputs[0] = cw & 0xFF; ec_slave[s].outputs[1] = cw >> 8; } } }\n"
+)
+#: after the main loop: the drives in Operation Enabled (statusword & 6Fh == 27h) and in csp
+_REPORT = (
+    "{ int en = 0, csp = 0; for (int s = 1; s <= ec_slavecount; s++) { if (ec_slave[s].Ibytes "
+    ">= 3) { en += (ec_slave[s].inputs[0] & 0x6F) == 0x27; csp += ec_slave[s].inputs[2] == 8; } "
+    '} printf("\\nEnabled drives %d csp %d\\n", en, csp); }\n'
+)
+
+
+def drive_patches() -> list[Patch]:
+    """red_test runs the drives as the pysoem master does: csp by SDO after ec_configdc,
+    then each enabled (CiA 402-2 Figure 5: controlword 6, 7, 15) holding its position, and
+    a line ``Enabled drives N csp M`` after its main loop (:mod:`ecatsim.bench.redtest`
+    reads it). The sample itself leaves the outputs at zero."""
+    return [
+        ("red_test.c", "ec_configdc();", "ec_configdc(); " + _CSP),
+        ("red_test.c", "int dorun = 0;", "int dorun = 0; volatile int drive_step = 0;"),
+        ("red_test.c", "osal_usleep(20000);", "drive_step = i; osal_usleep(20000);"),
+        ("red_test.c", "ec_sync(ec_DCtime, cycletime, &toff);\n         }\n",
+         "ec_sync(ec_DCtime, cycletime, &toff);\n         }\n         " + _ENABLE),
+        ("red_test.c", "            dorun = 0;\n            inOP = FALSE;",
+         "            " + _REPORT + "            dorun = 0;\n            inOP = FALSE;"),
+    ]  # fmt: skip
 
 
 def red_test(cycles: int, period_us: int, overlap: bool, sync0: bool = False) -> Path:

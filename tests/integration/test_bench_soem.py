@@ -31,7 +31,8 @@ def test_red_test_takes_four_drives_to_op_and_cycles_with_every_wkc(
 ) -> None:
     """config, SAFEOP, ec_configdc (with ``sync0``: every slave's SYNC0 started, 0x0981
     written 3), OP; then about 300 cycles at 1 ms, each one LRW whose reply carries the
-    full WKC, none lost; red_test's check thread reports nothing."""
+    full WKC, none lost, every drive enabled in csp; red_test's check thread reports
+    nothing."""
     exe = red_test(CYCLES, PERIOD_US, overlap=False, sync0=sync0)
     d = daemon_factory("--slaves", str(DRIVES))
     assert d.pid is not None
@@ -41,6 +42,8 @@ def test_red_test_takes_four_drives_to_op_and_cycles_with_every_wkc(
     assert (rt.slaves, rt.expected_wkc, rt.all_op, rt.trouble) == (
         DRIVES, EXPECTED_WKC, True, []
     ), rt.tail  # fmt: skip
+    # as the pysoem master runs them: csp by SDO, then enabled (controlword 6, 7, 15)
+    assert (rt.drives_enabled, rt.drives_csp) == (DRIVES, DRIVES), rt.tail
     assert [name for _, name in cap.marks] == ["config", "safeop_dc", "op", "cycles", "end"]
     marks = {name: t for t, name in cap.marks}
     frames = cap.frames()
@@ -59,3 +62,8 @@ def test_red_test_takes_four_drives_to_op_and_cycles_with_every_wkc(
     during = [f for f in frames if marks["cycles"] <= f.t_ns < marks["end"]]
     replies = [f.wkc for f in during if f.reply and f.cmd == LRW]
     assert set(replies) == {EXPECTED_WKC}
+    # the last cycle's outputs: each drive's controlword 15 (Enable operation) leads its
+    # 12 bytes of RxPDO (controlword, target position, target torque, target velocity)
+    last = [f for f in during if not f.reply and f.cmd == LRW][-1]
+    outputs = last.body[10 : 10 + 12 * DRIVES]
+    assert [outputs[12 * k : 12 * k + 2] for k in range(DRIVES)] == [b"\x0f\x00"] * DRIVES
