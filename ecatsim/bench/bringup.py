@@ -26,14 +26,14 @@ import platform
 import tempfile
 import time
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 from typing import Any
 
 from ecatsim.bench import redtest, results, soem, steadiness
 from ecatsim.bench.capture import Capture, analyse, process_cycles
-from ecatsim.bench.master import CSP, cycles, request_op
-from ecatsim.bench.netns import Daemon, NetnsPair, in_netns
+from ecatsim.bench.master import CSP, cpu_seconds, cycles, request_op
+from ecatsim.bench.netns import Daemon, ExtraNetns, NetnsPair, Port, SlaveEnd, in_netns
 from ecatsim.bench.options import BenchOptions
 
 #: pysoem's limits: SOEM's EC_MAXSLAVE 200 (entry 0 is the master's) and its fixed IO map
@@ -99,17 +99,66 @@ def master_scheduling(rt: int | None, cpu: int | None) -> Iterator[str]:
         os.sched_setaffinity(0, affinity)
 
 
+def chain_sizes(n: int, chain: int) -> list[int]:
+    """``n`` drives over ``chain`` daemons, as even as they go (the first ones take the
+    remainder)."""
+    return [n // chain + (k < n % chain) for k in range(chain)]
+
+
+def chain_flags(k: int, chain: int, extra: tuple[str, ...]) -> tuple[str, ...]:
+    """Daemon ``k``'s scheduling flags: ``extra``, and in a chain of more than one (unless
+    ``extra`` pins it) its own CPU, ``k`` modulo the CPUs this process may use."""
+    if chain == 1 or "--cpu" in extra:
+        return extra
+    cpus = sorted(os.sched_getaffinity(0))
+    return (*extra, "--cpu", str(cpus[k % len(cpus)]))
+
+
+@contextmanager
+def daemons(pair: NetnsPair, n: int, chain: int, extra: tuple[str, ...],
+            tmp: Path) -> Iterator[list[Daemon]]:  # fmt: skip
+    """``n`` drives in ``chain`` daemons, one segment to the master: the first on the
+    pair's slave end, each next one in a namespace of its own behind the previous one's
+    ``--out-iface`` (a veth), started from the last. Stopped and removed on exit."""
+    with ExitStack() as stack:
+        ends: list[SlaveEnd] = [pair]
+        outs: list[str] = []
+        for _ in range(1, chain):
+            x = stack.enter_context(ExtraNetns())
+            here, there = x.veth(ends[-1].slave_ns)
+            ends.append(Port(x.ns, here))
+            outs.append(there)
+        started: list[Daemon] = []
+        try:
+            for k, size in reversed(list(enumerate(chain_sizes(n, chain)))):
+                out = ("--out-iface", outs[k]) if k < chain - 1 else ()
+                args = ("--slaves", str(size), *out, *chain_flags(k, chain, extra))
+                d = Daemon(ends[k], args, tmp / f"daemon{n}-{k}.log")
+                started.insert(0, d)
+                d.start(timeout=120)
+            yield started
+        finally:
+            for d in started:
+                d.stop()
+
+
+def daemon_pids(ds: list[Daemon]) -> list[int]:
+    """The running daemons' process ids."""
+    pids = [d.pid for d in ds]
+    assert all(p is not None for p in pids)
+    return [p for p in pids if p is not None]
+
+
 def run_bringup(n: int, cycles_k: int, period_us: int, overlap: bool,
                 extra: tuple[str, ...], spin: bool = False, master_rt: int | None = None,
-                master_cpu: int | None = None) -> dict[str, Any]:  # fmt: skip
-    """One bring-up of ``n`` drives and ``cycles_k`` cycles on a fresh daemon; the master
-    scheduled as :func:`master_scheduling` says."""
+                master_cpu: int | None = None, chain: int = 1) -> dict[str, Any]:  # fmt: skip
+    """One bring-up of ``n`` drives (in ``chain`` chained daemons) and ``cycles_k`` cycles
+    on fresh daemons; the master scheduled as :func:`master_scheduling` says."""
     import pysoem
 
     tmp = Path(tempfile.mkdtemp(prefix="ecatsim-bringup-"))
-    with NetnsPair() as pair:
-        d = Daemon(pair, ("--slaves", str(n), *extra), tmp / f"daemon{n}.log")
-        d.start(timeout=120)
+    with NetnsPair() as pair, daemons(pair, n, chain, extra, tmp) as ds:
+        pids = daemon_pids(ds)
         m = pysoem.Master()
         try:
             with (
@@ -120,33 +169,43 @@ def run_bringup(n: int, cycles_k: int, period_us: int, overlap: bool,
                 bring_up(m, cap, pair, n, period_us, overlap)
                 bring_up_s = time.perf_counter() - t0
                 cap.mark("cycles")
-                assert d.pid is not None
+                cpu0, wall0 = [cpu_seconds(p) for p in pids], time.perf_counter()
                 cyc = cycles(
-                    m, cycles_k * period_us / 1e6, period_us, d.pid, spin=spin, overlap=overlap
+                    m, cycles_k * period_us / 1e6, period_us, pids[0], spin=spin, overlap=overlap
                 )
+                wall = time.perf_counter() - wall0
+                each = [
+                    round((cpu_seconds(p) - c) / wall * 100, 1)
+                    for p, c in zip(pids, cpu0, strict=True)
+                ]
                 cap.mark("end")
                 time.sleep(0.05)
         finally:
             m.close()
-            d.stop()
     frames = analyse(cap.frames(), cap.marks)
     frames.get("phases", {}).pop("end", None)
+    kept = {k: cyc[k] for k in ("cycles", "lost", "wkc_errors", "expected_wkc", "wkc_error_seen",
+                                "cpu_percent", "rtt_us", "fell_behind", "lost_master_stalled",
+                                "drives_enabled", "steal_s")}  # fmt: skip
     return {"slaves": n, "overlap": overlap, "period_us": period_us, "master": master,
             "master_name": f"pysoem {soem.pysoem_version()}", "master_limits": PYSOEM_LIMITS,
-            "daemon_flags": list(extra),
+            "daemon_flags": list(extra), "chain": chain_text(n, chain, extra),
             "bring_up_s": round(bring_up_s, 2), "frames": frames,
-            "cycles": {k: cyc[k] for k in ("cycles", "lost", "wkc_errors", "expected_wkc",
-                                           "wkc_error_seen", "cpu_percent", "rtt_us",
-                                           "fell_behind", "lost_master_stalled",
-                                           "drives_enabled", "steal_s")}}  # fmt: skip
+            "cycles": {**kept, "daemon_cpu_percent": each}}  # fmt: skip
+
+
+def chain_text(n: int, chain: int, extra: tuple[str, ...]) -> list[dict[str, Any]]:
+    """Each daemon of the segment: its drives and its own flags (the JSON's ``chain``)."""
+    return [{"slaves": size, "flags": list(chain_flags(k, chain, extra))}
+            for k, size in enumerate(chain_sizes(n, chain))]  # fmt: skip
 
 
 def run_bringup_soem(n: int, cycles_k: int, period_us: int, overlap: bool,
                      extra: tuple[str, ...], master_rt: int | None = None,
-                     master_cpu: int | None = None, sync0: bool = False
+                     master_cpu: int | None = None, sync0: bool = False, chain: int = 1
                      ) -> dict[str, Any]:  # fmt: skip
-    """One bring-up of ``n`` drives and about ``cycles_k`` cycles (red_test's 20 ms
-    loops) on a fresh daemon with SOEM's red_test as the master
+    """One bring-up of ``n`` drives (in ``chain`` chained daemons) and about ``cycles_k``
+    cycles (red_test's 20 ms loops) on fresh daemons with SOEM's red_test as the master
     (:mod:`ecatsim.bench.redtest`); ``master_rt``/``master_cpu`` as ``chrt``/``taskset``
     (its cycle thread sets SCHED_FIFO 40 itself)."""
     exe = soem.red_test(cycles_k, period_us, overlap, sync0)
@@ -157,18 +216,15 @@ def run_bringup_soem(n: int, cycles_k: int, period_us: int, overlap: bool,
         prefix += ("chrt", "-f", str(master_rt))
     sched = scheduling_text(master_rt, master_cpu) + "; cycle thread SCHED_FIFO 40"
     tmp = Path(tempfile.mkdtemp(prefix="ecatsim-bringup-"))
-    with NetnsPair() as pair:
-        d = Daemon(pair, ("--slaves", str(n), *extra), tmp / f"daemon{n}.log")
-        d.start(timeout=120)
-        try:
-            with Capture.master_end(pair.master_ns, pair.master_if, keep_wkc=True) as cap:
-                assert d.pid is not None
-                t0 = time.perf_counter()
-                rt = redtest.run(exe, pair, cap, period_us, d.pid, prefix,
-                                 redtest.run_timeout(cycles_k, period_us))  # fmt: skip
-                time.sleep(0.05)
-        finally:
-            d.stop()
+    with (
+        NetnsPair() as pair,
+        daemons(pair, n, chain, extra, tmp) as ds,
+        Capture.master_end(pair.master_ns, pair.master_if, keep_wkc=True) as cap,
+    ):
+        t0 = time.perf_counter()
+        rt = redtest.run(exe, pair, cap, period_us, daemon_pids(ds), prefix,
+                         redtest.run_timeout(cycles_k, period_us))  # fmt: skip
+        time.sleep(0.05)
     marks = dict((name, t) for t, name in cap.marks)
     if rt.slaves != n or "safeop_dc" not in marks:
         tail = "\n  ".join(rt.tail)
@@ -182,15 +238,27 @@ def run_bringup_soem(n: int, cycles_k: int, period_us: int, overlap: bool,
     cyc = process_cycles(found, start, marks.get("end", time.time_ns()), rt.expected_wkc,
                          redtest.timeout_ns(period_us))  # fmt: skip
     wall_s = rt.cycles_wall_ns / 1e9
-    cyc.update(cpu_percent=round(rt.cycles_cpu_s / wall_s * 100, 1) if wall_s else None,
+    each = [round(c / wall_s * 100, 1) for c in rt.cycles_cpu_s] if wall_s else []
+    cyc.update(cpu_percent=each[0] if each else None, daemon_cpu_percent=each,
                drives_enabled=rt.drives_enabled, all_op=rt.all_op, master_exit=rt.returncode,
                master_reports=rt.trouble)  # fmt: skip
     return {"slaves": n, "overlap": overlap, "period_us": period_us, "master": sched,
             "master_name": f"{redtest.NAME} (pysoem {soem.pysoem_version()} sdist)",
             "master_limits": redtest.limits(sync0), "daemon_flags": list(extra),
+            "chain": chain_text(n, chain, extra),
             "bring_up_s": round((marks.get("cycles", marks["op"]) - marks["config"]) / 1e9, 2),
             "run_s": round(time.perf_counter() - t0, 2), "frames": frames,
             "cycles": cyc}  # fmt: skip
+
+
+def chained(r: dict[str, Any]) -> str:
+    """ ", in K chained daemons of A/B/... drives" for a chain, else nothing."""
+    chain = r.get("chain", [])
+    if len(chain) < 2:
+        return ""
+    return (
+        f", in {len(chain)} chained daemons of {'/'.join(str(d['slaves']) for d in chain)} drives"
+    )
 
 
 def summary(r: dict[str, Any]) -> str:
@@ -202,12 +270,13 @@ def summary(r: dict[str, Any]) -> str:
              f"{r.get('master_name', 'pysoem')}"
              f"{'' if r.get('master_limits', {}).get('sync0', True) else ' without SYNC0'} "
              f"{r['master']}, daemon "
-             f"{' '.join(r['daemon_flags']) or 'default flags'}) bring-up "
+             f"{' '.join(r['daemon_flags']) or 'default flags'}{chained(r)}) bring-up "
              f"{r['bring_up_s']} s, {c['cycles']} cycles: {f['frames']} frames, reply p50 "
              f"{f['p50_us']} p99.9 {f['p999_us']} max {f['max_us']} us, over 1 ms "
              f"{f['over_1ms']}, over 2 ms {f['over_2ms']}, resends {f['resends']}, "
              f"unanswered {f['unanswered']}; cycles lost {c['lost']}, WKC short "
-             f"{c['wkc_errors']} (expected {c['expected_wkc']}), daemon {c['cpu_percent']} %, "
+             f"{c['wkc_errors']} (expected {c['expected_wkc']}), daemon "
+             f"{'/'.join(str(x) for x in c.get('daemon_cpu_percent') or [c['cpu_percent']])} %, "
              f"{'' if c.get('all_op', True) else 'NOT ALL IN OP, '}"
              f"{'MASTER KILLED, ' if c.get('master_exit', 0) == -9 else ''}"
              f"enabled {'not asked' if enabled is None else enabled}/{r['slaves']}"]  # fmt: skip
@@ -236,10 +305,12 @@ def run(args: BenchOptions) -> int:
         host = steadiness.measure()  # what the host's CPUs did just before (decision B7)
         if args.master == "soem":
             r = run_bringup_soem(n, args.cycles, args.period_us, args.overlap, extra,
-                                 args.master_rt, args.master_cpu, args.sync0)  # fmt: skip
+                                 args.master_rt, args.master_cpu, args.sync0,
+                                 args.chain)  # fmt: skip
         else:
             r = run_bringup(n, args.cycles, args.period_us, args.overlap, extra,
-                            args.master_spin, args.master_rt, args.master_cpu)  # fmt: skip
+                            args.master_spin, args.master_rt, args.master_cpu,
+                            args.chain)  # fmt: skip
         r["host_steadiness"] = host
         out["runs"].append(r)
         print(summary(r), flush=True)

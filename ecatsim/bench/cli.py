@@ -144,7 +144,17 @@ NO_PYSOEM = "ecatsim bench needs pysoem: pip install 'ecatsim[bench]'"
     show_default=True,
     help="--bringup's master: pysoem (up to 199 slaves, a 4096-byte IO map, SYNC0, drives "
     "enabled and moving) or soem: SOEM's own DC sample red_test built from pysoem's sdist "
-    "with 1023 slaves and a 64 KiB IO map (no SYNC0, drives not enabled; needs 'cc').",
+    "with 1023 slaves and a 64 KiB IO map (SYNC0 with --sync0, drives enabled holding "
+    "their positions; needs 'cc').",
+)
+@click.option(
+    "--chain",
+    type=click.IntRange(min=1),
+    default=1,
+    show_default=True,
+    help="--bringup: the drives in this many chained daemons, one segment to the master "
+    "(each next daemon behind the previous one's --out-iface), daemon k pinned to CPU k "
+    "modulo the CPUs.",
 )
 @click.option(
     "--sync0",

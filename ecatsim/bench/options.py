@@ -37,6 +37,8 @@ class BenchOptions:
     master: str = "pysoem"
     #: --master soem: start SYNC0 on every slave (SOEM's ec_dcsync0 added after ec_configdc)
     sync0: bool = False
+    #: --bringup: the drives in this many chained daemons (each on its own CPU)
+    chain: int = 1
     results: Path = DEFAULT_DIR
 
     def scheduling_flags(self) -> tuple[str, ...]:

@@ -24,6 +24,7 @@ from __future__ import annotations
 import re
 import subprocess
 import threading
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -84,16 +85,17 @@ class RedTestRun:
     drives_enabled: int | None = None
     drives_csp: int | None = None
     trouble: list[str] = field(default_factory=list)
-    cycles_cpu_s: float = 0.0
+    cycles_cpu_s: list[float] = field(default_factory=list)
     cycles_wall_ns: int = 0
     tail: list[str] = field(default_factory=list)
     returncode: int | None = None
 
 
-def run(exe: Path, pair: NetnsPair, cap: Capture, period_us: int, daemon_pid: int,
+def run(exe: Path, pair: NetnsPair, cap: Capture, period_us: int, daemon_pids: Sequence[int],
         prefix: tuple[str, ...] = (), timeout: float = 900.0) -> RedTestRun:  # fmt: skip
     """Run red_test on the master's interface (``prefix``: taskset/chrt before it), each
-    phase marked in ``cap`` as its line arrives; killed after ``timeout`` seconds."""
+    phase marked in ``cap`` as its line arrives; killed after ``timeout`` seconds. The CPU
+    seconds of each of ``daemon_pids`` over the cycles go to ``cycles_cpu_s``."""
     cmd = ["ip", "netns", "exec", pair.master_ns, *prefix, "stdbuf", "-oL", str(exe),
            pair.master_if, pair.master_if, str(period_us)]  # fmt: skip
     out = RedTestRun()
@@ -102,7 +104,8 @@ def run(exe: Path, pair: NetnsPair, cap: Capture, period_us: int, daemon_pid: in
                             stderr=subprocess.STDOUT, text=True)  # fmt: skip
     watchdog = threading.Timer(timeout, proc.kill)
     watchdog.start()
-    cpu0, t0 = 0.0, 0
+    cpu0: list[float] = []
+    t0 = 0
     try:
         assert proc.stdout is not None
         for line in proc.stdout:  # universal newlines: its "\r" progress lines too
@@ -119,9 +122,11 @@ def run(exe: Path, pair: NetnsPair, cap: Capture, period_us: int, daemon_pid: in
                     out.slaves = int(m.group(1))
                 elif phase in ("op", "cycles"):  # the cycles: from OP (from the request without)
                     out.all_op = phase == "cycles"
-                    cpu0, t0 = cpu_seconds(daemon_pid), cap.marks[-1][0]
+                    cpu0, t0 = [cpu_seconds(p) for p in daemon_pids], cap.marks[-1][0]
                 elif phase == "end":
-                    out.cycles_cpu_s = cpu_seconds(daemon_pid) - cpu0
+                    out.cycles_cpu_s = [
+                        cpu_seconds(p) - c for p, c in zip(daemon_pids, cpu0, strict=True)
+                    ]
                     out.cycles_wall_ns = cap.marks[-1][0] - t0
             m = EXPECTED.match(line)
             if m is not None:

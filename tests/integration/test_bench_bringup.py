@@ -8,6 +8,8 @@ Ref: docs/performance.md "How to measure"; CiA 402-2 Figure 5 (the enable sequen
 
 from __future__ import annotations
 
+import os
+
 import pytest
 
 from ecatsim.bench.bringup import run_bringup
@@ -26,3 +28,19 @@ def test_the_bringup_bench_enables_every_drive_and_loses_nothing(overlap: bool) 
     assert cyc["drives_enabled"] == DRIVES
     frames = r["frames"]
     assert frames["resends"] == 0 and frames["unanswered"] == 0
+
+
+def test_the_bringup_bench_chains_daemons_into_one_segment() -> None:
+    """``--chain 2``: the drives in two daemons, the second behind the first's
+    --out-iface, each pinned to its own CPU; the master sees one segment of all of them."""
+    r = run_bringup(5, 300, 1000, False, (), chain=2)
+    assert [d["slaves"] for d in r["chain"]] == [3, 2]
+    cpus = sorted(os.sched_getaffinity(0))
+    assert [d["flags"] for d in r["chain"]] == [
+        ["--cpu", str(cpus[k % len(cpus)])] for k in range(2)
+    ]
+    cyc = r["cycles"]
+    assert cyc["expected_wkc"] == 3 * 5
+    assert (cyc["lost"], cyc["wkc_errors"], cyc["drives_enabled"]) == (0, 0, 5)
+    assert len(cyc["daemon_cpu_percent"]) == 2 and all(x > 0 for x in cyc["daemon_cpu_percent"])
+    assert r["frames"]["resends"] == 0 and r["frames"]["unanswered"] == 0

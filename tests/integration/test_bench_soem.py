@@ -37,7 +37,7 @@ def test_red_test_takes_four_drives_to_op_and_cycles_with_every_wkc(
     d = daemon_factory("--slaves", str(DRIVES))
     assert d.pid is not None
     with Capture.master_end(netns_pair.master_ns, netns_pair.master_if, keep_wkc=True) as cap:
-        rt = redtest.run(exe, netns_pair, cap, PERIOD_US, d.pid, timeout=60)
+        rt = redtest.run(exe, netns_pair, cap, PERIOD_US, [d.pid], timeout=60)
     assert rt.returncode == 0, rt.tail
     assert (rt.slaves, rt.expected_wkc, rt.all_op, rt.trouble) == (
         DRIVES, EXPECTED_WKC, True, []
