@@ -22,14 +22,14 @@ cdef tuple _STATUS_BITS
 
 cdef object _round(double x)
 @cython.locals(k="long long", f=double)
-cdef long long _round_c(double x)
-cdef bint _small(double x)
+cdef long long _round_c(double x) noexcept
+cdef bint _small(double x) noexcept
 @cython.locals(k="long long")
-cdef long long _trunc_c(double x)
+cdef long long _trunc_c(double x) noexcept
 
 
-cdef bint _powered(object st)
-cdef bint _no_voltage(object st)
+cdef bint _powered(object st) noexcept
+cdef bint _no_voltage(object st) noexcept
 
 
 cdef long long _int_of(Entry e) except? -1
@@ -41,6 +41,10 @@ cdef class Drive(CycleDevice):
     cdef public object _published
     cdef public object _snapshot_hits
     cdef public object _control_hits
+    cdef bint _bound
+    cdef Entry _c_6040, _c_6060, _c_607a
+    cdef Entry _s_60ff, _s_6083, _s_6084, _s_607a, _s_60b0, _s_60b1, _s_6071, _s_60b2
+    cdef Entry _s_6065, _s_6085, _s_605a
     cdef public bint _pub_c
     cdef public long long[::1] _pub_lo, _pub_hi
     cdef public long long q_60ff, q_6083, q_6084, q_607a, q_60b0, q_60b1, q_6071, q_60b2
@@ -55,7 +59,9 @@ cdef class Drive(CycleDevice):
     cdef public object emcy
     cdef public object emcy_clear
     cdef public object state
-    cdef public object t_ns
+    cdef long long _t, _ltn
+    cdef double _lt
+    cdef bint _t_set, _lt_set, _ltn_set
     cdef public long long prev_cw
     cdef public long long mode
     cdef object _al_state
@@ -63,8 +69,6 @@ cdef class Drive(CycleDevice):
     cdef public double v_demand_rpm
     cdef public double p_demand
     cdef public double v_ff_rpm
-    cdef public object last_target
-    cdef public object last_t_ns
     cdef public bint set_point_ack
     cdef public bint homing_done
     cdef public bint homing_active
@@ -83,29 +87,30 @@ cdef class Drive(CycleDevice):
     cpdef object _v(self, int index, int sub=*)
     @cython.locals(hits=tuple)
     cpdef tuple _controls(self)
+    @cython.locals(c=tuple, hits=tuple)
+    cpdef _bind(self)
 
     @cython.locals(target=double, dt=double, now="long long", then="long long", prev=double,
                    ppr=double)
-    cpdef outputs_applied(self, now_ns)
+    cpdef outputs_applied(self, long long now_ns)
 
-    cpdef update_inputs(self, now_ns)
+    cpdef update_inputs(self, long long now_ns)
 
     @cython.locals(dt_ns="long long", n="long long", left="long long", t="long long",
                    now="long long", start="long long",
                    done="long long", more="long long", steps="long long", why=int,
                    kind=int, ref=double, v_ff=double, window=double, s=Servo)
-    cpdef advance(self, now_ns)
+    cpdef advance(self, long long now_ns)
 
     cpdef double _trip(self)
     cpdef double _window(self)
-    @cython.locals(hits=tuple)
     cpdef _snapshot(self)
 
     @cython.locals(mode="long long", v=double, target=double)
     cpdef bint _steady_demand(self) except -1
     cdef bint _demand(self, int kind, double ref, double v_ff, double window)
 
-    @cython.locals(cw="long long", mode="long long", hits=tuple)
+    @cython.locals(cw="long long", mode="long long")
     cpdef _controlword(self)
 
     @cython.locals(s=Servo, sw="long long", rpm=double, mode="long long", hits=tuple,
@@ -114,6 +119,6 @@ cdef class Drive(CycleDevice):
                    iq=double, iq_ref=double, si="long long")
     cpdef _publish(self)
     @cython.locals(lo="long long", hi="long long")
-    cdef void _put(self, Py_ssize_t k, long long v) except *
+    cdef int _put(self, Py_ssize_t k, long long v) except -1
     @cython.locals(hits=tuple, hit=tuple, e=Entry, k=Py_ssize_t)
     cpdef pub_flush(self)

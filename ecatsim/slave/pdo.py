@@ -384,6 +384,10 @@ class PdoImage:
         self._tx_st = tx.st if tx is not None else None
         self._tx_entries = tx.entries if tx is not None else ()
         self._tx_layout = tx.layout if tx is not None else None
+        #: the layouts as C integers (decision P51: no int object converted per entry and
+        #: cycle); empty where there is no layout
+        self._rx_spec = array("q", self._rx_layout or ())
+        self._tx_spec = array("q", self._tx_layout or ())
         #: the input image the C encoder fills: its padding stays zero, its entries'
         #: bytes are all written by every fill (decision P33)
         self._tx_buf = bytearray(plan.tx_size)
@@ -415,8 +419,9 @@ class PdoImage:
                 # the struct's values, decoded in C from the bytes (decision P33)
                 buf: bytes = data
                 q = buf  # compiled: a pointer to the bytes (the struct fits: tested above)
+                specs = self._rx_spec
                 for i in range(len(entries)):
-                    spec = layout[i]
+                    spec = specs[i]
                     off = spec >> 4
                     n = (spec >> 1) & 7
                     raw = 0
@@ -459,9 +464,10 @@ class PdoImage:
         st = self._tx_st
         layout = self._tx_layout
         if layout is not None:
-            fast = self._pack_small(layout)
+            fast = self._pack_small()
             if fast is not None:
-                return b"" + fast  # bytes: compiled, no call of the type bytes()
+                # compiled, already bytes; Python's slice of the bytearray is made bytes
+                return fast if type(fast) is bytes else bytes(fast)
         dev = self._dev
         if dev is not None:
             dev.pub_flush()  # the entries as the device has them now (P38)
@@ -484,11 +490,12 @@ class PdoImage:
                     f.write(out, int.from_bytes(f.entry.encode(), "little"))
         return bytes(out)
 
-    def _pack_small(self, layout: tuple[int, ...]) -> bytearray | None:
-        """The struct's bytes in the image buffer, encoded in C where every value is an
+    def _pack_small(self) -> bytes | bytearray | None:
+        """The struct's bytes, encoded in C into the image buffer where every value is an
         int within its field's type; None (the struct path decides) for any other (P33).
         A value the device keeps for its entry is taken from the device (P38)."""
         entries: tuple[Entry, ...] = self._tx_entries
+        specs = self._tx_spec
         out = self._tx_buf
         p = out  # compiled: a pointer to the buffer (every field lies inside it)
         dev = self._dev
@@ -511,7 +518,7 @@ class PdoImage:
                     c = _c_int(v)
                 except OverflowError:
                     return None
-            spec = layout[i]
+            spec = specs[i]
             off = spec >> 4
             n = (spec >> 1) & 7
             half = 1  # the sign bit's value: a C long long shifted in the core
@@ -523,7 +530,9 @@ class PdoImage:
                 return None
             for k in range(n):
                 p[off + k] = (c >> (8 * k)) & 0xFF
-        return out
+        # compiled, the pointer's slice is made as bytes at once, with no call and no
+        # buffer export (P51); in Python it is a bytearray, which pack_inputs makes bytes
+        return p[: len(out)]
 
     def al_state_changed(self, state: AlState, now_ns: int) -> None:
         self.device.al_state_changed(state, now_ns)
