@@ -22,17 +22,19 @@ cdef tuple _STATUS_BITS
 
 cdef object _round(double x)
 @cython.locals(k="long long", f=double)
-cdef long long _round_c(double x) noexcept
-cdef bint _small(double x) noexcept
+# inline (Cython warns that a declaration should not say so; it makes them C inline
+# functions, which the per-cycle callers absorb: decision P51)
+cdef inline long long _round_c(double x) noexcept
+cdef inline bint _small(double x) noexcept
 @cython.locals(k="long long")
-cdef long long _trunc_c(double x) noexcept
+cdef inline long long _trunc_c(double x) noexcept
 
 
-cdef bint _powered(object st) noexcept
-cdef bint _no_voltage(object st) noexcept
+cdef inline bint _powered(object st) noexcept
+cdef inline bint _no_voltage(object st) noexcept
 
 
-cdef long long _int_of(Entry e) except? -1
+cdef inline long long _int_of(Entry e) except? -1
 
 
 cdef class Drive(CycleDevice):

@@ -30,7 +30,7 @@ cdef class PdoImage:
 
     @cython.locals(entries=tuple, values=tuple, i="Py_ssize_t", e=Entry, dev=CycleDevice,
                    layout=tuple, buf=bytes, q="const unsigned char*", spec="long long",
-                   off="Py_ssize_t", specs="long long[::1]",
+                   off="Py_ssize_t",
                    n="long long", raw="long long", k="long long", half="long long")
     cpdef void set_outputs(self, object data, long long now_ns) except *
     @cython.locals(dev=CycleDevice)
@@ -39,9 +39,9 @@ cdef class PdoImage:
                    dev=CycleDevice)
     cpdef bytes pack_inputs(self)
     @cython.locals(entries=tuple, out=bytearray, p="unsigned char*", i="Py_ssize_t", e=Entry,
-                   c="long long", specs="long long[::1]",
+                   c="long long",
                    spec="long long", off="Py_ssize_t", n="long long", k="long long",
-                   half="long long", dev=CycleDevice, slots="long long[::1]",
+                   half="long long", dev=CycleDevice,
                    pending=bint, slot="Py_ssize_t")
     cdef object _pack_small(self)
 

@@ -419,9 +419,8 @@ class PdoImage:
                 # the struct's values, decoded in C from the bytes (decision P33)
                 buf: bytes = data
                 q = buf  # compiled: a pointer to the bytes (the struct fits: tested above)
-                specs = self._rx_spec
                 for i in range(len(entries)):
-                    spec = specs[i]
+                    spec = self._rx_spec[i]
                     off = spec >> 4
                     n = (spec >> 1) & 7
                     raw = 0
@@ -495,20 +494,18 @@ class PdoImage:
         int within its field's type; None (the struct path decides) for any other (P33).
         A value the device keeps for its entry is taken from the device (P38)."""
         entries: tuple[Entry, ...] = self._tx_entries
-        specs = self._tx_spec
         out = self._tx_buf
         p = out  # compiled: a pointer to the buffer (every field lies inside it)
         dev = self._dev
-        slots = self._tx_slot
-        pending = slots is not None and dev is not None and dev.pub_pending
+        # the device's values where it keeps them (the fields themselves in the compiled
+        # core, not local views acquired and released per call: P51)
+        pending = self._tx_slot is not None and dev is not None and dev.pub_pending
         for i in range(len(entries)):
             slot = -1
             if pending:
-                assert slots is not None and dev is not None
-                slot = slots[i]
+                slot = self._tx_slot[i]  # type: ignore[index]  # not None: pending
             if slot >= 0:
-                assert dev is not None
-                c = dev.pub_values[slot]
+                c = dev.pub_values[slot]  # type: ignore[union-attr]  # not None: pending
             else:
                 e = entries[i]
                 v = e.value
@@ -518,7 +515,7 @@ class PdoImage:
                     c = _c_int(v)
                 except OverflowError:
                     return None
-            spec = specs[i]
+            spec = self._tx_spec[i]
             off = spec >> 4
             n = (spec >> 1) & 7
             half = 1  # the sign bit's value: a C long long shifted in the core
