@@ -17,6 +17,10 @@ cdef long long SW_OMS12, SW_OMS13, SW_MOTOR_ACTIVE, SW_DIRECTION
 cdef long long _PP, _PV, _HM, _CSP, _CSV, _CST
 cdef int _STOP_FOLLOWING, _STOP_OVERCURRENT, _STOP_INDEX
 cdef long long _NO_WINDOW
+cdef int _TORQUE, _VELOCITY, _POSITION
+# the enum members the cycle compares by identity, as C globals (no module dict lookup)
+cdef object _OE, _QSA, _FRA, _FAULT, _SOD, _SO, _NRTSO, _AL_OP, _FAULT_RESET
+cdef object _SWITCH_ON_ENABLE
 cdef tuple _STATUS_BITS
 
 
@@ -120,7 +124,9 @@ cdef class Drive(CycleDevice):
                    pos_c="long long", p_demand=double, err=double, v_demand=double,
                    iq=double, iq_ref=double, si="long long")
     cpdef _publish(self)
-    @cython.locals(lo="long long", hi="long long")
-    cdef int _put(self, Py_ssize_t k, long long v) except -1
     @cython.locals(hits=tuple, hit=tuple, e=Entry, k=Py_ssize_t)
     cpdef pub_flush(self)
+
+
+@cython.locals(lo="long long", hi="long long")
+cdef inline int _put(Drive d, Py_ssize_t k, long long v) except -1

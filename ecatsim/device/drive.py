@@ -43,6 +43,8 @@ _PP, _PV, _HM, _CSP, _CSV, _CST = PP, PV, HM, CSP, CSV, CST
 #: the servo's stop reasons and "no window" (6065h FFFFFFFFh) as C integers, likewise
 _STOP_FOLLOWING, _STOP_OVERCURRENT, _STOP_INDEX = STOP_FOLLOWING, STOP_OVERCURRENT, STOP_INDEX
 _NO_WINDOW = 0xFFFFFFFF
+#: the servo's demand kinds as C integers, likewise
+_TORQUE, _VELOCITY, _POSITION = TORQUE, VELOCITY, POSITION
 
 # Statusword bits. Ref: TMC8670 Tables 80-83, 81 (Trinamic bits 14/15).
 SW_VOLTAGE = 0x0010
@@ -136,6 +138,16 @@ def _powered(st: PdsState) -> bool:
 def _no_voltage(st: PdsState) -> bool:
     """``st in _NO_VOLTAGE`` by identity (see _powered)."""
     return st is _NRTSO or st is _SOD or st is _FAULT
+
+
+def _put(d: Drive, k: int, v: int) -> int:
+    """Keep ``v``, clamped to the k-th published entry's range, as the drive's k-th
+    published value (decisions P34, P38); 0 (compiled: an inline C function whose result
+    shows an exception, no test of the thread's error state per call, P51)."""
+    lo = d._pub_lo[k]
+    hi = d._pub_hi[k]
+    d.pub_values[k] = lo if v < lo else hi if v > hi else v
+    return 0
 
 
 def _int_of(e: Entry | None) -> int:
@@ -622,25 +634,25 @@ class Drive(CycleDevice):
         Ref: CiA 402-2 §10-§12."""
         st = self.state
         if not _powered(st):
-            return self._demand(TORQUE, 0.0, 0.0, 0.0)  # voltage off: the motor coasts
+            return self._demand(_TORQUE, 0.0, 0.0, 0.0)  # voltage off: the motor coasts
         if st is not _OE:  # a PdsState member (P23)
             return False  # quick stop / fault reaction ramps
         mode = self.mode
         if mode == _CSP:
             self.p_demand = float(self.q_607a + self.q_60b0)
-            return self._demand(POSITION, self.p_demand, self.v_ff_rpm, self._window())
+            return self._demand(_POSITION, self.p_demand, self.v_ff_rpm, self._window())
         if mode == _CSV:
             v = float(self.q_60ff + self.q_60b1)
             self.v_demand_rpm = v
-            return self._demand(VELOCITY, v, 0.0, 0.0)
+            return self._demand(_VELOCITY, v, 0.0, 0.0)
         if mode == _CST:
-            return self._demand(TORQUE, float(self.q_6071 + self.q_60b2), 0.0, 0.0)
+            return self._demand(_TORQUE, float(self.q_6071 + self.q_60b2), 0.0, 0.0)
         if mode == _PV:
             target = 0.0 if self.prev_cw & 0x0100 else float(self.q_60ff)
-            return self.v_demand_rpm == target and self._demand(VELOCITY, target, 0.0, 0.0)
+            return self.v_demand_rpm == target and self._demand(_VELOCITY, target, 0.0, 0.0)
         if mode in (_PP, _HM):
             return False
-        return self._demand(VELOCITY, 0.0, 0.0, 0.0)
+        return self._demand(_VELOCITY, 0.0, 0.0, 0.0)
 
     def _demand(self, kind: int, ref: float, v_ff: float, window: float) -> bool:
         """Hold a steady demand (see _steady_demand); True."""
@@ -819,16 +831,16 @@ class Drive(CycleDevice):
             ):
                 # the values below as C integers, kept in the drive (P34); the OD entries
                 # get them when something reads the OD, the TxPDO takes them from here (P38)
-                self._put(0, sw)
-                self._put(1, mode)
-                self._put(2, pos_c)
-                self._put(3, _round_c(rpm))
-                self._put(4, _round_c(p_demand))
-                self._put(5, _round_c(v_demand))
-                self._put(6, _round_c(iq))
-                self._put(7, _round_c(iq_ref))
-                self._put(8, _round_c(err))
-                self._put(9, self.fault_code)
+                _put(self, 0, sw)
+                _put(self, 1, mode)
+                _put(self, 2, pos_c)
+                _put(self, 3, _round_c(rpm))
+                _put(self, 4, _round_c(p_demand))
+                _put(self, 5, _round_c(v_demand))
+                _put(self, 6, _round_c(iq))
+                _put(self, 7, _round_c(iq_ref))
+                _put(self, 8, _round_c(err))
+                _put(self, 9, self.fault_code)
                 self.pub_pending = True
                 return
         pos = int(pos_f)
@@ -853,15 +865,6 @@ class Drive(CycleDevice):
                 hi = hit[2]
                 e = hit[0]
                 e.value = lo if v < lo else hi if v > hi else v
-
-    def _put(self, k: int, v: int) -> int:
-        """Keep ``v``, clamped to the k-th published entry's range, as the k-th published
-        value (decisions P34, P38); 0 (compiled: a C result an exception shows in, not a
-        test of the thread's error state per call, P51)."""
-        lo = self._pub_lo[k]
-        hi = self._pub_hi[k]
-        self.pub_values[k] = lo if v < lo else hi if v > hi else v
-        return 0
 
     def pub_flush(self) -> None:
         """Write the values _publish() kept into their OD entries, if they wait for them:
