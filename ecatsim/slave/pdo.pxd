@@ -31,7 +31,8 @@ cdef class PdoImage:
     @cython.locals(entries=tuple, values=tuple, i="Py_ssize_t", e=Entry, dev=CycleDevice,
                    layout=tuple, buf=bytes, q="const unsigned char*", spec="long long",
                    off="Py_ssize_t",
-                   n="long long", raw="long long", k="long long", half="long long")
+                   n="long long", raw="long long", k="long long", half="long long",
+                   byte="long long")
     cpdef void set_outputs(self, object data, long long now_ns) except *
     @cython.locals(dev=CycleDevice)
     cpdef bytes get_inputs(self, long long now_ns)

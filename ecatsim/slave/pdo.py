@@ -425,7 +425,10 @@ class PdoImage:
                     n = (spec >> 1) & 7
                     raw = 0
                     for k in range(n):
-                        raw |= q[off + k] << (8 * k)
+                        # the byte as a C long long before the shift (an unsigned char
+                        # shifted is a C int: bit 31 set made it negative; P51)
+                        byte = q[off + k]
+                        raw |= byte << (8 * k)
                     half = 1  # the sign bit's value: a C long long shifted in the core
                     half <<= 8 * n - 1
                     if spec & 1 and raw >= half:
