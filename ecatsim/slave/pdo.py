@@ -423,12 +423,19 @@ class PdoImage:
                     spec = self._rx_spec[i]
                     off = spec >> 4
                     n = (spec >> 1) & 7
-                    raw = 0
-                    for k in range(n):
-                        # the byte as a C long long before the shift (an unsigned char
-                        # shifted is a C int: bit 31 set made it negative; P51)
-                        byte = q[off + k]
-                        raw |= byte << (8 * k)
+                    # 1, 2 or 4 bytes (the layout holds no more), each as a C long long
+                    # before its shift (an unsigned char shifted is a C int, whose bit 31
+                    # made a sign; P51)
+                    raw = q[off]
+                    if n > 1:
+                        byte = q[off + 1]
+                        raw |= byte << 8
+                        if n > 2:
+                            byte = q[off + 2]
+                            raw |= byte << 16
+                            if n > 3:
+                                byte = q[off + 3]
+                                raw |= byte << 24
                     half = 1  # the sign bit's value: a C long long shifted in the core
                     half <<= 8 * n - 1
                     if spec & 1 and raw >= half:
@@ -528,8 +535,13 @@ class PdoImage:
                     return None
             elif c < 0 or c >= half << 1:
                 return None
-            for k in range(n):
-                p[off + k] = (c >> (8 * k)) & 0xFF
+            p[off] = c & 0xFF  # 1, 2 or 4 bytes (the layout holds no more), unrolled
+            if n > 1:
+                p[off + 1] = (c >> 8) & 0xFF
+                if n > 2:
+                    p[off + 2] = (c >> 16) & 0xFF
+                    if n > 3:
+                        p[off + 3] = (c >> 24) & 0xFF
         # compiled, the pointer's slice is made as bytes at once, with no call and no
         # buffer export (P51); in Python it is a bytearray, which pack_inputs makes bytes
         return p[: len(out)]
