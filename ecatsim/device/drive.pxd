@@ -17,22 +17,28 @@ cdef long long SW_OMS12, SW_OMS13, SW_MOTOR_ACTIVE, SW_DIRECTION
 cdef long long _PP, _PV, _HM, _CSP, _CSV, _CST
 cdef int _STOP_FOLLOWING, _STOP_OVERCURRENT, _STOP_INDEX
 cdef long long _NO_WINDOW
+cdef int _TORQUE, _VELOCITY, _POSITION
+# the enum members the cycle compares by identity, as C globals (no module dict lookup)
+cdef object _OE, _QSA, _FRA, _FAULT, _SOD, _SO, _NRTSO, _AL_OP, _FAULT_RESET
+cdef object _SWITCH_ON_ENABLE
 cdef tuple _STATUS_BITS
 
 
 cdef object _round(double x)
 @cython.locals(k="long long", f=double)
-cdef long long _round_c(double x)
-cdef bint _small(double x)
+# inline (Cython warns that a declaration should not say so; it makes them C inline
+# functions, which the per-cycle callers absorb: decision P51)
+cdef inline long long _round_c(double x) noexcept
+cdef inline bint _small(double x) noexcept
 @cython.locals(k="long long")
-cdef long long _trunc_c(double x)
+cdef inline long long _trunc_c(double x) noexcept
 
 
-cdef bint _powered(object st)
-cdef bint _no_voltage(object st)
+cdef inline bint _powered(object st) noexcept
+cdef inline bint _no_voltage(object st) noexcept
 
 
-cdef long long _int_of(Entry e) except? -1
+cdef inline long long _int_of(Entry e) except? -1
 
 
 cdef class Drive(CycleDevice):
@@ -41,6 +47,10 @@ cdef class Drive(CycleDevice):
     cdef public object _published
     cdef public object _snapshot_hits
     cdef public object _control_hits
+    cdef bint _bound
+    cdef Entry _c_6040, _c_6060, _c_607a
+    cdef Entry _s_60ff, _s_6083, _s_6084, _s_607a, _s_60b0, _s_60b1, _s_6071, _s_60b2
+    cdef Entry _s_6065, _s_6085, _s_605a
     cdef public bint _pub_c
     cdef public long long[::1] _pub_lo, _pub_hi
     cdef public long long q_60ff, q_6083, q_6084, q_607a, q_60b0, q_60b1, q_6071, q_60b2
@@ -55,7 +65,9 @@ cdef class Drive(CycleDevice):
     cdef public object emcy
     cdef public object emcy_clear
     cdef public object state
-    cdef public object t_ns
+    cdef long long _t, _ltn
+    cdef double _lt
+    cdef bint _t_set, _lt_set, _ltn_set
     cdef public long long prev_cw
     cdef public long long mode
     cdef object _al_state
@@ -63,8 +75,6 @@ cdef class Drive(CycleDevice):
     cdef public double v_demand_rpm
     cdef public double p_demand
     cdef public double v_ff_rpm
-    cdef public object last_target
-    cdef public object last_t_ns
     cdef public bint set_point_ack
     cdef public bint homing_done
     cdef public bint homing_active
@@ -83,29 +93,30 @@ cdef class Drive(CycleDevice):
     cpdef object _v(self, int index, int sub=*)
     @cython.locals(hits=tuple)
     cpdef tuple _controls(self)
+    @cython.locals(c=tuple, hits=tuple)
+    cpdef _bind(self)
 
     @cython.locals(target=double, dt=double, now="long long", then="long long", prev=double,
                    ppr=double)
-    cpdef outputs_applied(self, now_ns)
+    cpdef outputs_applied(self, long long now_ns)
 
-    cpdef update_inputs(self, now_ns)
+    cpdef update_inputs(self, long long now_ns)
 
     @cython.locals(dt_ns="long long", n="long long", left="long long", t="long long",
                    now="long long", start="long long",
                    done="long long", more="long long", steps="long long", why=int,
                    kind=int, ref=double, v_ff=double, window=double, s=Servo)
-    cpdef advance(self, now_ns)
+    cpdef advance(self, long long now_ns)
 
     cpdef double _trip(self)
     cpdef double _window(self)
-    @cython.locals(hits=tuple)
     cpdef _snapshot(self)
 
     @cython.locals(mode="long long", v=double, target=double)
     cpdef bint _steady_demand(self) except -1
     cdef bint _demand(self, int kind, double ref, double v_ff, double window)
 
-    @cython.locals(cw="long long", mode="long long", hits=tuple)
+    @cython.locals(cw="long long", mode="long long")
     cpdef _controlword(self)
 
     @cython.locals(s=Servo, sw="long long", rpm=double, mode="long long", hits=tuple,
@@ -113,7 +124,9 @@ cdef class Drive(CycleDevice):
                    pos_c="long long", p_demand=double, err=double, v_demand=double,
                    iq=double, iq_ref=double, si="long long")
     cpdef _publish(self)
-    @cython.locals(lo="long long", hi="long long")
-    cdef void _put(self, Py_ssize_t k, long long v) except *
     @cython.locals(hits=tuple, hit=tuple, e=Entry, k=Py_ssize_t)
     cpdef pub_flush(self)
+
+
+@cython.locals(lo="long long", hi="long long")
+cdef inline int _put(Drive d, Py_ssize_t k, long long v) except -1

@@ -43,6 +43,8 @@ _PP, _PV, _HM, _CSP, _CSV, _CST = PP, PV, HM, CSP, CSV, CST
 #: the servo's stop reasons and "no window" (6065h FFFFFFFFh) as C integers, likewise
 _STOP_FOLLOWING, _STOP_OVERCURRENT, _STOP_INDEX = STOP_FOLLOWING, STOP_OVERCURRENT, STOP_INDEX
 _NO_WINDOW = 0xFFFFFFFF
+#: the servo's demand kinds as C integers, likewise
+_TORQUE, _VELOCITY, _POSITION = TORQUE, VELOCITY, POSITION
 
 # Statusword bits. Ref: TMC8670 Tables 80-83, 81 (Trinamic bits 14/15).
 SW_VOLTAGE = 0x0010
@@ -138,6 +140,16 @@ def _no_voltage(st: PdsState) -> bool:
     return st is _NRTSO or st is _SOD or st is _FAULT
 
 
+def _put(d: Drive, k: int, v: int) -> int:
+    """Keep ``v``, clamped to the k-th published entry's range, as the drive's k-th
+    published value (decisions P34, P38); 0 (compiled: an inline C function whose result
+    shows an exception, no test of the thread's error state per call, P51)."""
+    lo = d._pub_lo[k]
+    hi = d._pub_hi[k]
+    d.pub_values[k] = lo if v < lo else hi if v > hi else v
+    return 0
+
+
 def _int_of(e: Entry | None) -> int:
     """An entry's value if it is an int, else 0 (no entry: 0)."""
     if e is None:
@@ -167,6 +179,23 @@ class Drive(CycleDevice):
         #: the entries of SNAPSHOT and CONTROLS (None: not in the OD), looked up once
         self._snapshot_hits: tuple[Entry | None, ...] | None = None
         self._control_hits: tuple[Entry | None, ...] | None = None
+        #: the same entries one by one: typed fields in the compiled core, read without a
+        #: tuple's item and type test each cycle (decision P51); set by _bind()
+        self._bound = False
+        self._c_6040: Entry | None = None
+        self._c_6060: Entry | None = None
+        self._c_607a: Entry | None = None
+        self._s_60ff: Entry | None = None
+        self._s_6083: Entry | None = None
+        self._s_6084: Entry | None = None
+        self._s_607a: Entry | None = None
+        self._s_60b0: Entry | None = None
+        self._s_60b1: Entry | None = None
+        self._s_6071: Entry | None = None
+        self._s_60b2: Entry | None = None
+        self._s_6065: Entry | None = None
+        self._s_6085: Entry | None = None
+        self._s_605a: Entry | None = None
         #: the published entries' ranges as C integers (decision P34); set with _published
         self._pub_c = False
         self._pub_lo = self._pub_hi = array("q")
@@ -191,7 +220,14 @@ class Drive(CycleDevice):
         self.emcy = emcy
         self.emcy_clear = emcy_clear
         self.state = _SOD  # transitions 0 and 1 at power-on
-        self.t_ns: int | None = None
+        #: t_ns, last_target and last_t_ns as C numbers with a flag for None (decision
+        #: P51: no int or float object made per cycle); the properties give the values
+        self._t = 0
+        self._t_set = False
+        self._lt = 0.0
+        self._lt_set = False
+        self._ltn = 0
+        self._ltn_set = False
         self.prev_cw = 0
         self.mode = 0
         self._al_state = AlState.INIT
@@ -201,8 +237,6 @@ class Drive(CycleDevice):
         self.v_demand_rpm = 0.0  # pv / stop ramps
         self.p_demand = 0.0  # counts, position modes
         self.v_ff_rpm = 0.0
-        self.last_target: float | None = None
-        self.last_t_ns: int | None = None
         self.set_point_ack = False
         self.homing_done = False
         self.homing_active = False
@@ -260,6 +294,19 @@ class Drive(CycleDevice):
             hits = self._control_hits = tuple([self._entry_only(i) for i in CONTROLS])
         return hits
 
+    def _bind(self) -> None:
+        """The entries of CONTROLS and SNAPSHOT into their fields (looked up once: the
+        OD's entries are fixed objects, only their values change)."""
+        c = self._controls()
+        self._c_6040, self._c_6060, self._c_607a = c[0], c[1], c[2]
+        hits = self._snapshot_hits
+        if hits is None:
+            hits = self._snapshot_hits = tuple([self._entry_only(i) for i in SNAPSHOT])
+        self._s_60ff, self._s_6083, self._s_6084, self._s_607a = hits[0], hits[1], hits[2], hits[3]
+        self._s_60b0, self._s_60b1, self._s_6071, self._s_60b2 = hits[4], hits[5], hits[6], hits[7]
+        self._s_6065, self._s_6085, self._s_605a = hits[8], hits[9], hits[10]
+        self._bound = True
+
     def _set(self, index: int, value: int, sub: int = 0) -> None:
         hit = self._entry(index, sub)
         if hit is not None:
@@ -314,20 +361,22 @@ class Drive(CycleDevice):
         """New RxPDO values: advance to now, then act on controlword and targets."""
         self.advance(now_ns)
         if self.mode == _CSP:
-            target = float(_int_of(self._controls()[2]))  # 607Ah
-            last_target = self.last_target
-            last_t_ns = self.last_t_ns
-            if last_target is not None and last_t_ns is not None:
+            if not self._bound:
+                self._bind()
+            target = float(_int_of(self._c_607a))  # 607Ah
+            if self._lt_set and self._ltn_set:
                 # C integers and doubles in the compiled core, Python's results (P23)
                 now = now_ns
-                then = last_t_ns
+                then = self._ltn
                 dt = (now - then) * 1e-9
                 if dt > 0:
-                    prev = last_target
+                    prev = self._lt
                     ppr = self._ppr
                     self.v_ff_rpm = (target - prev) / dt * 60.0 / ppr
-            self.last_target = target
-            self.last_t_ns = now_ns
+            self._lt = target
+            self._lt_set = True
+            self._ltn = now_ns
+            self._ltn_set = True
         self._controlword()
 
     def update_inputs(self, now_ns: int) -> None:
@@ -357,6 +406,36 @@ class Drive(CycleDevice):
             self._v(0x6071) if mode == CST else round(self.servo.iq_ref_ma),
             self._v(0x6077),
         )
+
+    @property
+    def t_ns(self) -> int | None:
+        """The time the drive has advanced to (None: not yet)."""
+        return self._t if self._t_set else None
+
+    @t_ns.setter
+    def t_ns(self, t: int | None) -> None:
+        self._t_set = t is not None
+        self._t = t if t is not None else 0
+
+    @property
+    def last_target(self) -> float | None:
+        """The csp position target of the last cycle (None: none since enabling)."""
+        return self._lt if self._lt_set else None
+
+    @last_target.setter
+    def last_target(self, v: float | None) -> None:
+        self._lt_set = v is not None
+        self._lt = v if v is not None else 0.0
+
+    @property
+    def last_t_ns(self) -> int | None:
+        """The time of that target (None: none yet)."""
+        return self._ltn if self._ltn_set else None
+
+    @last_t_ns.setter
+    def last_t_ns(self, t: int | None) -> None:
+        self._ltn_set = t is not None
+        self._ltn = t if t is not None else 0
 
     @property
     def al_state(self) -> AlState:
@@ -404,11 +483,12 @@ class Drive(CycleDevice):
 
     # ----------------------------------------------------------------- controlword
     def _controlword(self) -> None:
-        hits = self._controls()
-        cw = _int_of(hits[0])  # 6040h
+        if not self._bound:
+            self._bind()
+        cw = _int_of(self._c_6040)  # 6040h
         cmd = cia402.decode(cw, self.prev_cw)
         self.prev_cw = cw
-        mode = _int_of(hits[1])  # 6060h
+        mode = _int_of(self._c_6060)  # 6060h
         if mode != self.mode and mode in MODES:
             self._mode_change(mode)
         if not self._al_op:
@@ -465,13 +545,13 @@ class Drive(CycleDevice):
     # ----------------------------------------------------------------- time
     def advance(self, now_ns: int) -> None:
         """Integrate on fixed substeps up to ``now_ns`` (never per frame)."""
-        t0 = self.t_ns
-        if t0 is None:
-            self.t_ns = now_ns
+        if not self._t_set:
+            self._t = now_ns
+            self._t_set = True
             return
         # the times as C integers in the compiled core (decision P23)
         now = now_ns
-        start = t0
+        start = self._t
         dt_ns = self.substep_ns
         n = (now - start) // dt_ns
         if n <= 0:
@@ -483,7 +563,7 @@ class Drive(CycleDevice):
             and s.iq_ma == 0.0
             and abs(self.params.load) <= self.params.coulomb
         ):
-            self.t_ns = start + n * dt_ns  # de-energised at rest: nothing moves, skip exactly
+            self._t = start + n * dt_ns  # de-energised at rest: nothing moves, skip exactly
             return
         n = min(n, 200_000)  # a long pause is caught up at most 20 s
         self._snapshot()
@@ -500,10 +580,13 @@ class Drive(CycleDevice):
             else:  # the demand moves every substep (profiles, ramps)
                 kind, ref, v_ff, window = self._substep_demand(self.params.substep)
                 steps = 1
-            done, why = s.run(steps, kind, ref, v_ff, window, self._trip(), index is not None)
+            # Servo._run: the substeps done, why it stopped in s.stopped (no tuple, P51)
+            done = s._run(steps, kind, ref, v_ff, window, self._trip(), index is not None)
+            why = s.stopped
             if why == _STOP_FOLLOWING:
                 self._fault("following_error")  # this substep still runs on the demand
-                more, why = s.run(1, kind, ref, v_ff, 0.0, self._trip(), index is not None)
+                more = s._run(1, kind, ref, v_ff, 0.0, self._trip(), index is not None)
+                why = s.stopped
                 done += more
             left -= done
             t += done * dt_ns
@@ -513,7 +596,7 @@ class Drive(CycleDevice):
                 self._index_pulse(index, t)
         if self.state is _OE and self.mode != _PP and self.mode != _CSP:
             self.p_demand = s.angle / TWO_PI * self.params.ppr  # follows the actual
-        self.t_ns = start + n * dt_ns if n < 200_000 else now
+        self._t = start + n * dt_ns if n < 200_000 else now
 
     def _trip(self) -> float:
         """The current above which a substep ends in an overcurrent fault."""
@@ -530,20 +613,19 @@ class Drive(CycleDevice):
     def _snapshot(self) -> None:
         """The OD values the substeps use. They only change between advance() calls (PDO
         outputs and SDO writes are applied after advancing), so read them once."""
-        hits = self._snapshot_hits
-        if hits is None:
-            hits = self._snapshot_hits = tuple([self._entry_only(i) for i in SNAPSHOT])
-        self.q_60ff = _int_of(hits[0])
-        self.q_6083 = _int_of(hits[1])
-        self.q_6084 = _int_of(hits[2])
-        self.q_607a = _int_of(hits[3])
-        self.q_60b0 = _int_of(hits[4])
-        self.q_60b1 = _int_of(hits[5])
-        self.q_6071 = _int_of(hits[6])
-        self.q_60b2 = _int_of(hits[7])
-        self.q_6065 = _int_of(hits[8])
-        self.q_6085 = _int_of(hits[9])
-        self.q_605a = _int_of(hits[10])
+        if not self._bound:
+            self._bind()
+        self.q_60ff = _int_of(self._s_60ff)
+        self.q_6083 = _int_of(self._s_6083)
+        self.q_6084 = _int_of(self._s_6084)
+        self.q_607a = _int_of(self._s_607a)
+        self.q_60b0 = _int_of(self._s_60b0)
+        self.q_60b1 = _int_of(self._s_60b1)
+        self.q_6071 = _int_of(self._s_6071)
+        self.q_60b2 = _int_of(self._s_60b2)
+        self.q_6065 = _int_of(self._s_6065)
+        self.q_6085 = _int_of(self._s_6085)
+        self.q_605a = _int_of(self._s_605a)
 
     def _steady_demand(self) -> bool:
         """Whether the servo demand stays the same over the substeps to come (the OD
@@ -552,25 +634,25 @@ class Drive(CycleDevice):
         Ref: CiA 402-2 §10-§12."""
         st = self.state
         if not _powered(st):
-            return self._demand(TORQUE, 0.0, 0.0, 0.0)  # voltage off: the motor coasts
+            return self._demand(_TORQUE, 0.0, 0.0, 0.0)  # voltage off: the motor coasts
         if st is not _OE:  # a PdsState member (P23)
             return False  # quick stop / fault reaction ramps
         mode = self.mode
         if mode == _CSP:
             self.p_demand = float(self.q_607a + self.q_60b0)
-            return self._demand(POSITION, self.p_demand, self.v_ff_rpm, self._window())
+            return self._demand(_POSITION, self.p_demand, self.v_ff_rpm, self._window())
         if mode == _CSV:
             v = float(self.q_60ff + self.q_60b1)
             self.v_demand_rpm = v
-            return self._demand(VELOCITY, v, 0.0, 0.0)
+            return self._demand(_VELOCITY, v, 0.0, 0.0)
         if mode == _CST:
-            return self._demand(TORQUE, float(self.q_6071 + self.q_60b2), 0.0, 0.0)
+            return self._demand(_TORQUE, float(self.q_6071 + self.q_60b2), 0.0, 0.0)
         if mode == _PV:
             target = 0.0 if self.prev_cw & 0x0100 else float(self.q_60ff)
-            return self.v_demand_rpm == target and self._demand(VELOCITY, target, 0.0, 0.0)
+            return self.v_demand_rpm == target and self._demand(_VELOCITY, target, 0.0, 0.0)
         if mode in (_PP, _HM):
             return False
-        return self._demand(VELOCITY, 0.0, 0.0, 0.0)
+        return self._demand(_VELOCITY, 0.0, 0.0, 0.0)
 
     def _demand(self, kind: int, ref: float, v_ff: float, window: float) -> bool:
         """Hold a steady demand (see _steady_demand); True."""
@@ -723,7 +805,7 @@ class Drive(CycleDevice):
                 sw |= SW_OMS12  # drive follows the command value
         if abs(s.iq_ref_ma) >= s.i_limit_ma - 1e-6 and _powered(st):
             sw |= SW_INTERNAL_LIMIT
-        if "following_error" in self.active_faults:
+        if self.active_faults and "following_error" in self.active_faults:
             sw |= SW_OMS13
         if abs(rpm) >= 1.0:
             sw |= SW_MOTOR_ACTIVE
@@ -749,16 +831,16 @@ class Drive(CycleDevice):
             ):
                 # the values below as C integers, kept in the drive (P34); the OD entries
                 # get them when something reads the OD, the TxPDO takes them from here (P38)
-                self._put(0, sw)
-                self._put(1, mode)
-                self._put(2, pos_c)
-                self._put(3, _round_c(rpm))
-                self._put(4, _round_c(p_demand))
-                self._put(5, _round_c(v_demand))
-                self._put(6, _round_c(iq))
-                self._put(7, _round_c(iq_ref))
-                self._put(8, _round_c(err))
-                self._put(9, self.fault_code)
+                _put(self, 0, sw)
+                _put(self, 1, mode)
+                _put(self, 2, pos_c)
+                _put(self, 3, _round_c(rpm))
+                _put(self, 4, _round_c(p_demand))
+                _put(self, 5, _round_c(v_demand))
+                _put(self, 6, _round_c(iq))
+                _put(self, 7, _round_c(iq_ref))
+                _put(self, 8, _round_c(err))
+                _put(self, 9, self.fault_code)
                 self.pub_pending = True
                 return
         pos = int(pos_f)
@@ -783,13 +865,6 @@ class Drive(CycleDevice):
                 hi = hit[2]
                 e = hit[0]
                 e.value = lo if v < lo else hi if v > hi else v
-
-    def _put(self, k: int, v: int) -> None:
-        """Keep ``v``, clamped to the k-th published entry's range, as the k-th published
-        value (decisions P34, P38)."""
-        lo = self._pub_lo[k]
-        hi = self._pub_hi[k]
-        self.pub_values[k] = lo if v < lo else hi if v > hi else v
 
     def pub_flush(self) -> None:
         """Write the values _publish() kept into their OD entries, if they wait for them:

@@ -5,14 +5,19 @@ cimport cython
 
 
 cdef double _TWO_PI, _RPM
+cdef int _TORQUE, _POSITION, _STOP_NONE, _STOP_FOLLOWING, _STOP_OVERCURRENT, _STOP_INDEX
 
 
 cdef class Gains:
     cdef public double cur_kp, cur_ki, flux_kp, flux_ki, vel_kp, vel_ki, pos_kp
 
 
+@cython.final
 cdef class Servo:
     cdef public object p
+    cdef public double _dt, _ppr, _kt, _load, _viscous, _coulomb, _inertia, _vmax_v
+    cdef public double _resistance
+    cdef public int stopped
     cdef public Gains gains
     cdef public double angle
     cdef public double omega
@@ -26,12 +31,13 @@ cdef class Servo:
     cdef public double decay
     cdef public double i_limit_ma
     cdef public double vel_limit_rpm
-    cdef public tuple motor
 
     cpdef object read_counts(self)
     cpdef double floor_counts(self) except? -1.0
     cpdef double read_rpm(self)
 
+    cpdef tuple run(self, long n, int kind, double ref, double v_ff_rpm=*, double window=*,
+                    double i_trip_ma=*, bint index=*)
     @cython.locals(
         dt=double, ppr=double, kt=double, load=double, viscous=double, coulomb=double,
         inertia=double, vmax_v=double, resistance=double, decay=double, lim=double,
@@ -39,11 +45,11 @@ cdef class Servo:
         cur_ki=double, angle=double, omega=double, iq=double, iq_integ=double, integ=double,
         iq_ref=double, flux=bint, done=long, why=int, out=double, err_p=double, v_ref=double,
         err=double, emf=double, err_a=double, v=double, torque=double, drive=double,
-        new=double, rev=double, two_pi=double, rpm=double, torque_kind=int, position_kind=int,
+        new=double, rev=double, torque_kind=int, position_kind=int,
         g=Gains,
     )
-    cpdef tuple run(self, long n, int kind, double ref, double v_ff_rpm=*, double window=*,
-                    double i_trip_ma=*, bint index=*)
+    cpdef long _run(self, long n, int kind, double ref, double v_ff_rpm, double window,
+                    double i_trip_ma, bint index) except? -1
 
 
 @cython.locals(k="long long")

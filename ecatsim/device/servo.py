@@ -23,6 +23,14 @@ _RPM = RPM
 # What Servo.run's reference is, and why it stopped early.
 TORQUE, VELOCITY, POSITION = 0, 1, 2
 STOP_NONE, STOP_FOLLOWING, STOP_OVERCURRENT, STOP_INDEX = 0, 1, 2, 3
+#: the same as C integers in the compiled core (a module global is a dict lookup there)
+_TORQUE, _POSITION = TORQUE, POSITION
+_STOP_NONE, _STOP_FOLLOWING, _STOP_OVERCURRENT, _STOP_INDEX = (
+    STOP_NONE,
+    STOP_FOLLOWING,
+    STOP_OVERCURRENT,
+    STOP_INDEX,
+)
 
 
 @dataclass(frozen=True, slots=True)
@@ -95,6 +103,15 @@ class Servo:
     """State and one substep of the motor and its loops."""
 
     __slots__ = (
+        "_coulomb",
+        "_dt",
+        "_inertia",
+        "_kt",
+        "_load",
+        "_ppr",
+        "_resistance",
+        "_viscous",
+        "_vmax_v",
         "angle",
         "decay",
         "gains",
@@ -106,9 +123,9 @@ class Servo:
         "iq_integ",
         "iq_ma",
         "iq_ref_ma",
-        "motor",
         "omega",
         "p",
+        "stopped",
         "vel_limit_rpm",
     )
 
@@ -126,20 +143,37 @@ class Servo:
         self.integ = 0.0
         # R-L winding over one substep: i' = i*decay + (1 - decay) * v / R
         self.decay = math.exp(-params.resistance * params.substep / params.inductance)
-        #: the constants of run()'s loop, from the (frozen) motor parameters
-        self.motor = (
-            params.substep,
-            float(params.ppr),
-            params.kt,
-            params.load,
-            params.viscous,
-            params.coulomb,
-            params.inertia,
-            params.supply_voltage,
-            params.resistance,
-        )
+        # the constants of run()'s loop, from the (frozen) motor parameters: C doubles in
+        # the compiled core, read as fields (no tuple unpacked per call; decision P51)
+        self._dt = float(params.substep)
+        self._ppr = float(params.ppr)
+        self._kt = float(params.kt)
+        self._load = float(params.load)
+        self._viscous = float(params.viscous)
+        self._coulomb = float(params.coulomb)
+        self._inertia = float(params.inertia)
+        self._vmax_v = float(params.supply_voltage)
+        self._resistance = float(params.resistance)
         self.i_limit_ma = float(params.max_current_ma)
         self.vel_limit_rpm = 1e9
+        #: why the last _run() stopped early (STOP_NONE: it did every substep)
+        self.stopped = STOP_NONE
+
+    @property
+    def motor(self) -> tuple[float, ...]:
+        """The constants of run()'s loop: substep, ppr, kt, load, viscous, coulomb,
+        inertia, supply voltage, resistance."""
+        return (
+            self._dt,
+            self._ppr,
+            self._kt,
+            self._load,
+            self._viscous,
+            self._coulomb,
+            self._inertia,
+            self._vmax_v,
+            self._resistance,
+        )
 
     # ----------------------------------------------------------------- feedback
     @property
@@ -158,7 +192,7 @@ class Servo:
 
     def floor_counts(self) -> float:
         """``counts`` as a whole float (a C double to the compiled drive, no int object)."""
-        return _floor(self.angle / _TWO_PI * self.motor[1])  # motor[1]: float(ppr)
+        return _floor(self.angle / _TWO_PI * self._ppr)
 
     def read_rpm(self) -> float:
         """``rpm`` as a method (see read_counts)."""
@@ -208,7 +242,7 @@ class Servo:
         index: bool = False,
     ) -> tuple[int, int]:
         """Up to ``n`` substeps with a constant demand; returns (substeps done, why it
-        stopped early or STOP_NONE).
+        stopped early or STOP_NONE): ``_run`` with its reason as a tuple.
 
         ``kind`` says what ``ref`` is: TORQUE (current mA), VELOCITY (rpm, through the
         velocity PI) or POSITION (counts, through the position P with velocity feed-forward
@@ -223,7 +257,31 @@ class Servo:
         this is the frame path's largest cost per drive.
         Ref: TMC8670 §5.1.7-5.1.10; decisions D15, P2.
         """
-        dt, ppr, kt, load, viscous, coulomb, inertia, vmax_v, resistance = self.motor
+        done = self._run(n, kind, ref, v_ff_rpm, window, i_trip_ma, index)
+        return done, self.stopped
+
+    def _run(
+        self,
+        n: int,
+        kind: int,
+        ref: float,
+        v_ff_rpm: float,
+        window: float,
+        i_trip_ma: float,
+        index: bool,
+    ) -> int:
+        """run() returning the substeps done, its reason to stop in ``stopped``: a C call
+        with C results in the compiled core, no tuple per call (decision P51).
+        Ref: TMC8670 §5.1.7-5.1.10."""
+        dt = self._dt
+        ppr = self._ppr
+        kt = self._kt
+        load = self._load
+        viscous = self._viscous
+        coulomb = self._coulomb
+        inertia = self._inertia
+        vmax_v = self._vmax_v
+        resistance = self._resistance
         g = self.gains
         decay = self.decay
         lim = self.i_limit_ma
@@ -241,27 +299,27 @@ class Servo:
         iq_ref = self.iq_ref_ma
         flux = bool(self.id_ref_ma or self.id_ma)
         # the module's constants as locals (C constants in the compiled core)
-        two_pi = TWO_PI
-        rpm = RPM
-        torque_kind = TORQUE
-        position_kind = POSITION
+        torque_kind = _TORQUE
+        position_kind = _POSITION
         done = 0
-        why = STOP_NONE
+        why = _STOP_NONE
         while done < n:
             if kind == torque_kind:
                 out = ref
             else:
                 if kind == position_kind:
-                    err_p = ref - angle / two_pi * ppr
+                    # 2 pi and RPM as literals (the same doubles as TWO_PI, RPM: a test
+                    # says so): compiled, no test for a zero divisor per substep (P51)
+                    err_p = ref - angle / 6.283185307179586 * ppr
                     if window and abs(err_p) > window:
-                        why = STOP_FOLLOWING
+                        why = _STOP_FOLLOWING
                         break
                     v_ref = pos_kp * err_p + v_ff_rpm
                 else:
                     v_ref = ref
                 # velocity PI, anti-windup by clamping
                 v_ref = -vlim if v_ref < -vlim else vlim if v_ref > vlim else v_ref
-                err = v_ref - omega / rpm
+                err = v_ref - omega / 0.10471975511965977
                 out = vel_kp * err + integ
                 if -lim < out < lim:
                     integ += vel_ki * err * dt
@@ -294,15 +352,15 @@ class Servo:
             new = omega + drive / inertia * dt
             if omega != 0.0 and (new > 0) != (omega > 0) and abs(torque - load) <= coulomb:
                 new = 0.0  # friction stops the motor, it does not reverse it
-            rev = _floor(angle / two_pi) if index else 0
+            rev = _floor(angle / 6.283185307179586) if index else 0
             omega = new
             angle += omega * dt
             done += 1
             if abs(iq) > i_trip_ma:
-                why = STOP_OVERCURRENT
+                why = _STOP_OVERCURRENT
                 break
-            if index and _floor(angle / two_pi) != rev:
-                why = STOP_INDEX
+            if index and _floor(angle / 6.283185307179586) != rev:
+                why = _STOP_INDEX
                 break
         self.angle = angle
         self.omega = omega
@@ -310,7 +368,8 @@ class Servo:
         self.iq_integ = iq_integ
         self.integ = integ
         self.iq_ref_ma = iq_ref
-        return done, why
+        self.stopped = why
+        return done
 
 
 def _floor(x: float) -> float:

@@ -9,11 +9,12 @@ from ecatsim.slave.od cimport Entry
 cdef class CycleDevice:
     cdef public long long[::1] pub_values
     cdef public bint pub_pending
-    cpdef outputs_applied(self, now_ns)
-    cpdef update_inputs(self, now_ns)
+    cpdef outputs_applied(self, long long now_ns)
+    cpdef update_inputs(self, long long now_ns)
     cpdef pub_flush(self)
 
 
+@cython.final
 cdef class PdoImage:
     cdef public object od, rules
     cdef object _device
@@ -23,25 +24,27 @@ cdef class PdoImage:
     cdef Py_ssize_t _rx_need
     cdef tuple _rx_entries, _tx_entries
     cdef tuple _rx_layout, _tx_layout
+    cdef long long[::1] _rx_spec, _tx_spec
     cdef bytearray _tx_buf
     cdef long long[::1] _tx_slot
 
     @cython.locals(entries=tuple, values=tuple, i="Py_ssize_t", e=Entry, dev=CycleDevice,
                    layout=tuple, buf=bytes, q="const unsigned char*", spec="long long",
                    off="Py_ssize_t",
-                   n="long long", raw="long long", k="long long", half="long long")
-    cpdef void set_outputs(self, object data, object now_ns) except *
+                   n="long long", raw="long long", half="long long",
+                   byte="long long")
+    cpdef void set_outputs(self, object data, long long now_ns) except *
     @cython.locals(dev=CycleDevice)
-    cpdef bytes get_inputs(self, object now_ns)
+    cpdef bytes get_inputs(self, long long now_ns)
     @cython.locals(entries=tuple, values=list, i="Py_ssize_t", e=Entry, layout=tuple,
                    dev=CycleDevice)
     cpdef bytes pack_inputs(self)
     @cython.locals(entries=tuple, out=bytearray, p="unsigned char*", i="Py_ssize_t", e=Entry,
                    c="long long",
-                   spec="long long", off="Py_ssize_t", n="long long", k="long long",
-                   half="long long", dev=CycleDevice, slots="long long[::1]",
+                   spec="long long", off="Py_ssize_t", n="long long",
+                   half="long long", dev=CycleDevice,
                    pending=bint, slot="Py_ssize_t")
-    cdef object _pack_small(self, tuple layout)
+    cdef object _pack_small(self)
 
 
 cpdef long long _c_int(object v) except? -1

@@ -384,6 +384,10 @@ class PdoImage:
         self._tx_st = tx.st if tx is not None else None
         self._tx_entries = tx.entries if tx is not None else ()
         self._tx_layout = tx.layout if tx is not None else None
+        #: the layouts as C integers (decision P51: no int object converted per entry and
+        #: cycle); empty where there is no layout
+        self._rx_spec = array("q", self._rx_layout or ())
+        self._tx_spec = array("q", self._tx_layout or ())
         #: the input image the C encoder fills: its padding stays zero, its entries'
         #: bytes are all written by every fill (decision P33)
         self._tx_buf = bytearray(plan.tx_size)
@@ -416,12 +420,22 @@ class PdoImage:
                 buf: bytes = data
                 q = buf  # compiled: a pointer to the bytes (the struct fits: tested above)
                 for i in range(len(entries)):
-                    spec = layout[i]
+                    spec = self._rx_spec[i]
                     off = spec >> 4
                     n = (spec >> 1) & 7
-                    raw = 0
-                    for k in range(n):
-                        raw |= q[off + k] << (8 * k)
+                    # 1, 2 or 4 bytes (the layout holds no more), each as a C long long
+                    # before its shift (an unsigned char shifted is a C int, whose bit 31
+                    # made a sign; P51)
+                    raw = q[off]
+                    if n > 1:
+                        byte = q[off + 1]
+                        raw |= byte << 8
+                        if n > 2:
+                            byte = q[off + 2]
+                            raw |= byte << 16
+                            if n > 3:
+                                byte = q[off + 3]
+                                raw |= byte << 24
                     half = 1  # the sign bit's value: a C long long shifted in the core
                     half <<= 8 * n - 1
                     if spec & 1 and raw >= half:
@@ -459,9 +473,10 @@ class PdoImage:
         st = self._tx_st
         layout = self._tx_layout
         if layout is not None:
-            fast = self._pack_small(layout)
+            fast = self._pack_small()
             if fast is not None:
-                return b"" + fast  # bytes: compiled, no call of the type bytes()
+                # compiled, already bytes; Python's slice of the bytearray is made bytes
+                return fast if type(fast) is bytes else bytes(fast)
         dev = self._dev
         if dev is not None:
             dev.pub_flush()  # the entries as the device has them now (P38)
@@ -484,24 +499,23 @@ class PdoImage:
                     f.write(out, int.from_bytes(f.entry.encode(), "little"))
         return bytes(out)
 
-    def _pack_small(self, layout: tuple[int, ...]) -> bytearray | None:
-        """The struct's bytes in the image buffer, encoded in C where every value is an
+    def _pack_small(self) -> bytes | bytearray | None:
+        """The struct's bytes, encoded in C into the image buffer where every value is an
         int within its field's type; None (the struct path decides) for any other (P33).
         A value the device keeps for its entry is taken from the device (P38)."""
         entries: tuple[Entry, ...] = self._tx_entries
         out = self._tx_buf
         p = out  # compiled: a pointer to the buffer (every field lies inside it)
         dev = self._dev
-        slots = self._tx_slot
-        pending = slots is not None and dev is not None and dev.pub_pending
+        # the device's values where it keeps them (the fields themselves in the compiled
+        # core, not local views acquired and released per call: P51)
+        pending = self._tx_slot is not None and dev is not None and dev.pub_pending
         for i in range(len(entries)):
             slot = -1
             if pending:
-                assert slots is not None and dev is not None
-                slot = slots[i]
+                slot = self._tx_slot[i]  # type: ignore[index]  # not None: pending
             if slot >= 0:
-                assert dev is not None
-                c = dev.pub_values[slot]
+                c = dev.pub_values[slot]  # type: ignore[union-attr]  # not None: pending
             else:
                 e = entries[i]
                 v = e.value
@@ -511,7 +525,7 @@ class PdoImage:
                     c = _c_int(v)
                 except OverflowError:
                     return None
-            spec = layout[i]
+            spec = self._tx_spec[i]
             off = spec >> 4
             n = (spec >> 1) & 7
             half = 1  # the sign bit's value: a C long long shifted in the core
@@ -521,9 +535,16 @@ class PdoImage:
                     return None
             elif c < 0 or c >= half << 1:
                 return None
-            for k in range(n):
-                p[off + k] = (c >> (8 * k)) & 0xFF
-        return out
+            p[off] = c & 0xFF  # 1, 2 or 4 bytes (the layout holds no more), unrolled
+            if n > 1:
+                p[off + 1] = (c >> 8) & 0xFF
+                if n > 2:
+                    p[off + 2] = (c >> 16) & 0xFF
+                    if n > 3:
+                        p[off + 3] = (c >> 24) & 0xFF
+        # compiled, the pointer's slice is made as bytes at once, with no call and no
+        # buffer export (P51); in Python it is a bytearray, which pack_inputs makes bytes
+        return p[: len(out)]
 
     def al_state_changed(self, state: AlState, now_ns: int) -> None:
         self.device.al_state_changed(state, now_ns)

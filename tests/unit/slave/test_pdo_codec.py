@@ -187,6 +187,26 @@ def test_the_c_codec_is_the_struct_and_the_per_entry_path_for_every_mapping() ->
                 assert len(packed[0]) == plan.tx_size
 
 
+def test_unsigned_outputs_with_the_top_bit_set_decode_as_the_struct_does() -> None:
+    """An UNSIGNED8/16/32 output (an ESI slave's digital outputs) with its top bit set is
+    positive in the C codec too: each byte is shifted as a C long long (P51; a byte shifted
+    as a C int made bit 31 a sign). Ref: ETG.1000.6 Table 64."""
+    od = build_od(default_description())
+    img = PdoImage(od, Quiet())  # type: ignore[arg-type]
+    e = od.entry(0x60FD, 0)  # UNSIGNED32
+    assert e.dtype == "UNSIGNED32"
+    fields = (Field(0, 4, e),)
+    plan = Plan(fields, (), 4, 0, codec(fields, 4))
+    assert plan.rx_codec is not None and plan.rx_codec.layout is not None
+    for value in (0x80000001, 0xFFFFFFFF, 0x7FFFFFFF, 0x00800000, 0):
+        got = []
+        for p in (plan, replace(plan, rx_codec=replace(plan.rx_codec, layout=None)), slow(plan)):
+            img.plan = p
+            img.set_outputs(struct.pack("<I", value), 0)
+            got.append(e.value)
+        assert got == [value] * 3, hex(value)
+
+
 def _enabled_drive(od: ObjectDictionary) -> tuple[Drive, PdoImage]:
     """A drive in OP, enabled in csp, behind its process image."""
     d = Drive(od)
