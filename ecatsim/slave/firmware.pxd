@@ -5,6 +5,7 @@
 cimport cython
 
 from ecatsim.esc.pdi cimport Pdi
+from ecatsim.slave.mailbox cimport MailboxEngine
 from ecatsim.slave.pdo cimport PdoImage
 
 # the registers and events, imported through pdi.py: C constants here
@@ -19,7 +20,8 @@ cdef class Firmware:
     cdef public Pdi pdi
     cdef object _app
     cdef PdoImage _pdo
-    cdef public object mailbox, mbx
+    cdef public object mailbox
+    cdef public MailboxEngine mbx
     cdef public long long event_mask
     cdef public object od, emergency, device, coe
     cdef public bint pd_masked
@@ -41,11 +43,11 @@ cdef class Firmware:
     cdef void _latch(self, Pdi p, long long ev, long long now_ns) except *
     @cython.locals(pdo=PdoImage, now_ns="long long")
     cpdef void sync0_run(self) except *
-    @cython.locals(now_ns="long long")
+    @cython.locals(now_ns="long long", mbx=MailboxEngine)
     cpdef void run_latched(self) except *
     @cython.locals(pdo=PdoImage)
     cdef void _apply_outputs(self, object out, long long now_ns) except *
-    @cython.locals(want="long long", pending=bint)
+    @cython.locals(want="long long", pending=bint, mbx=MailboxEngine)
     cpdef void service_mailbox(self, long long ev, long long now_ns) except *
     cpdef void _outputs_received(self, long long now_ns) except *
     @cython.locals(pdo=PdoImage)
