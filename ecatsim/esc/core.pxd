@@ -35,12 +35,18 @@ cdef void _put16(bytearray m, long long a, long long v) except *
 cdef void _put32(bytearray m, long long a, long long v) except *
 
 
+@cython.final
 cdef class FrameContext:
     cdef public long long frame_no
     cdef public long long t_ns, pdi_ns
     cdef public bint irq_dirty, addr_dirty, logical_dirty, topology_dirty, timers_dirty
     cdef public bint latch_wait
-    cdef public set pending, flush
+    cdef public bytearray raised
+    cdef public long long n_raised
+    cdef public set flush
+
+    @cython.locals(r=bytearray)
+    cpdef void set_raised(self, long long position, bint line) except *
 
 
 @cython.final
@@ -100,7 +106,7 @@ cdef class Esc(SmHost):
     # final type may not declare its overrides again here)
     @cython.locals(ebit="long long", abit="long long")
     cpdef void _sm_events(self, long long mirror, long long n, long long changed) except *
-    cpdef void sync0_tick(self, object now_ns) except *
+    cpdef void sync0_tick(self, long long now_ns) except *
     cpdef void sync1_tick(self) except *
     @cython.locals(end="long long", ws="long long", we="long long")
     cpdef int64_t ecat_read(self, long long ado, unsigned char[:] out) except -1

@@ -108,8 +108,9 @@ class FrameContext:
         "irq_dirty",
         "latch_wait",
         "logical_dirty",
+        "n_raised",
         "pdi_ns",
-        "pending",
+        "raised",
         "t_ns",
         "timers_dirty",
         "topology_dirty",
@@ -129,10 +130,33 @@ class FrameContext:
         #: latch its receive time (DcUnit.latch_wait)
         self.latch_wait = False
         self.timers_dirty = True
-        #: positions of ESCs whose PDI interrupt line (AL event & mask) is raised
-        self.pending: set[int] = set()
+        #: the ESCs whose PDI interrupt line (AL event & mask) is raised: a byte per
+        #: position (1: raised) and their number, kept by ``Esc._pdi_irq`` as C fields, not
+        #: a set changed at every line change (decision P43); ``pending`` is the set
+        self.raised = bytearray()
+        self.n_raised = 0
         #: positions of ESCs with an EEPROM image to persist
         self.flush: set[int] = set()
+
+    @property
+    def pending(self) -> set[int]:
+        """Positions of the ESCs whose PDI interrupt line is raised."""
+        if not self.n_raised:
+            return set()
+        return {i for i, v in enumerate(self.raised) if v}
+
+    def set_raised(self, position: int, line: bool) -> None:
+        """Record the PDI interrupt line of the ESC at ``position`` (``Esc._pdi_irq``)."""
+        r = self.raised
+        if position >= len(r):
+            r.extend(bytes(position + 1 - len(r)))
+        if line:
+            if not r[position]:
+                r[position] = 1
+                self.n_raised += 1
+        elif r[position]:
+            r[position] = 0
+            self.n_raised -= 1
 
 
 class Esc(SmHost):
@@ -249,7 +273,7 @@ class Esc(SmHost):
         self.reset_progress_frame = -1
         self.ecat_irq = 0
         #: the PDI interrupt line (IRQ pin), as last set by _pdi_irq: this ESC's position
-        #: is in ctx.pending while it is high
+        #: is raised in ctx (ctx.pending) while it is high
         self.irq_line = False
         #: byte range [wr_s, wr_e) of the register write being processed (for hooks)
         self.wr_s = 0
@@ -290,7 +314,7 @@ class Esc(SmHost):
         self.update_dl_status()
         self.ctx.addr_dirty = self.ctx.logical_dirty = self.ctx.irq_dirty = True
         self.ctx.topology_dirty = True
-        self.ctx.pending.discard(self.position)
+        self.ctx.set_raised(self.position, False)
         self.irq_line = False
         self.ecat_irq = 0
 
@@ -433,15 +457,13 @@ class Esc(SmHost):
 
     def _pdi_irq(self, request: int) -> None:
         """The PDI interrupt: AL event request AND AL event mask. Ref: §5.32, §5.33. The
-        pending set changes only where the line does (most event changes leave it high)."""
+        frame context's record changes only where the line does (most event changes leave
+        it high)."""
         line = (request & _get32(self.mem, AL_EVENT_MASK)) != 0
         if line == self.irq_line:
             return
         self.irq_line = line
-        if line:
-            self.ctx.pending.add(self.position)
-        else:
-            self.ctx.pending.discard(self.position)
+        self.ctx.set_raised(self.position, line)
 
     def memory(self) -> bytearray:
         return self.mem
@@ -964,7 +986,7 @@ class Esc(SmHost):
         """A due SYNC0 pulse: status, and AL event 0x0220.2 if mapped. Ref: §5.32 bit 2."""
         if self.dc.sync0_pulse(now_ns):
             self.set_al_event(EV_SYNC0)
-        if self.dc.next_sync0 is None:
+        if not self.dc.sync0_on:
             self.ctx.timers_dirty = True  # single shot: this ESC's SYNC unit is done
 
     def sync1_tick(self) -> None:

@@ -2,7 +2,8 @@
 # state as typed fields. The clock is C integers: dc.py keeps every value of it modulo
 # 2^64 in the source, so Python's unbounded integers and C's agree; the rates are C
 # doubles computed in the same order as Python (built -ffp-contract=off). The SYNC
-# deadlines stay Python integers (None while off). Decisions P2, P13.
+# deadlines' API stays Python integers (None while off); the SYNC0 pulse's own time is C
+# fields (P42). Decisions P2, P13.
 cimport cython
 # int64_t, not long long, for the methods of a final class with an exception value:
 # Cython 3.3 writes long long's value there as -1LLLL in pure-Python mode
@@ -46,7 +47,10 @@ cdef class DcUnit:
     cdef public double drift_ppm, rate_ppb, spd
     cdef public long long moved_ns, t_ref
     cdef public unsigned long long local_ref
-    cdef public object next_sync0, next_sync1
+    cdef public object next_sync1
+    # the next SYNC0 pulse (next_sync0, a property): C fields (decision P42)
+    cdef public bint sync0_on
+    cdef public unsigned long long sync0_at
 
     cpdef int64_t arrival_ns(self, long long frame_t_ns) except? -1
     cpdef unsigned long long local_time(self, long long t_ns) except? 0
@@ -66,7 +70,7 @@ cdef class DcUnit:
     cpdef object sync0_deadline(self)
     @cython.locals(m=bytearray, n0="unsigned long long", cycle="long long",
                    behind="long long")
-    cpdef bint sync0_pulse(self, object now_ns) except -1
+    cpdef bint sync0_pulse(self, long long now_ns) except -1
     cpdef void _schedule_sync1(self, object sync0_time, object cycle0) except *
     cpdef object sync1_deadline(self)
     @cython.locals(n0="unsigned long long")
