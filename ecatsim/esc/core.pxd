@@ -25,14 +25,15 @@ cdef long long SM_ACT_LATCH_ECAT, SM_ACT_LATCH_PDI, SM_CTRL_WATCHDOG, WD_COUNTER
 cdef long long WD_STATUS_PD
 
 
+# the register helpers inline: a few loads or stores each, called at every event (P46)
 @cython.locals(b3="long long", p="const unsigned char*")
-cdef long long _get32(bytearray m, long long a) except? -1
+cdef inline long long _get32(bytearray m, long long a) except? -1
 @cython.locals(i="long long")
 cdef long long _first(bytes hooked, long long s, long long e) except? -2
 @cython.locals(p="unsigned char*")
-cdef void _put16(bytearray m, long long a, long long v) except *
+cdef inline void _put16(bytearray m, long long a, long long v) except *
 @cython.locals(p="unsigned char*")
-cdef void _put32(bytearray m, long long a, long long v) except *
+cdef inline void _put32(bytearray m, long long a, long long v) except *
 
 
 @cython.final

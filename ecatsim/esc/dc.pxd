@@ -25,14 +25,15 @@ cdef long long ESC_CONFIG, EV_DC_LATCH, EV_SYNC0, EV_SYNC1, SYNC_LATCH_CONFIG
 @cython.locals(k="long long")
 cdef long long _trunc(double x) except? -1
 cdef long long _signed64(unsigned long long x)
+# the register helpers inline (P46)
 @cython.locals(v="unsigned long long", i="long long", p="const unsigned char*")
-cdef unsigned long long _get64(bytearray m, long long a) except? 0
+cdef inline unsigned long long _get64(bytearray m, long long a) except? 0
 @cython.locals(b3="unsigned long long", p="const unsigned char*")
-cdef unsigned long long _get32(bytearray m, long long a) except? 0
+cdef inline unsigned long long _get32(bytearray m, long long a) except? 0
 @cython.locals(i="long long", p="unsigned char*")
-cdef void _put64(bytearray m, long long a, unsigned long long v) except *
+cdef inline void _put64(bytearray m, long long a, unsigned long long v) except *
 @cython.locals(i="long long", p="unsigned char*")
-cdef void _put32(bytearray m, long long a, unsigned long long v) except *
+cdef inline void _put32(bytearray m, long long a, unsigned long long v) except *
 
 
 @cython.final

@@ -16,6 +16,7 @@ cdef long long SM_MBX_OUT, SM_MBX_IN, SM_PD_OUT, SM_PD_IN
 cdef long long EV_SM1, PD_EVENTS, EVENT_MASK, OP_WAIT_NS
 
 
+@cython.final
 cdef class Firmware:
     cdef public Pdi pdi
     cdef object _app
@@ -41,14 +42,15 @@ cdef class Firmware:
     @cython.locals(p=Pdi, ev="long long")
     cpdef bint sync0_latch(self, long long now_ns) except *
     cdef void _latch(self, Pdi p, long long ev, long long now_ns) except *
-    @cython.locals(pdo=PdoImage, now_ns="long long")
+    # the pulse's time as one int object for the image's two calls (decision P45)
+    @cython.locals(pdo=PdoImage, now_ns=object)
     cpdef void sync0_run(self) except *
     @cython.locals(now_ns="long long", mbx=MailboxEngine)
     cpdef void run_latched(self) except *
     @cython.locals(pdo=PdoImage)
-    cdef void _apply_outputs(self, object out, long long now_ns) except *
+    cdef void _apply_outputs(self, object out, object now_ns) except *
     @cython.locals(want="long long", pending=bint, mbx=MailboxEngine)
     cpdef void service_mailbox(self, long long ev, long long now_ns) except *
-    cpdef void _outputs_received(self, long long now_ns) except *
+    cpdef void _outputs_received(self, object now_ns) except *
     @cython.locals(pdo=PdoImage)
-    cpdef void _write_inputs(self, long long now_ns) except *
+    cpdef void _write_inputs(self, object now_ns) except *
