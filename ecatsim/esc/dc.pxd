@@ -78,6 +78,13 @@ cdef class DcUnit:
     cpdef int64_t sync0_deadline_or(self, long long none) except? -1
     cpdef int64_t sync1_deadline_or(self, long long none) except? -1
     cpdef bint sync1_pulse(self) except -1
+    # the latch in unit, driven by a drive's encoder index pulse: C calls (P49)
+    @cython.locals(m=bytearray)
+    cpdef void latch_input(self, long long unit, bint level, long long host_ns) except *
+    @cython.locals(m=bytearray, status="long long", bit="long long", single="long long",
+                   reg="long long")
+    cpdef bint latch_edge(self, long long unit, bint rising, long long host_ns) except -1
+    cpdef bint latch_pdi(self, long long unit) except -1
     @cython.locals(lim="long long", x="long long", m=bytearray)
     cpdef void _speed_counter_diff(self, long long start) except *
     # the register hooks that the frames of every DC cycle run: C calls from the ESC

@@ -289,14 +289,16 @@ class SyncManager:
 
     def read_whole(self) -> bytes:
         """The whole buffer read as the reading side (``reader_read`` of every byte).
-        Compiled, the bytes object is made once from the memory's bytes (decision P28)."""
+        Compiled, the bytes object is made once from the memory's bytes (decision P28) and
+        taken as it is (decision P47)."""
         self._reader_open()
         base = self._base_for_read()
         mem = self.mem
         end = min(base + self.length, len(mem))  # a slice stops at the memory's end
         p = mem  # compiled: a C pointer to the bytes (a slice of it is a bytes object)
-        # b"" + slice: bytes in Python; compiled, the slice itself (bytes(bytes) is a call)
-        data = b"" + p[base:end] if base < end else b""
+        # joined alone: bytes in Python; compiled, the slice itself, returned by the join
+        # without a copy (bytes(bytes) is a call, b"" + bytes takes two buffer views)
+        data = b"".join((p[base:end],)) if base < end else b""
         self._reader_access(True, True)
         return data
 
