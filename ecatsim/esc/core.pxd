@@ -21,7 +21,7 @@ cdef long long DL_STATUS, ECAT_EV_AL_STATUS, ECAT_EV_DL_STATUS, ECAT_EV_SM0, ECA
 cdef long long ECAT_EVENT_REQUEST, ECAT_PU_ERROR_COUNTER, ESC_CONFIG, EV_AL_CONTROL, EV_SM0
 cdef long long EV_SYNC0, EV_SYNC1, EV_WATCHDOG_PD, LOST_LINK_COUNTER, N_SM, PDI_ERROR_CODE
 cdef long long PDI_ERROR_COUNTER, PDRAM_END, PDRAM_START, REGISTER_END, RX_ERROR_COUNTER
-cdef long long SM_ACT_LATCH_ECAT, SM_ACT_LATCH_PDI, SM_CTRL_WATCHDOG, WD_COUNTER_PDI
+cdef long long SM_ACT_LATCH_ECAT, SM_ACT_LATCH_PDI, WD_COUNTER_PDI
 cdef long long WD_STATUS_PD
 
 
@@ -47,7 +47,7 @@ cdef class FrameContext:
     cdef public set flush
 
     # noexcept: the event paths below only move bits in memory and these fields (P48)
-    @cython.locals(r=bytearray)
+    @cython.locals(r=bytearray, v="long long")
     cpdef void set_raised(self, long long position, bint line) noexcept
 
 

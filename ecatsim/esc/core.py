@@ -55,7 +55,6 @@ from ecatsim.esc.regs import (
     RX_ERROR_COUNTER,
     SM_ACT_LATCH_ECAT,
     SM_ACT_LATCH_PDI,
-    SM_CTRL_WATCHDOG,
     WD_COUNTER_PDI,
     WD_STATUS_PD,
 )
@@ -130,9 +129,8 @@ class FrameContext:
         #: latch its receive time (DcUnit.latch_wait)
         self.latch_wait = False
         self.timers_dirty = True
-        #: the ESCs whose PDI interrupt line (AL event & mask) is raised: a byte per
-        #: position (1: raised) and their number, kept by ``Esc._pdi_irq`` as C fields, not
-        #: a set changed at every line change (decision P43); ``pending`` is the set
+        #: ESCs whose PDI interrupt line (AL event & mask) is raised: a byte per position
+        #: and their number, C fields kept by ``Esc._pdi_irq`` (P43); ``pending``: the set
         self.raised = bytearray()
         self.n_raised = 0
         #: positions of ESCs with an EEPROM image to persist
@@ -141,22 +139,16 @@ class FrameContext:
     @property
     def pending(self) -> set[int]:
         """Positions of the ESCs whose PDI interrupt line is raised."""
-        if not self.n_raised:
-            return set()
-        return {i for i, v in enumerate(self.raised) if v}
+        return {i for i, v in enumerate(self.raised) if v} if self.n_raised else set()
 
     def set_raised(self, position: int, line: bool) -> None:
         """Record the PDI interrupt line of the ESC at ``position`` (``Esc._pdi_irq``)."""
         r = self.raised
         if position >= len(r):
             r.extend(bytes(position + 1 - len(r)))
-        if line:
-            if not r[position]:
-                r[position] = 1
-                self.n_raised += 1
-        elif r[position]:
-            r[position] = 0
-            self.n_raised -= 1
+        v = 1 if line else 0
+        self.n_raised += v - r[position]
+        r[position] = v
 
 
 class Esc(SmHost):
@@ -457,8 +449,7 @@ class Esc(SmHost):
 
     def _pdi_irq(self, request: int) -> None:
         """The PDI interrupt: AL event request AND AL event mask. Ref: §5.32, §5.33. The
-        frame context's record changes only where the line does (most event changes leave
-        it high)."""
+        context's record changes only where the line does (most changes leave it high)."""
         line = (request & _get32(self.mem, AL_EVENT_MASK)) != 0
         if line == self.irq_line:
             return
@@ -718,22 +709,10 @@ class Esc(SmHost):
         if e > ado:
             self.mem[ado:e] = data[: e - ado]
             for sm in self.sm:  # an SM of length 1 is not activated: the watchdog trigger
-                if sm.length == 1 and ado <= sm.start < e and self._wd_tap(sm):
+                if sm.length == 1 and ado <= sm.start < e and sm.wd_tap():
                     self.wd_pd_trigger()
                     break
         return True
-
-    @staticmethod
-    def _wd_tap(sm: SyncManager) -> bool:
-        """An enabled write SM of length 1 with the watchdog trigger bit: a write of its
-        byte (plain memory) triggers the process-data watchdog. Ref: TMC8460 §5.49
-        Table 87 ("if set to 1, only Watchdog Trigger is generated if configured")."""
-        return (
-            sm.enabled
-            and not sm.locked
-            and sm.ecat_side_writes
-            and bool(sm.control & SM_CTRL_WATCHDOG)
-        )
 
     def _plain_read(self, ado: int, out: memoryview) -> bool:
         end = ado + len(out)

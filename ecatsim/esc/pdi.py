@@ -192,7 +192,7 @@ class Pdi:
         if addr < _REG_END:  # a register: its read side effects, then the byte
             hooked: bytes = esc.pdi_r_hooked
             if hooked[addr]:
-                if addr == _SYNC0_STATUS or addr == _SYNC1_STATUS:
+                if addr in (_SYNC0_STATUS, _SYNC1_STATUS):
                     # the acknowledge of every SYNC pulse: the registers' one hook
                     # (DcUnit._pr_sync_status) as reg_read_hooks runs it (P25, P44)
                     esc.clr_al_event(esc.dc.sync_status_read(addr))

@@ -318,6 +318,17 @@ class SyncManager:
             p[base + i] = d[i]
         self._writer_access(True, True)
 
+    def wd_tap(self) -> bool:
+        """An enabled write SM of length 1 with the watchdog trigger bit: a write of its
+        byte (plain memory) triggers the process-data watchdog. Ref: TMC8460 §5.49
+        Table 87 ("if set to 1, only Watchdog Trigger is generated if configured")."""
+        return (
+            self.enabled
+            and not self.locked
+            and self.ecat_side_writes
+            and bool(self.control & SM_CTRL_WATCHDOG)
+        )
+
     def peek(self, off: int, n: int) -> bytes:
         """The bytes a reader would see, without side effects (for logging and bit FMMUs)."""
         base = self._base_for_read()
