@@ -46,6 +46,7 @@ CORE = (
     "ecatsim.esc.pdi",
     "ecatsim.slave.od",
     "ecatsim.slave.pdo",
+    "ecatsim.slave.mailbox",
     "ecatsim.slave.firmware",
     "ecatsim.wire.frame",
     "ecatsim.ethercat.recorder",

@@ -21,26 +21,34 @@ cdef long long DL_STATUS, ECAT_EV_AL_STATUS, ECAT_EV_DL_STATUS, ECAT_EV_SM0, ECA
 cdef long long ECAT_EVENT_REQUEST, ECAT_PU_ERROR_COUNTER, ESC_CONFIG, EV_AL_CONTROL, EV_SM0
 cdef long long EV_SYNC0, EV_SYNC1, EV_WATCHDOG_PD, LOST_LINK_COUNTER, N_SM, PDI_ERROR_CODE
 cdef long long PDI_ERROR_COUNTER, PDRAM_END, PDRAM_START, REGISTER_END, RX_ERROR_COUNTER
-cdef long long SM_ACT_LATCH_ECAT, SM_ACT_LATCH_PDI, SM_CTRL_WATCHDOG, WD_COUNTER_PDI
+cdef long long SM_ACT_LATCH_ECAT, SM_ACT_LATCH_PDI, WD_COUNTER_PDI
 cdef long long WD_STATUS_PD
 
 
+# the register helpers inline: a few loads or stores each, called at every event (P46)
 @cython.locals(b3="long long", p="const unsigned char*")
-cdef long long _get32(bytearray m, long long a) except? -1
+cdef inline long long _get32(bytearray m, long long a) except? -1
 @cython.locals(i="long long")
 cdef long long _first(bytes hooked, long long s, long long e) except? -2
 @cython.locals(p="unsigned char*")
-cdef void _put16(bytearray m, long long a, long long v) except *
+cdef inline void _put16(bytearray m, long long a, long long v) except *
 @cython.locals(p="unsigned char*")
-cdef void _put32(bytearray m, long long a, long long v) except *
+cdef inline void _put32(bytearray m, long long a, long long v) except *
 
 
+@cython.final
 cdef class FrameContext:
     cdef public long long frame_no
     cdef public long long t_ns, pdi_ns
     cdef public bint irq_dirty, addr_dirty, logical_dirty, topology_dirty, timers_dirty
     cdef public bint latch_wait
-    cdef public set pending, flush
+    cdef public bytearray raised
+    cdef public long long n_raised
+    cdef public set flush
+
+    # noexcept: the event paths below only move bits in memory and these fields (P48)
+    @cython.locals(r=bytearray, v="long long")
+    cpdef void set_raised(self, long long position, bint line) noexcept
 
 
 @cython.final
@@ -83,25 +91,27 @@ cdef class Esc(SmHost):
                    pb="long long", ps="long long", pe="long long", fb="long long")
     cpdef bint _fmmu_xfer(self, FmmuMap f, long long lad, unsigned char[:] data, bint write) except -1
     @cython.locals(m=bytearray, v="long long")
-    cpdef void _set_ecat_event(self, long long bits) except *
+    cpdef void _set_ecat_event(self, long long bits) noexcept
     @cython.locals(m=bytearray, v="long long")
-    cpdef void _clr_ecat_event(self, long long bits) except *
+    cpdef void _clr_ecat_event(self, long long bits) noexcept
     @cython.locals(m=bytearray, req="long long", mask="long long", irq="long long")
-    cpdef void _irq_update(self) except *
+    cpdef void _irq_update(self) noexcept
     cpdef int64_t al_event(self) except -1
     cpdef void pdi_buffer_event(self, SyncManager sm, bint first, bint last) except *
     @cython.locals(m=bytearray, v="long long")
-    cpdef void set_al_event(self, long long bits) except *
+    cpdef void set_al_event(self, long long bits) noexcept
     @cython.locals(m=bytearray, v="long long")
-    cpdef void clr_al_event(self, long long bits) except *
+    cpdef void clr_al_event(self, long long bits) noexcept
     @cython.locals(line=bint)
-    cpdef void _pdi_irq(self, long long request) except *
+    cpdef void _pdi_irq(self, long long request) noexcept
     # sm_status_changed, wd_pd_trigger, sm_event_time: SmHost's, overridden in core.py (a
     # final type may not declare its overrides again here)
     @cython.locals(ebit="long long", abit="long long")
-    cpdef void _sm_events(self, long long mirror, long long n, long long changed) except *
-    cpdef void sync0_tick(self, object now_ns) except *
+    cpdef void _sm_events(self, long long mirror, long long n, long long changed) noexcept
+    cpdef void sync0_tick(self, long long now_ns) except *
     cpdef void sync1_tick(self) except *
+    # the encoder index pulse of a drive in motion, to the latch in unit: C calls (P49)
+    cpdef void latch_input(self, long long unit, bint level, long long host_ns) except *
     @cython.locals(end="long long", ws="long long", we="long long")
     cpdef int64_t ecat_read(self, long long ado, unsigned char[:] out) except -1
     @cython.locals(n="long long", k="long long", m="long long", wmask="const unsigned char*",

@@ -55,7 +55,6 @@ from ecatsim.esc.regs import (
     RX_ERROR_COUNTER,
     SM_ACT_LATCH_ECAT,
     SM_ACT_LATCH_PDI,
-    SM_CTRL_WATCHDOG,
     WD_COUNTER_PDI,
     WD_STATUS_PD,
 )
@@ -108,8 +107,9 @@ class FrameContext:
         "irq_dirty",
         "latch_wait",
         "logical_dirty",
+        "n_raised",
         "pdi_ns",
-        "pending",
+        "raised",
         "t_ns",
         "timers_dirty",
         "topology_dirty",
@@ -129,10 +129,26 @@ class FrameContext:
         #: latch its receive time (DcUnit.latch_wait)
         self.latch_wait = False
         self.timers_dirty = True
-        #: positions of ESCs whose PDI interrupt line (AL event & mask) is raised
-        self.pending: set[int] = set()
+        #: ESCs whose PDI interrupt line (AL event & mask) is raised: a byte per position
+        #: and their number, C fields kept by ``Esc._pdi_irq`` (P43); ``pending``: the set
+        self.raised = bytearray()
+        self.n_raised = 0
         #: positions of ESCs with an EEPROM image to persist
         self.flush: set[int] = set()
+
+    @property
+    def pending(self) -> set[int]:
+        """Positions of the ESCs whose PDI interrupt line is raised."""
+        return {i for i, v in enumerate(self.raised) if v} if self.n_raised else set()
+
+    def set_raised(self, position: int, line: bool) -> None:
+        """Record the PDI interrupt line of the ESC at ``position`` (``Esc._pdi_irq``)."""
+        r = self.raised
+        if position >= len(r):
+            r.extend(bytes(position + 1 - len(r)))
+        v = 1 if line else 0
+        self.n_raised += v - r[position]
+        r[position] = v
 
 
 class Esc(SmHost):
@@ -249,7 +265,7 @@ class Esc(SmHost):
         self.reset_progress_frame = -1
         self.ecat_irq = 0
         #: the PDI interrupt line (IRQ pin), as last set by _pdi_irq: this ESC's position
-        #: is in ctx.pending while it is high
+        #: is raised in ctx (ctx.pending) while it is high
         self.irq_line = False
         #: byte range [wr_s, wr_e) of the register write being processed (for hooks)
         self.wr_s = 0
@@ -290,7 +306,7 @@ class Esc(SmHost):
         self.update_dl_status()
         self.ctx.addr_dirty = self.ctx.logical_dirty = self.ctx.irq_dirty = True
         self.ctx.topology_dirty = True
-        self.ctx.pending.discard(self.position)
+        self.ctx.set_raised(self.position, False)
         self.irq_line = False
         self.ecat_irq = 0
 
@@ -433,15 +449,12 @@ class Esc(SmHost):
 
     def _pdi_irq(self, request: int) -> None:
         """The PDI interrupt: AL event request AND AL event mask. Ref: §5.32, §5.33. The
-        pending set changes only where the line does (most event changes leave it high)."""
+        context's record changes only where the line does (most changes leave it high)."""
         line = (request & _get32(self.mem, AL_EVENT_MASK)) != 0
         if line == self.irq_line:
             return
         self.irq_line = line
-        if line:
-            self.ctx.pending.add(self.position)
-        else:
-            self.ctx.pending.discard(self.position)
+        self.ctx.set_raised(self.position, line)
 
     def memory(self) -> bytearray:
         return self.mem
@@ -696,22 +709,10 @@ class Esc(SmHost):
         if e > ado:
             self.mem[ado:e] = data[: e - ado]
             for sm in self.sm:  # an SM of length 1 is not activated: the watchdog trigger
-                if sm.length == 1 and ado <= sm.start < e and self._wd_tap(sm):
+                if sm.length == 1 and ado <= sm.start < e and sm.wd_tap():
                     self.wd_pd_trigger()
                     break
         return True
-
-    @staticmethod
-    def _wd_tap(sm: SyncManager) -> bool:
-        """An enabled write SM of length 1 with the watchdog trigger bit: a write of its
-        byte (plain memory) triggers the process-data watchdog. Ref: TMC8460 §5.49
-        Table 87 ("if set to 1, only Watchdog Trigger is generated if configured")."""
-        return (
-            sm.enabled
-            and not sm.locked
-            and sm.ecat_side_writes
-            and bool(sm.control & SM_CTRL_WATCHDOG)
-        )
 
     def _plain_read(self, ado: int, out: memoryview) -> bool:
         end = ado + len(out)
@@ -964,7 +965,7 @@ class Esc(SmHost):
         """A due SYNC0 pulse: status, and AL event 0x0220.2 if mapped. Ref: §5.32 bit 2."""
         if self.dc.sync0_pulse(now_ns):
             self.set_al_event(EV_SYNC0)
-        if self.dc.next_sync0 is None:
+        if not self.dc.sync0_on:
             self.ctx.timers_dirty = True  # single shot: this ESC's SYNC unit is done
 
     def sync1_tick(self) -> None:

@@ -2,7 +2,8 @@
 # state as typed fields. The clock is C integers: dc.py keeps every value of it modulo
 # 2^64 in the source, so Python's unbounded integers and C's agree; the rates are C
 # doubles computed in the same order as Python (built -ffp-contract=off). The SYNC
-# deadlines stay Python integers (None while off). Decisions P2, P13.
+# deadlines' API stays Python integers (None while off); the SYNC0 pulse's own time is C
+# fields (P42). Decisions P2, P13.
 cimport cython
 # int64_t, not long long, for the methods of a final class with an exception value:
 # Cython 3.3 writes long long's value there as -1LLLL in pure-Python mode
@@ -24,14 +25,15 @@ cdef long long ESC_CONFIG, EV_DC_LATCH, EV_SYNC0, EV_SYNC1, SYNC_LATCH_CONFIG
 @cython.locals(k="long long")
 cdef long long _trunc(double x) except? -1
 cdef long long _signed64(unsigned long long x)
+# the register helpers inline (P46)
 @cython.locals(v="unsigned long long", i="long long", p="const unsigned char*")
-cdef unsigned long long _get64(bytearray m, long long a) except? 0
+cdef inline unsigned long long _get64(bytearray m, long long a) except? 0
 @cython.locals(b3="unsigned long long", p="const unsigned char*")
-cdef unsigned long long _get32(bytearray m, long long a) except? 0
+cdef inline unsigned long long _get32(bytearray m, long long a) except? 0
 @cython.locals(i="long long", p="unsigned char*")
-cdef void _put64(bytearray m, long long a, unsigned long long v) except *
+cdef inline void _put64(bytearray m, long long a, unsigned long long v) except *
 @cython.locals(i="long long", p="unsigned char*")
-cdef void _put32(bytearray m, long long a, unsigned long long v) except *
+cdef inline void _put32(bytearray m, long long a, unsigned long long v) except *
 
 
 @cython.final
@@ -46,7 +48,10 @@ cdef class DcUnit:
     cdef public double drift_ppm, rate_ppb, spd
     cdef public long long moved_ns, t_ref
     cdef public unsigned long long local_ref
-    cdef public object next_sync0, next_sync1
+    cdef public object next_sync1
+    # the next SYNC0 pulse (next_sync0, a property): C fields (decision P42)
+    cdef public bint sync0_on
+    cdef public unsigned long long sync0_at
 
     cpdef int64_t arrival_ns(self, long long frame_t_ns) except? -1
     cpdef unsigned long long local_time(self, long long t_ns) except? 0
@@ -66,13 +71,20 @@ cdef class DcUnit:
     cpdef object sync0_deadline(self)
     @cython.locals(m=bytearray, n0="unsigned long long", cycle="long long",
                    behind="long long")
-    cpdef bint sync0_pulse(self, object now_ns) except -1
+    cpdef bint sync0_pulse(self, long long now_ns) except -1
     cpdef void _schedule_sync1(self, object sync0_time, object cycle0) except *
     cpdef object sync1_deadline(self)
     @cython.locals(n0="unsigned long long")
     cpdef int64_t sync0_deadline_or(self, long long none) except? -1
     cpdef int64_t sync1_deadline_or(self, long long none) except? -1
     cpdef bint sync1_pulse(self) except -1
+    # the latch in unit, driven by a drive's encoder index pulse: C calls (P49)
+    @cython.locals(m=bytearray)
+    cpdef void latch_input(self, long long unit, bint level, long long host_ns) except *
+    @cython.locals(m=bytearray, status="long long", bit="long long", single="long long",
+                   reg="long long")
+    cpdef bint latch_edge(self, long long unit, bint rising, long long host_ns) except -1
+    cpdef bint latch_pdi(self, long long unit) except -1
     @cython.locals(lim="long long", x="long long", m=bytearray)
     cpdef void _speed_counter_diff(self, long long start) except *
     # the register hooks that the frames of every DC cycle run: C calls from the ESC

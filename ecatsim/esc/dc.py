@@ -120,12 +120,13 @@ class DcUnit:
         "local_ref",
         "mem",
         "moved_ns",
-        "next_sync0",
         "next_sync1",
         "port_ns",
         "position",
         "rate_ppb",
         "spd",
+        "sync0_at",
+        "sync0_on",
         "sync1_countdown",
         "t_ref",
         "turnaround_ns",
@@ -165,12 +166,24 @@ class DcUnit:
         # spd since. Corrections rebase it, so a rate change never jumps the time.
         self.t_ref = 0
         self.local_ref = start_ns & MASK64
-        #: system time of the next SYNC0 pulse, or None while the SYNC unit is off
-        self.next_sync0: int | None = None
+        #: whether a SYNC0 pulse is scheduled, and its system time (``next_sync0``): C
+        #: fields, not an int object made at every pulse (decision P42)
+        self.sync0_on = False
+        self.sync0_at = 0
         #: system time of the next SYNC1 pulse (None: none scheduled), and how many more
         #: SYNC0 pulses until one is scheduled
         self.next_sync1: int | None = None
         self.sync1_countdown = 0
+
+    @property
+    def next_sync0(self) -> int | None:
+        """System time of the next SYNC0 pulse, or None while the SYNC unit is off."""
+        return self.sync0_at if self.sync0_on else None
+
+    @next_sync0.setter
+    def next_sync0(self, value: int | None) -> None:
+        self.sync0_on = value is not None
+        self.sync0_at = value & MASK64 if value is not None else 0
 
     def arrival_ns(self, frame_t_ns: int) -> int:
         """When a frame sent at ``frame_t_ns`` reaches this slave's port 0."""
@@ -341,25 +354,30 @@ class DcUnit:
         Ref: TMC8460 §5.50.4 Tables 106-112; §5.28.2 Table 42 (0x0151 bit 3).
         """
         m = self.mem
-        if self.next_sync0 is None:
+        if not self.sync0_on:
             return False
-        n0 = self.next_sync0
+        n0 = self.sync0_at
         cycle = _get32(m, DC_SYNC0_CYCLE)
         if m[DC_ACTIVATION] & 0x04:
             self._schedule_sync1(n0, cycle)
         if not m[DC_ACTIVATION] & 0x02:
-            self.next_sync0 = (n0 + cycle) & MASK64 if cycle else None  # SYNC1 only
+            if cycle:  # SYNC1 only
+                self.sync0_at = (n0 + cycle) & MASK64
+            else:
+                self.sync0_on = False
+                self.sync0_at = 0
             return False
         m[DC_ACTIVATION_STATUS] &= 0xFE
         m[DC_SYNC0_STATUS] |= 0x01
         if cycle == 0:
-            self.next_sync0 = None  # single shot
+            self.sync0_on = False  # single shot
+            self.sync0_at = 0
         else:
             n0 = (n0 + cycle) & MASK64
             behind = _signed64((self.system_time(now_ns) - n0) & MASK64)
             if behind >= cycle:
                 n0 = (n0 + (behind // cycle) * cycle) & MASK64
-            self.next_sync0 = n0
+            self.sync0_at = n0
             _put64(m, DC_START_TIME, n0)
         return bool(m[SYNC_LATCH_CONFIG] & 0x08)
 
@@ -389,10 +407,9 @@ class DcUnit:
     def sync0_deadline_or(self, none: int) -> int:
         """sync0_deadline(), or ``none`` while no SYNC0 pulse is scheduled (an integer
         either way: a C integer in the compiled core)."""
-        if self.next_sync0 is None:
+        if not self.sync0_on:
             return none
-        n0 = self.next_sync0  # kept in [0, 2^64) by sync0_pulse and activation_written
-        return self._host_time(n0)
+        return self._host_time(self.sync0_at)  # in [0, 2^64): sync0_pulse, next_sync0
 
     def sync1_deadline_or(self, none: int) -> int:
         """sync1_deadline(), or ``none`` while no SYNC1 pulse is scheduled."""

@@ -3,13 +3,16 @@
 # else. pdi.py stays the one source of the behaviour; this file only gives types.
 # Decisions P2, P13.
 cimport cython
+# int64_t, not long long, for the methods of a final type with an exception value (core.pxd)
+from libc.stdint cimport int64_t
 
 from ecatsim.esc.core cimport Esc
 from ecatsim.esc.sm cimport SyncManager
 
-cdef long long _REG_END, _DL_STATUS
+cdef long long _REG_END, _DL_STATUS, _SYNC0_STATUS, _SYNC1_STATUS
 
 
+@cython.final
 cdef class Pdi:
     cdef public Esc _esc
 
@@ -20,14 +23,14 @@ cdef class Pdi:
                    n="long long", split="long long")
     cpdef bint write(self, long long addr, object data) except -1
     @cython.locals(esc=Esc, hooked=bytes)
-    cpdef long long u8(self, long long addr) except -1
+    cpdef int64_t u8(self, long long addr) except -1
     @cython.locals(esc=Esc, hooked=bytes, m=bytearray)
-    cpdef long long u16(self, long long addr) except -1
+    cpdef int64_t u16(self, long long addr) except -1
     @cython.locals(esc=Esc, m=bytearray, b3="long long")
-    cpdef long long u32(self, long long addr) except -1
+    cpdef int64_t u32(self, long long addr) except -1
     cpdef void w16(self, long long addr, long long value) except *
     cpdef void w32(self, long long addr, long long value) except *
-    cpdef long long al_event(self) except -1
+    cpdef int64_t al_event(self) except -1
     @cython.locals(esc=Esc, sm=SyncManager)
     cpdef object sm_read(self, long long n)
     @cython.locals(esc=Esc, sm=SyncManager)

@@ -41,7 +41,9 @@ from ecatsim.esc.regs import (  # re-exported for the firmware
     WD_STATUS_PD,
     sm_addr,
 )
-from ecatsim.esc.regs import DL_STATUS as _DL_STATUS  # compiled: C constants (pdi.pxd)
+from ecatsim.esc.regs import DC_SYNC0_STATUS as _SYNC0_STATUS  # compiled: C constants
+from ecatsim.esc.regs import DC_SYNC1_STATUS as _SYNC1_STATUS  # (pdi.pxd)
+from ecatsim.esc.regs import DL_STATUS as _DL_STATUS
 from ecatsim.esc.regs import REGISTER_END as _REG_END
 
 if TYPE_CHECKING:
@@ -190,7 +192,12 @@ class Pdi:
         if addr < _REG_END:  # a register: its read side effects, then the byte
             hooked: bytes = esc.pdi_r_hooked
             if hooked[addr]:
-                esc.reg_read_hooks(addr, addr + 1, True)
+                if addr in (_SYNC0_STATUS, _SYNC1_STATUS):
+                    # the acknowledge of every SYNC pulse: the registers' one hook
+                    # (DcUnit._pr_sync_status) as reg_read_hooks runs it (P25, P44)
+                    esc.clr_al_event(esc.dc.sync_status_read(addr))
+                else:
+                    esc.reg_read_hooks(addr, addr + 1, True)
             return esc.mem[addr]
         return self.read(addr, 1)[0]
 

@@ -14,7 +14,8 @@ cdef class SyncManager
 
 
 cdef class SmHost:
-    cpdef void sm_status_changed(self, SyncManager sm) except *
+    # noexcept: the ESC only moves its event bits (core.pxd, P48)
+    cpdef void sm_status_changed(self, SyncManager sm) noexcept
     cpdef void wd_pd_trigger(self) except *
     cpdef void sm_event_time(self, long long reg) except *
 

@@ -289,14 +289,16 @@ class SyncManager:
 
     def read_whole(self) -> bytes:
         """The whole buffer read as the reading side (``reader_read`` of every byte).
-        Compiled, the bytes object is made once from the memory's bytes (decision P28)."""
+        Compiled, the bytes object is made once from the memory's bytes (decision P28) and
+        taken as it is (decision P47)."""
         self._reader_open()
         base = self._base_for_read()
         mem = self.mem
         end = min(base + self.length, len(mem))  # a slice stops at the memory's end
         p = mem  # compiled: a C pointer to the bytes (a slice of it is a bytes object)
-        # b"" + slice: bytes in Python; compiled, the slice itself (bytes(bytes) is a call)
-        data = b"" + p[base:end] if base < end else b""
+        # joined alone: bytes in Python; compiled, the slice itself, returned by the join
+        # without a copy (bytes(bytes) is a call, b"" + bytes takes two buffer views)
+        data = b"".join((p[base:end],)) if base < end else b""
         self._reader_access(True, True)
         return data
 
@@ -315,6 +317,17 @@ class SyncManager:
         for i in range(n):
             p[base + i] = d[i]
         self._writer_access(True, True)
+
+    def wd_tap(self) -> bool:
+        """An enabled write SM of length 1 with the watchdog trigger bit: a write of its
+        byte (plain memory) triggers the process-data watchdog. Ref: TMC8460 §5.49
+        Table 87 ("if set to 1, only Watchdog Trigger is generated if configured")."""
+        return (
+            self.enabled
+            and not self.locked
+            and self.ecat_side_writes
+            and bool(self.control & SM_CTRL_WATCHDOG)
+        )
 
     def peek(self, off: int, n: int) -> bytes:
         """The bytes a reader would see, without side effects (for logging and bit FMMUs)."""

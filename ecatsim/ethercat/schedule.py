@@ -132,7 +132,7 @@ class Schedule:
         if self.deferred and not self.run_deferred():
             return  # a frame waits: the rest after its reply (decision P30)
         ctx = self.ctx
-        if (ctx.pending or self.awake) and self.firmware:
+        if (ctx.n_raised or self.awake) and self.firmware:
             probe = self.frame_waiting
             look = time.monotonic_ns() + self.probe_ns if probe is not None else NO_DEADLINE
             order = sorted(ctx.pending | self.awake)
@@ -288,7 +288,7 @@ class Schedule:
         """ESCs whose SYNC unit runs (recomputed when an activation changes)."""
         if self.ctx.timers_dirty:
             self.ctx.timers_dirty = False
-            self._sync_escs = [e for e in self.escs if e.dc.next_sync0 is not None]
+            self._sync_escs = [e for e in self.escs if e.dc.sync0_on]
         return self._sync_escs
 
     def next_deadline(self) -> int | None:

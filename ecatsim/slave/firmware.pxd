@@ -5,6 +5,7 @@
 cimport cython
 
 from ecatsim.esc.pdi cimport Pdi
+from ecatsim.slave.mailbox cimport MailboxEngine
 from ecatsim.slave.pdo cimport PdoImage
 
 # the registers and events, imported through pdi.py: C constants here
@@ -15,11 +16,13 @@ cdef long long SM_MBX_OUT, SM_MBX_IN, SM_PD_OUT, SM_PD_IN
 cdef long long EV_SM1, PD_EVENTS, EVENT_MASK, OP_WAIT_NS
 
 
+@cython.final
 cdef class Firmware:
     cdef public Pdi pdi
     cdef object _app
     cdef PdoImage _pdo
-    cdef public object mailbox, mbx
+    cdef public object mailbox
+    cdef public MailboxEngine mbx
     cdef public long long event_mask
     cdef public object od, emergency, device, coe
     cdef public bint pd_masked
@@ -39,14 +42,15 @@ cdef class Firmware:
     @cython.locals(p=Pdi, ev="long long")
     cpdef bint sync0_latch(self, long long now_ns) except *
     cdef void _latch(self, Pdi p, long long ev, long long now_ns) except *
-    @cython.locals(pdo=PdoImage, now_ns="long long")
+    # the pulse's time as one int object for the image's two calls (decision P45)
+    @cython.locals(pdo=PdoImage, now_ns=object)
     cpdef void sync0_run(self) except *
-    @cython.locals(now_ns="long long")
+    @cython.locals(now_ns="long long", mbx=MailboxEngine)
     cpdef void run_latched(self) except *
     @cython.locals(pdo=PdoImage)
-    cdef void _apply_outputs(self, object out, long long now_ns) except *
-    @cython.locals(want="long long", pending=bint)
+    cdef void _apply_outputs(self, object out, object now_ns) except *
+    @cython.locals(want="long long", pending=bint, mbx=MailboxEngine)
     cpdef void service_mailbox(self, long long ev, long long now_ns) except *
-    cpdef void _outputs_received(self, long long now_ns) except *
+    cpdef void _outputs_received(self, object now_ns) except *
     @cython.locals(pdo=PdoImage)
-    cpdef void _write_inputs(self, long long now_ns) except *
+    cpdef void _write_inputs(self, object now_ns) except *

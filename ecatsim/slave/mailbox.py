@@ -64,6 +64,26 @@ class Source(Protocol):
 class MailboxEngine:
     """Serves SM0/SM1 for one slave through its PDI."""
 
+    #: fixed attributes (compiled: the typed fields of mailbox.pxd)
+    __slots__ = (
+        "_turn",
+        "accept",
+        "counter",
+        "drop_next",
+        "error_next",
+        "errors",
+        "handlers",
+        "held",
+        "last_in_counter",
+        "last_sent",
+        "log",
+        "out",
+        "pdi",
+        "repeat_ack",
+        "sources",
+        "stale_counter_next",
+    )
+
     def __init__(self, pdi: Pdi) -> None:
         self.pdi = pdi
         self.handlers: dict[int, Handler] = {}
@@ -112,7 +132,8 @@ class MailboxEngine:
 
     def pending(self) -> bool:
         """Replies wait for SM1 (the firmware then wants the SM1 event). Asked at every
-        firmware service: a plain loop, not ``any()`` over a generator (decision P22)."""
+        firmware service: a plain loop, not ``any()`` over a generator (decision P22), and
+        compiled, a C call from the firmware (decision P41)."""
         if self.out or self.held is not None:  # queued(), inline: asked every cycle
             return True
         for src in self.sources:  # noqa: SIM110 (a generator per call costs 3 k instructions)

@@ -12,6 +12,7 @@ import pytest
 
 from ecatsim.esc.core import Esc, FrameContext
 from ecatsim.esc.dc import DcUnit
+from ecatsim.esc.pdi import Pdi
 from ecatsim.esc.regs import (
     AL_EVENT_MASK,
     DC_PULSE_LENGTH,
@@ -110,6 +111,32 @@ def test_the_sync_status_read_is_the_tables_hook(ra: int, pulse_length: int) -> 
         EV_SYNC1 if ra == DC_SYNC0_STATUS else EV_SYNC0
     )
     assert fast.mem[ra] == (0x00 if pulse_length == 0 else 0x01)
+
+
+@pytest.mark.parametrize("pulse_length", [0, 1000])
+@pytest.mark.parametrize("ra", [DC_SYNC0_STATUS, DC_SYNC1_STATUS])
+def test_the_firmwares_sync_acknowledge_is_the_tables_hook(ra: int, pulse_length: int) -> None:
+    """Pdi.u8 of 0x098E/0x098F (the firmware's acknowledge of every pulse) calls the hook's
+    body directly (decision P44): the same byte, memory, AL events and interrupt line as
+    the general PDI read, which runs the table's hook (DcUnit._pr_sync_status)."""
+    fast, slow = twins()
+    for e in (fast, slow):
+        e.mem[DC_PULSE_LENGTH : DC_PULSE_LENGTH + 2] = pulse_length.to_bytes(2, "little")
+        e.mem[AL_EVENT_MASK : AL_EVENT_MASK + 4] = (EV_SYNC0 | EV_SYNC1).to_bytes(4, "little")
+        e.mem[ra] = 0x01
+        e.set_al_event(EV_SYNC0 | EV_SYNC1)
+    byte = Pdi(fast).u8(ra)
+    assert byte == Pdi(slow).read(ra, 1)[0] == (0x00 if pulse_length == 0 else 0x01)
+    same(fast, slow)
+    assert fast.irq_line == slow.irq_line
+    assert fast.al_event() & (EV_SYNC0 | EV_SYNC1) == (
+        EV_SYNC1 if ra == DC_SYNC0_STATUS else EV_SYNC0
+    )
+    assert fast.mem[ra] == (0x00 if pulse_length == 0 else 0x01)
+    for e in (fast, slow):  # the other one too: the line drops
+        e.clr_al_event(EV_SYNC0 | EV_SYNC1)
+    assert fast.ctx.pending == slow.ctx.pending == set()
+    assert not fast.irq_line
 
 
 @pytest.mark.parametrize("size", [4, 8])
