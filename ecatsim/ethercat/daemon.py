@@ -343,14 +343,25 @@ class Daemon:
             and isinstance(self.segment.clock, MonotonicClock)
         )
 
+    def frame_fds(self) -> tuple[int, ...]:
+        """The descriptors frames arrive on: the daemon's link and the out link."""
+        out_fd = self.out.link.fileno() if self.out is not None else -1
+        return tuple(f for f in (self._fd, out_fd) if f >= 0)
+
+    def probe_frames(self) -> None:
+        """The select(2) loop's probes: the work after a reply stops for a frame that came
+        meanwhile on either link (decision P19; on the out link the frame coming back from
+        the next daemon, which the master waits for: L9), and pulses fall due on the
+        segment's clock (P30). Not for busy-poll, which looks after every piece anyway."""
+        fds = self.frame_fds()
+        if self._fd < 0 or self.busy_poll:
+            return
+        self.segment.schedule.frame_waiting = lambda: bool(select.select(fds, (), (), 0)[0])
+        self.segment.schedule.now_ns = self.segment.clock.now_ns
+
     def _run_select(self, buf: bytearray) -> None:
         follow_fd = self.follower.fileno() if self.follower is not None else -1
-        link_fd = self._fd
-        if link_fd >= 0 and not self.busy_poll:
-            # the work after a reply stops for a frame that came meanwhile (decision P19)
-            waiting = lambda: bool(select.select((link_fd,), (), (), 0)[0])  # noqa: E731
-            self.segment.schedule.frame_waiting = waiting
-            self.segment.schedule.now_ns = self.segment.clock.now_ns  # P30
+        self.probe_frames()
         out_fd = self.out.link.fileno() if self.out is not None else -1
         watch = [f for f in (self._fd, out_fd, *self._watch, follow_fd) if f >= 0]
         clock = self.segment.clock

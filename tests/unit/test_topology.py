@@ -334,3 +334,26 @@ def test_daemon_sends_each_frame_where_its_route_leaves() -> None:
     assert d.handle_one(buf)
     home = main.master_recv()
     assert home is not None and decode(home, 14)[0].wkc == 2
+
+
+def test_the_work_after_a_reply_stops_for_a_frame_coming_back_on_the_out_link() -> None:
+    """With an out link the frame a daemon passed on comes back there, and the master waits
+    for it: the work after a reply looks on both links for a waiting frame (P19, L9)."""
+    from ecatsim.ethercat.daemon import Daemon, OutPort
+    from tests.support.socketlink import SocketLink
+
+    seg = line(2, out=True)
+    main, far = SocketLink(), SocketLink()
+    d = Daemon(main, seg, out=OutPort(far, lambda: True))
+    d.probe_frames()
+    waiting = seg.schedule.frame_waiting
+    assert waiting is not None and d.frame_fds() == (main.fileno(), far.fileno())
+    assert not waiting()
+    far.master_send(b"\x00" * 60)  # the next daemon's reply
+    assert waiting()
+    assert far.recv_into(bytearray(64)) == 60
+    assert not waiting()
+    main.master_send(b"\x00" * 60)  # a frame from the master
+    assert waiting()
+    main.close()
+    far.close()
