@@ -206,16 +206,23 @@ def test_redundancy_ring_with_a_soem_c_master(
         proc.stdin.flush()
         return proc.stdout.readline().strip()
 
+    def cycles_whole() -> None:
+        """500 cycles: every reply with the full WKC and every slave in OP after; a cycle
+        without a reply in SOEM's 2 ms is the host's load, allowed in 1 of 100."""
+        words = ask("cycles 500").split()
+        assert words[:4] == ["cycles", "500", "bad", "0"] and words[6:] == ["op", "1"], words
+        assert words[4] == "late" and int(words[5]) <= 5, words
+
     try:
         ready = proc.stdout.readline().split()
         assert ready[:2] == ["ready", "4"], ready
-        assert ask("cycles 500") == "cycles 500 bad 0 op 1"
+        cycles_whole()
         assert request(sock, {"cmd": "link", "slave": 1, "port": 1, "up": False})["ok"]
-        assert ask("cycles 500") == "cycles 500 bad 0 op 1"
+        cycles_whole()
         dl = [s["dl_status"] for s in request(sock, {"cmd": "status"})["slaves"]]
         assert (dl[1] >> 5 & 1, dl[2] >> 4 & 1) == (0, 0)  # the break: no link either end
         assert request(sock, {"cmd": "link", "slave": 1, "port": 1, "up": True})["ok"]
-        assert ask("cycles 500") == "cycles 500 bad 0 op 1"
+        cycles_whole()
         proc.stdin.write("quit\n")
         proc.stdin.flush()
         assert proc.wait(10) == 0

@@ -4,8 +4,9 @@
  *
  * Opens both NICs with ec_init_redundant, scans, maps, brings every slave to OP and prints
  * "ready SLAVES EXPECTED_WKC". Then reads commands from stdin, one per line:
- *   cycles N   N process-data cycles at 1 ms; prints "cycles N bad B op O" (B: cycles
- *              whose WKC was not the expected one, O: 1 if every slave reads OP after)
+ *   cycles N   N process-data cycles at 1 ms; prints "cycles N bad B late L op O" (B:
+ *              cycles whose reply came with another WKC than the expected one, L: cycles
+ *              with no reply within SOEM's 2 ms, O: 1 if every slave reads OP after)
  *   quit
  * Built with SOEM's sources from pysoem's source distribution (tests/support/soem_build.py).
  */
@@ -63,14 +64,17 @@ int main(int argc, char *argv[])
    while (fgets(line, sizeof line, stdin)) {
       int cycles = 0;
       if (sscanf(line, "cycles %d", &cycles) == 1) {
-         int bad = 0;
+         int bad = 0, late = 0;
          for (int i = 0; i < cycles; i++) {
             ec_send_processdata();
-            if (ec_receive_processdata(EC_TIMEOUTRET) != expected)
+            int wkc = ec_receive_processdata(EC_TIMEOUTRET);
+            if (wkc <= 0)
+               late++;
+            else if (wkc != expected)
                bad++;
             osal_usleep(1000);
          }
-         printf("cycles %d bad %d op %d\n", cycles, bad, all_op());
+         printf("cycles %d bad %d late %d op %d\n", cycles, bad, late, all_op());
          fflush(stdout);
       } else if (strncmp(line, "quit", 4) == 0) {
          break;
