@@ -38,6 +38,17 @@ def twins() -> tuple[Esc, Esc]:
     return escs[0], escs[1]
 
 
+def pulsed_twins(ra: int, pulse_length: int) -> tuple[Esc, Esc]:
+    """:func:`twins` with both SYNC pulses raised, unmasked and ``ra``'s status set."""
+    fast, slow = twins()
+    for e in (fast, slow):
+        e.mem[DC_PULSE_LENGTH : DC_PULSE_LENGTH + 2] = pulse_length.to_bytes(2, "little")
+        e.mem[AL_EVENT_MASK : AL_EVENT_MASK + 4] = (EV_SYNC0 | EV_SYNC1).to_bytes(4, "little")
+        e.mem[ra] = 0x01
+        e.set_al_event(EV_SYNC0 | EV_SYNC1)
+    return fast, slow
+
+
 def same(fast: Esc, slow: Esc) -> None:
     assert fast.mem == slow.mem
     assert fast.dc.local_ref == slow.dc.local_ref
@@ -97,12 +108,7 @@ def test_the_sync_status_read_is_the_tables_hook(ra: int, pulse_length: int) -> 
     assert fn is DcUnit._pr_sync_status
     assert (ra_, rs) == (ra, 1)
     assert t.ecat_r[ra] is None  # an ECAT read has no side effect
-    fast, slow = twins()
-    for e in (fast, slow):
-        e.mem[DC_PULSE_LENGTH : DC_PULSE_LENGTH + 2] = pulse_length.to_bytes(2, "little")
-        e.mem[AL_EVENT_MASK : AL_EVENT_MASK + 4] = (EV_SYNC0 | EV_SYNC1).to_bytes(4, "little")
-        e.mem[ra] = 0x01
-        e.set_al_event(EV_SYNC0 | EV_SYNC1)
+    fast, slow = pulsed_twins(ra, pulse_length)
     assert fast.ctx.pending == {0}
     fast.reg_read_hooks(ra, ra + 1, True)
     fn(slow.dc, ra, rs)
@@ -119,12 +125,7 @@ def test_the_firmwares_sync_acknowledge_is_the_tables_hook(ra: int, pulse_length
     """Pdi.u8 of 0x098E/0x098F (the firmware's acknowledge of every pulse) calls the hook's
     body directly (decision P44): the same byte, memory, AL events and interrupt line as
     the general PDI read, which runs the table's hook (DcUnit._pr_sync_status)."""
-    fast, slow = twins()
-    for e in (fast, slow):
-        e.mem[DC_PULSE_LENGTH : DC_PULSE_LENGTH + 2] = pulse_length.to_bytes(2, "little")
-        e.mem[AL_EVENT_MASK : AL_EVENT_MASK + 4] = (EV_SYNC0 | EV_SYNC1).to_bytes(4, "little")
-        e.mem[ra] = 0x01
-        e.set_al_event(EV_SYNC0 | EV_SYNC1)
+    fast, slow = pulsed_twins(ra, pulse_length)
     byte = Pdi(fast).u8(ra)
     assert byte == Pdi(slow).read(ra, 1)[0] == (0x00 if pulse_length == 0 else 0x01)
     same(fast, slow)
