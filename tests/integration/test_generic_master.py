@@ -115,9 +115,11 @@ def test_esi_slave_under_pysoem(master_factory: Any, daemon_factory: Any, tmp_pa
 def test_kickcat_on_an_esi_slave(
     netns_pair: NetnsPair, daemon_factory: Any, tmp_path: Path
 ) -> None:
-    """KickCAT (defaults: 2 ms link timeout) maps the ESI slave and reaches OP on every run;
-    a run whose cycles lose a frame on a loaded host (test_kickcat_master.py) is run again
-    from power-up, up to 3 runs, and one must complete."""
+    """KickCAT (defaults: 2 ms link timeout) maps the ESI slave, reaches OP and cycles. KickCAT
+    gives up on the first frame it does not get back within 2 ms, in its bring-up (an EEPROM
+    read: "Error while fetching eeprom data") as in its cycles; a run that a loaded host
+    cost a frame (test_kickcat_master.py, docs/performance.md "The host") is run again from
+    power-up, up to 3 runs, and one must complete: a fault of the slave fails all three."""
     seg = tmp_path / "segment.yaml"
     seg.write_text("slaves:\n" + ACME_IO8)
     d = daemon_factory("--config", str(seg))
@@ -127,7 +129,6 @@ def test_kickcat_on_an_esi_slave(
         if runs[-1]["ok"]:
             break
         d.restart()
-    assert all(r["stage"] in ("cycles", "done") for r in runs), runs
     assert runs[-1] == {"ok": True, "stage": "done", "slaves": 1, "cycles": 100}, runs
 
 
