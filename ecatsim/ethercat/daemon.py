@@ -362,8 +362,7 @@ class Daemon:
     def _run_select(self, buf: bytearray) -> None:
         follow_fd = self.follower.fileno() if self.follower is not None else -1
         self.probe_frames()
-        out_fd = self.out.link.fileno() if self.out is not None else -1
-        watch = [f for f in (self._fd, out_fd, *self._watch, follow_fd) if f >= 0]
+        watch = [f for f in (*self.frame_fds(), *self._watch, follow_fd) if f >= 0]
         clock = self.segment.clock
         while not self._stop:
             if self.busy_poll:
