@@ -23,32 +23,31 @@ from typing import Any
 
 import pytest
 
-from ecatsim.bench.capture import Capture
 from tests.integration.netns import NetnsPair
-from tests.support.kickcat import busy_cpus, kickcat_trial
+from tests.support.kickcat import busy_cpus, kickcat_until_clean, one_trial
 
 pytestmark = pytest.mark.integration
 
-#: KickCAT's default link timeout: a reply later than this is a lost frame to it
-KICKCAT_TIMEOUT_US = 2000
 #: the daemon's reply time, 99th percentile, under load (measured: 60-300 us)
 LOADED_P99_US = 1000
 
 
-def timed_trial(
-    pair: NetnsPair, master_cpu: int | None = None
-) -> tuple[dict[str, Any], dict[str, Any]]:
-    with Capture.both_ends((pair.master_ns, pair.master_if), (pair.slave_ns, pair.slave_if)) as rt:
-        result = kickcat_trial(pair, master_cpu=master_cpu)
-    return result, rt.stats()
+def timed_trial(pair: NetnsPair) -> tuple[dict[str, Any], dict[str, Any]]:
+    trial = one_trial(pair)
+    return trial.result, trial.replies
 
 
 def test_kickcat_reaches_op_and_runs_500_cycles(netns_pair: NetnsPair, daemon_factory: Any) -> None:
-    daemon_factory()
-    result, replies = timed_trial(netns_pair, master_cpu=max(os.sched_getaffinity(0)))
-    assert result == {"ok": True, "stage": "done", "slaves": 1, "cycles": 500}, replies
-    assert replies["unpaired"] == 0 and replies["frames"] > 1000, replies
-    assert replies["max"] < KICKCAT_TIMEOUT_US, replies
+    """Every request gets its reply within KickCAT's 2 ms. A run that KickCAT does not
+    complete, or with a reply later than 2 ms, is run again from power-up only when the host
+    stalled (a watch on every CPU woke 1 ms late or more) during each late reply and within
+    2 ms of the request KickCAT gave up on; otherwise it fails the test
+    (tests/support/kickcat.py)."""
+    d = daemon_factory()
+    expected = {"ok": True, "stage": "done", "slaves": 1, "cycles": 500}
+    cpu = max(os.sched_getaffinity(0))
+    trial = kickcat_until_clean(netns_pair, d.restart, expected, master_cpu=cpu)
+    assert trial.replies["frames"] > 1000, trial.replies
 
 
 def test_kickcat_under_load_with_the_daemons_default_flags(

@@ -1,18 +1,31 @@
-"""Run tools/kickcat_master.py in a master namespace; keep the CPUs busy meanwhile."""
+"""Run tools/kickcat_master.py in a master namespace; keep the CPUs busy meanwhile; repeat a
+run the host spoiled (a stall measured by tests/support/stall.py), and only such a run."""
 
 from __future__ import annotations
 
 import json
 import subprocess
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import pytest
+
+from ecatsim.bench.capture import Capture, reply_stats
+from ecatsim.bench.capture import pair as pair_frames
 from tests.integration.netns import NetnsPair
+from tests.support.stall import StallWatch
 
 TOOL = Path(__file__).resolve().parents[2] / "tools" / "kickcat_master.py"
+
+#: KickCAT's default link timeout: a reply later than this is a lost frame to it
+KICKCAT_TIMEOUT_US = 2000
+#: a host stall that can cost KickCAT a frame: half its link timeout, with the daemon's own
+#: reply time (tens of microseconds for one slave) and KickCAT's polling naps on top
+HOST_STALL_S = 0.001
 
 
 def kickcat_trial(
@@ -47,3 +60,73 @@ def busy_cpus(n: int) -> Iterator[None]:
         for p in procs:
             p.kill()
             p.wait()
+
+
+@dataclass
+class Trial:
+    """One KickCAT run: its JSON result, the reply times a capture at both ends saw
+    (:func:`ecatsim.bench.capture.reply_stats`), where it needs the host to explain it (the
+    requests answered later than KickCAT's timeout, and for a run KickCAT gave up, its last
+    request and the timeout after it: CLOCK_REALTIME ns) and the host stalls a watch on
+    every CPU saw meanwhile (tests/support/stall.py)."""
+
+    result: dict[str, Any]
+    replies: dict[str, Any]
+    late: list[tuple[int, int]]
+    watch: StallWatch
+
+    def clean(self, expected: dict[str, Any]) -> bool:
+        """The run completed as expected and every request had its reply within KickCAT's
+        link timeout."""
+        return self.result == expected and self.replies["unpaired"] == 0 and not self.late
+
+    def spoiled_by_the_host(self) -> bool:
+        """The host stalled for :data:`HOST_STALL_S` or more during each reply later than
+        KickCAT's timeout and, if KickCAT gave up, within its timeout of the last request."""
+        return bool(self.late) and all(self.watch.overlaps(*t, HOST_STALL_S) for t in self.late)
+
+    def __str__(self) -> str:
+        return (f"{self.result} replies {self.replies}, {len(self.late)} late or last, longest "
+                f"host stall {self.watch.worst_s * 1e3:.2f} ms")  # fmt: skip
+
+
+def one_trial(pair: NetnsPair, expected: dict[str, Any] | None = None, **kwargs: Any) -> Trial:
+    """A :func:`kickcat_trial` under a stall watch, captured at both ends; a result other
+    than ``expected`` makes its last request one to explain."""
+    with StallWatch() as watch:
+        ends = (pair.master_ns, pair.master_if), (pair.slave_ns, pair.slave_if)
+        with Capture.both_ends(*ends) as rt:
+            result = kickcat_trial(pair, **kwargs)
+    frames = rt.frames()
+    timeout_ns = KICKCAT_TIMEOUT_US * 1000
+    late = [(req.t_ns, req.t_ns + round(us * 1e3)) for us, req in pair_frames(frames).times
+            if us >= KICKCAT_TIMEOUT_US]  # fmt: skip
+    requests = [f.t_ns for f in frames if not f.reply]
+    if expected is not None and result != expected and requests:
+        late.append((requests[-1], requests[-1] + timeout_ns))
+    return Trial(result, reply_stats(frames), late, watch)
+
+
+def kickcat_until_clean(
+    pair: NetnsPair,
+    restart: Callable[[], None],
+    expected: dict[str, Any],
+    runs: int = 5,
+    **kwargs: Any,
+) -> Trial:
+    """Run KickCAT (``kickcat_trial(pair, **kwargs)``) until a run is :meth:`Trial.clean`.
+
+    A run that is not clean fails the test at once unless the host spoiled it
+    (:meth:`Trial.spoiled_by_the_host`: KickCAT gives up on the first frame late past 2 ms,
+    and a descheduled virtual CPU stops the daemon and the master alike): only then it is
+    run again from power-up (``restart()``), at most ``runs`` runs in all."""
+    spoiled: list[str] = []
+    for _ in range(runs):
+        trial = one_trial(pair, expected, **kwargs)
+        if trial.clean(expected):
+            return trial
+        if not trial.spoiled_by_the_host():
+            pytest.fail(f"KickCAT's run failed, not for a host stall: {trial}; before: {spoiled}")
+        spoiled.append(str(trial))
+        restart()
+    pytest.fail(f"the host stalled in each of {runs} KickCAT runs: {spoiled}")
