@@ -8,8 +8,8 @@ receives and answers each frame through the same segment calls as
 segment's timers, and returns here only for what Python serves (the control socket, the
 front doors, faults, delayed replies); it hands a frame to :meth:`handle_frame` where
 something watches or alters frames (trace, faults).
-With an out link (``--out-iface``: port 1 of the last slave leaves the process) the
-select(2) loop serves both links (:class:`OutPort`); the compiled responder serves one.
+With an out link (``--out-iface``: port 1 of the last slave leaves the process, decision
+L9) the compiled responder, or the select(2) loop, serves both links (:class:`OutPort`).
 A failure while processing a frame is counted and logged once with the last frames; the
 loop carries on.
 Ref: docs/architecture.md "Frame path".
@@ -337,9 +337,9 @@ class Daemon:
         monotonic clock the receive time stamps are converted to."""
         return (
             responder is not None
-            and self.out is None
             and self.compiled
             and getattr(self.link, "raw_socket", False)
+            and (self.out is None or getattr(self.out.link, "raw_socket", False))
             and isinstance(self.segment.clock, MonotonicClock)
         )
 
@@ -440,7 +440,7 @@ class Daemon:
             self.replies += sent
             self.compiled_replies += sent
         if code == mod.FRAME:
-            self.handle_frame(buf, n, t_rx)
+            self.handle_frame(buf, n, t_rx, srv.entry)
         elif code in (mod.TIMEOUT, mod.WAKE):
             if code == mod.WAKE:
                 ready, _, _ = select.select(self._watch, (), (), 0)
@@ -454,8 +454,9 @@ class Daemon:
         assert mod is not None
         srv = self._responder
         if srv is None:
+            out_fd = self.out.link.fileno() if self.out is not None else -1
             srv = self._responder = mod.Responder(
-                self._fd, self._watch, self.recorder, self.busy_poll
+                self._fd, self._watch, self.recorder, self.busy_poll, out_fd=out_fd
             )
         return srv
 

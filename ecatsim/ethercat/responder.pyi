@@ -22,6 +22,7 @@ class ServiceError(Exception):
 class Responder:
     busy: bool
     replied: int
+    entry: int
     def __init__(
         self,
         fd: int,
@@ -29,6 +30,7 @@ class Responder:
         recorder: FrameRecorder,
         busy: bool = False,
         timer: bool = True,
+        out_fd: int = -1,
     ) -> None: ...
     def set_follow(self, follow: Callable[[int], int] | None, fd: int, look_ns: int) -> None: ...
     def serve(

@@ -4,7 +4,9 @@ Python bytecode run. One :class:`Responder` per link waits, receives each frame 
 kernel time stamp, records it, walks it, sends the reply, then runs the work after the
 reply and the segment's timers, and goes back to waiting; it returns to the daemon only
 where Python is needed (another descriptor, a signal, the daemon's own deadline, a frame
-it does not serve whole).
+it does not serve whole). With an out link (``--out-iface``, decision L9) it waits on both
+links, passes each frame in with the link it came from, and sends it where the segment
+says it leaves.
 
 What happens to a frame is written once, in the core's per-frame sequence
 (ecatsim/ethercat/sequence.py, decision P21), which :meth:`Daemon.handle_frame` runs too:
@@ -276,17 +278,21 @@ cdef int wait_fds(pollfd *pfd, nfds_t n, const timespec *ts) noexcept:
 
 
 cdef class Responder:
-    """The raw link's steady state (decision P9). ``fd``: the link's socket; ``others``:
-    descriptors that end a wait (wake-up pipe, control socket, front doors);
+    """The raw link's steady state (decision P9). ``fd``: the link's socket; ``out_fd``: the
+    out link's (-1: none), frames from it enter the segment at its out port and frames the
+    segment sends on leave on it; ``others``: descriptors that end a wait (wake-up pipe,
+    control socket, front doors);
     ``recorder``: where each frame served here is kept as received; ``busy``: spin
     instead of sleeping in ppoll(2); ``timer``: wait on a timerfd(2) armed once per
     deadline, not a ppoll timeout (which arms and cancels a kernel timer on every call,
     costly in a VM). :meth:`set_follow`: the daemon's CPU following (decision K5), or
-    none. ``replied``: replies sent so far."""
+    none. ``replied``: frames sent so far; ``entry``: the link the last frame came from
+    (0: the daemon's, 1: the out link)."""
 
-    cdef int fd, tfd, nothers
-    #: the link, ``others``, the timer fd, the CPU follower's fd
-    cdef pollfd pfd[MAX_WATCH + 3]
+    cdef int fd, out_fd, tfd, nothers
+    cdef readonly int entry
+    #: the link, ``others``, the timer fd, the CPU follower's fd, the out link
+    cdef pollfd pfd[MAX_WATCH + 4]
     #: the deadline the timer fd is armed for (-1: none)
     cdef long long armed
     cdef bytearray buf
@@ -315,11 +321,13 @@ cdef class Responder:
         self.tfd = -1
 
     def __init__(self, int fd, tuple others not None, FrameRecorder recorder not None,
-                 bint busy=False, bint timer=True) -> None:
+                 bint busy=False, bint timer=True, int out_fd=-1) -> None:
         cdef Py_ssize_t i
         if len(others) > MAX_WATCH:
             raise ValueError("too many fds to watch")
         self.fd = fd
+        self.out_fd = out_fd
+        self.entry = 0
         self.nothers = <int>len(others)
         self.recorder = recorder
         self.busy = busy
@@ -339,6 +347,8 @@ cdef class Responder:
         self.pfd[self.nothers + 1].events = POLLIN
         self.pfd[self.nothers + 2].fd = -1
         self.pfd[self.nothers + 2].events = POLLIN
+        self.pfd[self.nothers + 3].fd = out_fd
+        self.pfd[self.nothers + 3].events = POLLIN
 
     def __dealloc__(self) -> None:
         if self.tfd >= 0:
@@ -388,13 +398,17 @@ cdef class Responder:
         return 0
 
     def frame_waiting(self) -> bool:
-        """A frame waits on the link (poll(2) without waiting): the segment's work after a
-        reply stops for it (``Schedule.frame_waiting``, decision P19)."""
-        cdef pollfd p
-        p.fd = self.fd
-        p.events = POLLIN
-        p.revents = 0
-        return poll(&p, 1, 0) > 0 and p.revents != 0
+        """A frame waits on the link or the out link (poll(2) without waiting): the
+        segment's work after a reply stops for it (``Schedule.frame_waiting``, decisions P19
+        and L9)."""
+        cdef pollfd p[2]
+        p[0].fd = self.fd
+        p[0].events = POLLIN
+        p[0].revents = 0
+        p[1].fd = self.out_fd
+        p[1].events = POLLIN
+        p[1].revents = 0
+        return poll(p, 2 if self.out_fd >= 0 else 1, 0) > 0
 
     def close(self) -> None:
         """Close the timer fd (the link's socket is the caller's)."""
@@ -420,9 +434,24 @@ cdef class Responder:
         self.armed = deadline
         return 0
 
+    cdef long receive(self, bint link, bint out, long long *stamp) except? ERROR:
+        """A frame from the link (if ``link``) or else the out link (if ``out``): its length
+        (``entry`` says which link), 0 if none is waiting."""
+        cdef long n = 0
+        cdef uint8_t *buf = <uint8_t *>(<char *>self.buf)
+        if link:
+            n = raw_recv(self.fd, buf, len(self.buf), stamp)
+            self.entry = 0
+        if n == 0 and out and self.out_fd >= 0:
+            n = raw_recv(self.out_fd, buf, len(self.buf), stamp)
+            self.entry = 1
+        if n < 0:
+            raise OSError(-n, strerror(-n))
+        return n
+
     cdef long wait_frame(self, long long deadline, long long *stamp) except? ERROR:
         """Wait for a frame (or the deadline, or ``others``) and receive it: its length
-        > 0, or NO_FRAME (the deadline), -WAKE. Without busy spinning, the link is read
+        > 0, or NO_FRAME (the deadline), -WAKE. Without busy spinning, a link is read
         only where ppoll(2) says it is readable (a receive that finds nothing is a
         system call for nothing), or once where the deadline has already passed."""
         cdef long n
@@ -435,13 +464,12 @@ cdef class Responder:
         cdef pollfd *pfd = self.pfd
         # a frame waiting is served before a deadline that has passed
         cdef bint look = self.busy or deadline <= clock_ns(CLOCK_MONOTONIC)
+        cdef bint look_out = look
         while True:
-            if look:
-                n = raw_recv(self.fd, <uint8_t *>(<char *>self.buf), len(self.buf), stamp)
+            if look or look_out:
+                n = self.receive(look, look_out, stamp)
                 if n > 0:
                     return n
-                if n < 0:
-                    raise OSError(-n, strerror(-n))
             PyErr_CheckSignals()
             left = deadline - clock_ns(CLOCK_MONOTONIC)
             if left <= 0:
@@ -453,14 +481,14 @@ cdef class Responder:
                 rc = poll(pfd + 1, <nfds_t>(nothers + 2), 0)
             elif self.tfd >= 0:
                 self.arm(deadline)
-                rc = wait_fds(pfd, <nfds_t>(nothers + 3), NULL)
+                rc = wait_fds(pfd, <nfds_t>(nothers + 4), NULL)
                 if rc > 0 and pfd[nothers + 1].revents:
                     if read(self.tfd, &expirations, sizeof(expirations)) < 0 and errno != EAGAIN:
                         PyErr_SetFromErrno(OSError)
             else:
                 ts.tv_sec = <time_t>(left // 1_000_000_000)
                 ts.tv_nsec = left % 1_000_000_000
-                rc = wait_fds(pfd, <nfds_t>(nothers + 3), &ts)  # no timer fd: -1, ignored
+                rc = wait_fds(pfd, <nfds_t>(nothers + 4), &ts)  # no timer fd: -1, ignored
             if rc < 0:
                 if errno != EINTR:
                     PyErr_SetFromErrno(OSError)
@@ -470,11 +498,12 @@ cdef class Responder:
                 if pfd[i].revents:
                     return -WAKE
             look = self.busy or (rc > 0 and pfd[0].revents != 0)
-            if look and not self.busy:
+            look_out = self.busy or (rc > 0 and pfd[nothers + 3].revents != 0)
+            if (look or look_out) and not self.busy:
                 self.prefetch()  # while the receive runs, the walk's lines come in
             if rc > 0 and pfd[nothers + 2].revents:
                 self.follow_due = True  # after this frame, or now if none came with it
-                if not look:
+                if not (look or look_out):
                     self.run_follow(clock_ns(CLOCK_MONOTONIC))
 
     cdef int answer(self, long n, FrameSequence seq, long long t_rx) except -1:
@@ -482,15 +511,17 @@ cdef class Responder:
         REPLIED, DROPPED (destroyed: no reply) or FRAME (not an EtherCAT frame: Python
         ignores it). Ref: ETG.1000.4 §5.3-5.4."""
         cdef long long code
+        cdef int fd
         self.stage = IN_FRAME
         self.stage_n = n
-        code = seq.arrive(self.buf, n, t_rx)
+        code = seq.arrive(self.buf, n, t_rx, self.entry)
         self.stage = IN_NOTHING
         if code == _NOT_ECAT:
             return FRAME
         if code == _DROPPED:
             return DROPPED
-        if send(self.fd, <uint8_t *>(<char *>self.buf), <size_t>n, 0) < 0:
+        fd = self.out_fd if self.out_fd >= 0 and seq.segment.exit else self.fd  # it leaves there
+        if send(fd, <uint8_t *>(<char *>self.buf), <size_t>n, 0) < 0:
             if errno not in (ENOBUFS, EAGAIN, ENETDOWN, ENXIO):  # dropped, as a wire would
                 PyErr_SetFromErrno(OSError)
         self.replied += 1
@@ -567,7 +598,7 @@ cdef class Responder:
         cdef long n
         cdef int code, i
         cdef Segment seg = seq.segment if seq is not None else None
-        for i in range(self.nothers + 3):
+        for i in range(self.nothers + 4):
             self.pfd[i].revents = 0
         while True:
             if seg is not None and self.replied >= self.hot_next:

@@ -20,7 +20,7 @@ import pytest
 from ecatsim.clock import MonotonicClock
 from ecatsim.ethercat import daemon as daemon_mod
 from ecatsim.ethercat.assembly import build_segment
-from ecatsim.ethercat.daemon import Daemon
+from ecatsim.ethercat.daemon import Daemon, OutPort
 from ecatsim.ethercat.prefetch import hot_lines
 from ecatsim.ethercat.recorder import FrameRecorder
 from ecatsim.ethercat.segment import Segment
@@ -307,6 +307,43 @@ def test_daemon_run_serves_through_the_responder(srv: ModuleType, link: SocketLi
     assert replies[0] == processed and replies[2] == processed
     assert replies[1] is not None and replies[1][26:30] == b"\x01\x00\x01\x00"
     assert (d.replies, d.compiled_replies, d.failures) == (3, 3, 0)
+
+
+def test_the_responder_serves_the_out_link_too(srv: ModuleType, link: SocketLink) -> None:
+    """With an out link (decision L9) the responder waits on both links: a frame from the
+    master leaves on the out link marked processed, the same frame coming back there
+    leaves on the daemon's link unchanged, both served compiled; the work after a reply
+    stops for a frame waiting on either link."""
+    cfg = SegmentConfig(tuple(SlaveConfig(device="echo", serial=i + 1) for i in range(2)))
+    seg = build_segment(cfg, MonotonicClock(), out=True)
+    far = SocketLink()
+    try:
+        d = Daemon(link, seg, out=OutPort(far, lambda: True))
+        assert d.responder_applies()
+        d._service_timers()  # the first look at the carrier
+        assert seg.out_up
+        buf = bytearray(2048)
+        frame = dg.ethernet_frame([dg.build(dg.Cmd.BRD, 0, 0x0130, bytes(2))])
+        link.master_send(frame)
+        deadline = time.monotonic_ns() + 1_000_000_000
+        assert d.serve_once(buf, deadline) == srv.REPLIED
+        went = far.master_recv()
+        assert link.master_recv() is None and went is not None
+        processed = bytearray(frame)
+        processed[6] |= 0x02
+        processed[18] = 2  # each slave counts the position up
+        processed[26:30] = b"\x01\x00\x02\x00"  # both AL status INIT, WKC 2
+        assert went == processed
+        far.master_send(went)  # the next daemon's reply comes back on the out link
+        assert d.serve_once(buf, deadline) == srv.REPLIED
+        assert link.master_recv() == went and far.master_recv() is None
+        assert (d.replies, d.compiled_replies, d.failures) == (2, 2, 0)
+        waiting = d._make_responder().frame_waiting
+        assert not waiting()
+        far.master_send(b"\x00" * 60)
+        assert waiting()
+    finally:
+        far.close()
 
 
 def test_the_responder_runs_the_segments_timers(
