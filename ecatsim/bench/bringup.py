@@ -16,11 +16,16 @@ in the results directory.
 With ``--master soem`` SOEM's own DC sample red_test is the master instead
 (:mod:`ecatsim.bench.redtest`): up to 1023 slaves and a 64 KiB IO map, the cycles' lost
 frames and WKCs read off the wire. Each run records its master, the master's limits,
-overlap or not, and the daemon's flags. Ref: docs/performance.md "How to measure".
+overlap or not, and the daemon's flags. A watch on every CPU records the host's stalls
+during the run and how many replies over 2 ms came during one
+(:mod:`ecatsim.bench.stallwatch`), and each daemon's ``stopped`` log line (SYNC0 pulses
+merged, collector pauses, failures) is kept with the run (decision B8).
+Ref: docs/performance.md "How to measure".
 """
 
 from __future__ import annotations
 
+import json
 import os
 import platform
 import tempfile
@@ -31,10 +36,11 @@ from pathlib import Path
 from typing import Any
 
 from ecatsim.bench import redtest, results, soem, steadiness
-from ecatsim.bench.capture import Capture, analyse, process_cycles
+from ecatsim.bench.capture import Capture, analyse, late_replies, process_cycles
 from ecatsim.bench.master import CSP, cpu_seconds, cycles, request_op
 from ecatsim.bench.netns import Daemon, ExtraNetns, NetnsPair, Port, SlaveEnd, in_netns
 from ecatsim.bench.options import BenchOptions
+from ecatsim.bench.stallwatch import StallWatch
 
 #: pysoem's limits: SOEM's EC_MAXSLAVE 200 (entry 0 is the master's) and its fixed IO map
 PYSOEM_LIMITS = {"max_slaves": 199, "iomap_bytes": 4096, "sync0": True, "drives_enabled": True}
@@ -97,6 +103,29 @@ def master_scheduling(rt: int | None, cpu: int | None) -> Iterator[str]:
     finally:
         os.sched_setscheduler(0, policy, param)
         os.sched_setaffinity(0, affinity)
+
+
+#: a reply this late (us) is lost to a master with the default timeout
+LATE_US = 2000
+#: the fields of each daemon's ``stopped`` log line kept in the JSON (``daemons``)
+STOPPED_FIELDS = ("frames", "replies", "compiled_replies", "bad_frames", "sync0_pulses",
+                  "sync0_max_late_us", "sync0_deferred", "sync0_merged", "failures",
+                  "cpu_moves", "cpu_follow_pauses", "gc_collections", "gc_max_us")  # fmt: skip
+#: of those, the ones the summary prints
+DAEMON_SUMMARY = ("sync0_merged", "sync0_max_late_us", "failures", "gc_max_us")
+
+
+def stopped_line(log: Path) -> dict[str, Any]:
+    """The :data:`STOPPED_FIELDS` of the daemon's ``stopped`` line in its log (JSON
+    lines); {} when it has none (it was killed)."""
+    for line in reversed(log.read_text(errors="replace").splitlines()):
+        try:
+            event = json.loads(line)
+        except ValueError:
+            continue
+        if isinstance(event, dict) and event.get("event") == "stopped":
+            return {k: event[k] for k in STOPPED_FIELDS if k in event}
+    return {}
 
 
 def chain_sizes(n: int, chain: int) -> list[int]:
@@ -163,6 +192,7 @@ def run_bringup(n: int, cycles_k: int, period_us: int, overlap: bool,
         try:
             with (
                 Capture.master_end(pair.master_ns, pair.master_if) as cap,
+                StallWatch() as watch,  # on every CPU: before the master is pinned
                 master_scheduling(master_rt, master_cpu) as master,
             ):
                 t0 = time.perf_counter()
@@ -182,7 +212,8 @@ def run_bringup(n: int, cycles_k: int, period_us: int, overlap: bool,
                 time.sleep(0.05)
         finally:
             m.close()
-    frames = analyse(cap.frames(), cap.marks)
+    found = cap.frames()
+    frames = analyse(found, cap.marks)
     frames.get("phases", {}).pop("end", None)
     kept = {k: cyc[k] for k in ("cycles", "lost", "wkc_errors", "expected_wkc", "wkc_error_seen",
                                 "cpu_percent", "rtt_us", "fell_behind", "lost_master_stalled",
@@ -191,7 +222,9 @@ def run_bringup(n: int, cycles_k: int, period_us: int, overlap: bool,
             "master_name": f"pysoem {soem.pysoem_version()}", "master_limits": PYSOEM_LIMITS,
             "daemon_flags": list(extra), "chain": chain_text(n, chain, extra),
             "bring_up_s": round(bring_up_s, 2), "frames": frames,
-            "cycles": {**kept, "daemon_cpu_percent": each}}  # fmt: skip
+            "cycles": {**kept, "daemon_cpu_percent": each},
+            "host_stalls": watch.report(late_replies(found, LATE_US)),
+            "daemons": [stopped_line(d.log) for d in ds]}  # fmt: skip
 
 
 def chain_text(n: int, chain: int, extra: tuple[str, ...]) -> list[dict[str, Any]]:
@@ -220,6 +253,7 @@ def run_bringup_soem(n: int, cycles_k: int, period_us: int, overlap: bool,
         NetnsPair() as pair,
         daemons(pair, n, chain, extra, tmp) as ds,
         Capture.master_end(pair.master_ns, pair.master_if, keep_wkc=True) as cap,
+        StallWatch() as watch,
     ):
         t0 = time.perf_counter()
         rt = redtest.run(exe, pair, cap, period_us, daemon_pids(ds), prefix,
@@ -248,7 +282,8 @@ def run_bringup_soem(n: int, cycles_k: int, period_us: int, overlap: bool,
             "chain": chain_text(n, chain, extra),
             "bring_up_s": round((marks.get("cycles", marks["op"]) - marks["config"]) / 1e9, 2),
             "run_s": round(time.perf_counter() - t0, 2), "frames": frames,
-            "cycles": cyc}  # fmt: skip
+            "cycles": cyc, "host_stalls": watch.report(late_replies(found, LATE_US)),
+            "daemons": [stopped_line(d.log) for d in ds]}  # fmt: skip
 
 
 def chained(r: dict[str, Any]) -> str:
@@ -286,6 +321,11 @@ def summary(r: dict[str, Any]) -> str:
                      f">2ms {p['over_2ms']}")  # fmt: skip
     if "host_steadiness" in r:
         lines.append("  " + steadiness.text(r["host_steadiness"]))
+    if "host_stalls" in r:
+        lines.append("  " + StallWatch.text(r["host_stalls"]))
+    for k, d in enumerate(r.get("daemons", [])):
+        lines.append(f"  daemon {k}: " + ", ".join(f"{key} {d[key]}" for key in DAEMON_SUMMARY
+                                                   if key in d))  # fmt: skip
     for s in f["slowest"][:5]:
         lines.append(f"  slowest: {s['us']} us {s['cmd']} adp {s['adp']} ado {s['ado']} "
                      f"len {s['length']}")  # fmt: skip

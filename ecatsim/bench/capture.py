@@ -179,6 +179,13 @@ def pair(frames: Sequence[Frame], keep_resent: int = 10) -> Pairing:
     return Pairing(times, resends, unanswered + len(pending), extra, resent)
 
 
+def late_replies(frames: Sequence[Frame], over_us: float) -> list[tuple[int, int]]:
+    """Each request answered ``over_us`` or more after it: (request, reply) kernel times
+    (CLOCK_REALTIME ns). Requests never answered are not in it (``unanswered``)."""
+    return [(req.t_ns, req.t_ns + round(us * 1e3)) for us, req in pair(frames, 0).times
+            if us >= over_us]  # fmt: skip
+
+
 def analyse(
     frames: Sequence[Frame], marks: Sequence[tuple[int, str]] = (), slowest: int = 10
 ) -> dict[str, Any]:

@@ -14,8 +14,7 @@ from typing import Any
 
 import pytest
 
-from ecatsim.bench.capture import Capture, reply_stats
-from ecatsim.bench.capture import pair as pair_frames
+from ecatsim.bench.capture import Capture, late_replies, reply_stats
 from tests.integration.netns import NetnsPair
 from tests.support.stall import StallWatch
 
@@ -99,8 +98,7 @@ def one_trial(pair: NetnsPair, expected: dict[str, Any] | None = None, **kwargs:
             result = kickcat_trial(pair, **kwargs)
     frames = rt.frames()
     timeout_ns = KICKCAT_TIMEOUT_US * 1000
-    late = [(req.t_ns, req.t_ns + round(us * 1e3)) for us, req in pair_frames(frames).times
-            if us >= KICKCAT_TIMEOUT_US]  # fmt: skip
+    late = late_replies(frames, KICKCAT_TIMEOUT_US)
     requests = [f.t_ns for f in frames if not f.reply]
     if expected is not None and result != expected and requests:
         late.append((requests[-1], requests[-1] + timeout_ns))
