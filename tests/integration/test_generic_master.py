@@ -118,7 +118,7 @@ def test_kickcat_on_an_esi_slave(
     """KickCAT (defaults: 2 ms link timeout) maps the ESI slave, reaches OP and cycles. KickCAT
     gives up on the first frame it does not get back within 2 ms, in its bring-up (an EEPROM
     read: "Error while fetching eeprom data") as in its cycles. A failed run is run again
-    from power-up only when the host stalled (a watch on every CPU woke 1 ms late or more,
+    from power-up only when the host stalled or slowed a CPU (ecatsim/bench/stallwatch.py,
     docs/performance.md "The host") within 2 ms of the request KickCAT gave up on; otherwise
     it fails the test (tests/support/kickcat.py)."""
     seg = tmp_path / "segment.yaml"

@@ -80,9 +80,10 @@ class Trial:
         return self.result == expected and self.replies["unpaired"] == 0 and not self.late
 
     def spoiled_by_the_host(self) -> bool:
-        """The host stalled for :data:`HOST_STALL_S` or more during each reply later than
-        KickCAT's timeout and, if KickCAT gave up, within its timeout of the last request."""
-        return bool(self.late) and all(self.watch.overlaps(*t, HOST_STALL_S) for t in self.late)
+        """The host stalled a CPU for :data:`HOST_STALL_S` or more, or ran it below 30 % of
+        its speed, during each reply later than KickCAT's timeout and, if KickCAT gave up,
+        within its timeout of the last request (ecatsim/bench/stallwatch.py)."""
+        return bool(self.late) and all(self.watch.explains(*t, HOST_STALL_S) for t in self.late)
 
     def __str__(self) -> str:
         return (f"{self.result} replies {self.replies}, {len(self.late)} late or last, longest "

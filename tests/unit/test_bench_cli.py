@@ -154,16 +154,18 @@ def test_the_bench_imports_with_tools_and_tests_out_of_reach(tmp_path: Path) -> 
 
 
 def test_the_c_floor_is_package_data() -> None:
-    """The floor's C source (and the host probe's) is read from the installed package, and
-    pyproject.toml lists it as package data, so a wheel carries it."""
+    """The floor's C source (and the host probe's and the stall watch's) is read from the
+    installed package, and pyproject.toml lists it as package data, so a wheel carries it."""
     src = resources.files("ecatsim.bench").joinpath(SOURCE)
     assert src.is_file()
     assert echo_source() == src.read_text()
     assert "socket(AF_PACKET, SOCK_RAW, htons(0x88A4))" in echo_source()
     conf = tomllib.loads((ROOT / "pyproject.toml").read_text())
     assert "ecatsim.bench" in conf["tool"]["setuptools"]["packages"]
-    assert conf["tool"]["setuptools"]["package-data"]["ecatsim.bench"] == [SOURCE, "steadiness.c"]
+    data = conf["tool"]["setuptools"]["package-data"]["ecatsim.bench"]
+    assert data == [SOURCE, "steadiness.c", "stallwatch.c"]
     assert "sched_setscheduler(0, SCHED_FIFO" in c_source("steadiness.c")
+    assert "clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME" in c_source("stallwatch.c")
     assert conf["project"]["optional-dependencies"]["bench"] == ["pysoem>=1.1.13"]
 
 

@@ -32,18 +32,21 @@ def test_late_replies_are_the_requests_answered_that_late_or_later() -> None:
     assert late_replies(frames, 2000) == [(1 * MS, 3 * MS), (4 * MS, 6_500_000)]
 
 
-def test_the_report_counts_late_replies_that_a_long_enough_stall_overlapped() -> None:
+def test_the_report_counts_late_replies_that_a_stall_or_a_slow_spot_overlapped() -> None:
     w = StallWatch()
     w.stalls = [(10 * MS, 11_500_000), (20 * MS, 20_600_000), (30 * MS, 33 * MS)]
+    w.slow = [(41 * MS, 41_100_000)]
     w.worst_s = 0.003
-    late = [(9 * MS, 12 * MS), (19 * MS, 22 * MS), (31 * MS, 34 * MS), (40 * MS, 43 * MS)]
+    late = [(9 * MS, 12 * MS), (19 * MS, 22 * MS), (31 * MS, 34 * MS), (40 * MS, 43 * MS),
+            (50 * MS, 53 * MS)]  # fmt: skip
     r = w.report(late)
-    # the second overlaps only a 0.6 ms stall, the fourth none
-    assert r == {"least_ms": 1.0, "stalls": 2, "longest_ms": 3.0, "late_replies": 4,
-                 "late_in_a_stall": 2}  # fmt: skip
+    # the first and third overlap a stall of 1 ms or more, the second only a 0.6 ms one, the
+    # fourth a slow spot, the fifth nothing
+    assert r == {"least_ms": 1.0, "stalls": 2, "longest_ms": 3.0, "slow_spots": 1,
+                 "late_replies": 5, "late_in_a_stall": 2, "late_when_slowed": 3}  # fmt: skip
     assert StallWatch.text(r) == (
-        "host stalls during the run: 2 of 1 ms or more (longest 3.0 ms); replies over 2 ms: "
-        "4, 2 of them during such a stall"
+        "host during the run: 2 stalls of 1 ms or more (longest 3.0 ms), 1 slow spots; "
+        "replies over 2 ms: 5, 2 during a stall, 3 during a stall or a slow spot"
     )
 
 
@@ -55,7 +58,7 @@ def test_the_watch_runs_on_every_cpu_and_records_stalls_in_the_capture_s_clock()
         time.sleep(0.3)
     after = time.time_ns()
     assert not w._procs
-    assert all(before <= s < e <= after for s, e in w.stalls), w.stalls
+    assert all(before <= s < e <= after for s, e in w.stalls + w.slow), (w.stalls, w.slow)
     assert w.worst_s == max(((e - s) / 1e9 for s, e in w.stalls), default=0.0)
 
 
