@@ -357,3 +357,19 @@ def test_the_work_after_a_reply_stops_for_a_frame_coming_back_on_the_out_link() 
     assert waiting()
     main.close()
     far.close()
+
+
+def test_a_dl_control_write_that_keeps_the_loop_settings_keeps_the_routes() -> None:
+    """SOEM's ec_config_init writes 0x0100 (the forwarding rule) of every slave: the routes
+    are compiled again only when the loop settings (0x0101) change. Ref: TMC8460 §5.17."""
+    seg = line(3)
+    routes = seg.routes[0]
+    got = send(seg, [dg.build(dg.Cmd.BWR, 0, 0x0100, bytes(2))])
+    assert got is not None and got[0][0].wkc == 3
+    send(seg, [dg.build(dg.Cmd.BRD, 0, 0x0130, bytes(2))])
+    assert seg.routes[0] is routes and not seg.ctx.topology_dirty
+    assert [bytes(e.mem[0x0100:0x0104]) for e in seg.escs] == [b"\x00\x00\x07\x00"] * 3
+    # the last slave's port 1 closed (loop 0x0101 bits 2-3 = 2): compiled again, same order
+    send(seg, [dg.build(dg.Cmd.APWR, (-2) & 0xFFFF, 0x0101, b"\x08")])
+    send(seg, [dg.build(dg.Cmd.BRD, 0, 0x0130, bytes(2))])
+    assert seg.routes[0] is not routes and seg.routes[0].order == routes.order
