@@ -869,16 +869,11 @@ class Esc(SmHost):
             self.on_reset()
 
     def _ec_dl_control(self, ra: int, rs: int, old: bytes) -> None:
-        """Loop settings (0x0101) change DL status and the routes; bit 24 enables the alias.
-        The other bits (forwarding rule, RX FIFO size, EBUS jitter) change neither, so a
-        master's write of them (SOEM's ec_config_init writes 0x0100 of every slave) costs
-        no recompiling of the segment's routes. Ref: TMC8460 §5.17 Table 28."""
-        m = self.mem
-        if m[DL_CONTROL + 1] != old[1]:
+        """Loop 0x0101: DL status, routes; bit 24: alias; no other bit (P57). Ref: TMC8460 §5.17"""
+        if self.mem[DL_CONTROL + 1] != old[1]:
             self.update_dl_status()
             self.ctx.topology_dirty = True
-        if (m[DL_CONTROL + 3] ^ old[3]) & 0x01:
-            self.ctx.addr_dirty = True
+        self.ctx.addr_dirty |= bool((self.mem[DL_CONTROL + 3] ^ old[3]) & 0x01)
 
     def _er_dl_status(self, ra: int, rs: int) -> None:
         """Reading DL status clears ECAT event 0x0210.2. Ref: TMC8460 §5.19 note *."""

@@ -7,6 +7,7 @@ Ref: ETG.1000.6 §6.4 (AL state machine); TMC8460 §2.3.2, §5.20-5.22, §5.32, 
 
 from __future__ import annotations
 
+import gc
 from dataclasses import dataclass
 
 import structlog
@@ -455,6 +456,10 @@ class Firmware:
         self.log.info("al_state", state=to.name, transition=tr.name)
         self.app.al_state_changed(to, now_ns)
         self._publish()
+        if tr in (Transition.PS, Transition.SO):
+            # what the way to SAFEOP and OP built (PDO maps, images) lives as long as the
+            # state: out of the cyclic collector, as the daemon's start-up (decision P57)
+            gc.freeze()
 
     def on_mailbox_start(self) -> None:
         """The mailbox starts (IP/IB): counters and queues reset."""

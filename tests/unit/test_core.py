@@ -137,8 +137,8 @@ def test_every_extension_is_optional(monkeypatch: pytest.MonkeyPatch) -> None:
     """Where no C compiler exists pip still installs ecatsim, and the pure-Python core runs:
     every extension setup.py declares is optional, including those cythonize makes anew.
     They are all Cython modules: no hand-written C is left. The C files in the package are
-    the benchmark's floor and its host probe, separate programs the bench compiles at run
-    time (decisions B2, B7), never linked into ecatsim."""
+    the benchmark's floor, its host probe and its stall watch, separate programs the bench
+    compiles at run time (decisions B2, B7, B8), never linked into ecatsim."""
     exts, _ = _cythonize_calls(monkeypatch)
     assert {e.name for e in exts} == {
         *compiled.CORE,
@@ -148,7 +148,7 @@ def test_every_extension_is_optional(monkeypatch: pytest.MonkeyPatch) -> None:
     assert [e.name for e in exts if not e.optional] == []
     root = Path(compiled.__file__).parent
     found = sorted(p.relative_to(root).as_posix() for p in root.rglob("*.[ch]"))
-    assert found == ["bench/echo.c", "bench/steadiness.c"]
+    assert found == ["bench/echo.c", "bench/stallwatch.c", "bench/steadiness.c"]
 
 
 def test_every_extension_declares_that_it_needs_the_gil(monkeypatch: pytest.MonkeyPatch) -> None:
