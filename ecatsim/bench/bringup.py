@@ -25,7 +25,6 @@ Ref: docs/performance.md "How to measure".
 
 from __future__ import annotations
 
-import json
 import os
 import platform
 import tempfile
@@ -36,7 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from ecatsim.bench import redtest, results, soem, steadiness
-from ecatsim.bench.capture import Capture, analyse, late_replies, process_cycles
+from ecatsim.bench.capture import Capture, Frame, analyse, late_replies, process_cycles
 from ecatsim.bench.master import CSP, cpu_seconds, cycles, request_op
 from ecatsim.bench.netns import Daemon, ExtraNetns, NetnsPair, Port, SlaveEnd, in_netns
 from ecatsim.bench.options import BenchOptions
@@ -115,17 +114,19 @@ STOPPED_FIELDS = ("frames", "replies", "compiled_replies", "bad_frames", "sync0_
 DAEMON_SUMMARY = ("sync0_merged", "sync0_max_late_us", "failures", "gc_max_us")
 
 
-def stopped_line(log: Path) -> dict[str, Any]:
-    """The :data:`STOPPED_FIELDS` of the daemon's ``stopped`` line in its log (JSON
-    lines); {} when it has none (it was killed)."""
-    for line in reversed(log.read_text(errors="replace").splitlines()):
-        try:
-            event = json.loads(line)
-        except ValueError:
-            continue
-        if isinstance(event, dict) and event.get("event") == "stopped":
-            return {k: event[k] for k in STOPPED_FIELDS if k in event}
-    return {}
+def stopped_counts(d: Daemon) -> dict[str, Any]:
+    """The :data:`STOPPED_FIELDS` of the daemon's ``stopped`` log line; {} when it has
+    none (it was killed)."""
+    event = d.last_event("stopped")
+    return {k: event[k] for k in STOPPED_FIELDS if k in event}
+
+
+def observed(watch: StallWatch, found: list[Frame], ds: list[Daemon]) -> dict[str, Any]:
+    """What a run records besides the master's figures (decision B8): the host during the
+    run against the replies later than :data:`LATE_US` (``host_stalls``), and each
+    daemon's :func:`stopped_counts` (``daemons``)."""
+    return {"host_stalls": watch.report(late_replies(found, LATE_US)),
+            "daemons": [stopped_counts(d) for d in ds]}  # fmt: skip
 
 
 def chain_sizes(n: int, chain: int) -> list[int]:
@@ -223,8 +224,7 @@ def run_bringup(n: int, cycles_k: int, period_us: int, overlap: bool,
             "daemon_flags": list(extra), "chain": chain_text(n, chain, extra),
             "bring_up_s": round(bring_up_s, 2), "frames": frames,
             "cycles": {**kept, "daemon_cpu_percent": each},
-            "host_stalls": watch.report(late_replies(found, LATE_US)),
-            "daemons": [stopped_line(d.log) for d in ds]}  # fmt: skip
+            **observed(watch, found, ds)}  # fmt: skip
 
 
 def chain_text(n: int, chain: int, extra: tuple[str, ...]) -> list[dict[str, Any]]:
@@ -282,8 +282,7 @@ def run_bringup_soem(n: int, cycles_k: int, period_us: int, overlap: bool,
             "chain": chain_text(n, chain, extra),
             "bring_up_s": round((marks.get("cycles", marks["op"]) - marks["config"]) / 1e9, 2),
             "run_s": round(time.perf_counter() - t0, 2), "frames": frames,
-            "cycles": cyc, "host_stalls": watch.report(late_replies(found, LATE_US)),
-            "daemons": [stopped_line(d.log) for d in ds]}  # fmt: skip
+            "cycles": cyc, **observed(watch, found, ds)}  # fmt: skip
 
 
 def chained(r: dict[str, Any]) -> str:

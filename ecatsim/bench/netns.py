@@ -32,7 +32,7 @@ import time
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from types import TracebackType
-from typing import Protocol
+from typing import Any, Protocol
 
 CLONE_NEWNET = 0x40000000
 NETNS_DIR = Path("/run/netns")
@@ -334,6 +334,18 @@ class Daemon:
         text = self.log.read_text(errors="replace")
         marker = f"--- start {self.starts}:"
         return text[text.rfind(marker) :].splitlines()[1:]
+
+    def last_event(self, name: str) -> dict[str, Any]:
+        """The last JSON log line of the current start whose ``event`` is ``name``; {} if
+        there is none (the daemon was killed, or logs in another format)."""
+        for line in reversed(self._this_run()):
+            try:
+                event = json.loads(line)
+            except ValueError:
+                continue
+            if isinstance(event, dict) and event.get("event") == name:
+                return event
+        return {}
 
     def start(self, timeout: float = READY_TIMEOUT) -> None:
         if self.alive():

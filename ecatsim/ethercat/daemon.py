@@ -343,10 +343,13 @@ class Daemon:
             and isinstance(self.segment.clock, MonotonicClock)
         )
 
+    def _out_fd(self) -> int:
+        """The out link's descriptor (-1: none)."""
+        return self.out.link.fileno() if self.out is not None else -1
+
     def frame_fds(self) -> tuple[int, ...]:
         """The descriptors frames arrive on: the daemon's link and the out link."""
-        out_fd = self.out.link.fileno() if self.out is not None else -1
-        return tuple(f for f in (self._fd, out_fd) if f >= 0)
+        return tuple(f for f in (self._fd, self._out_fd()) if f >= 0)
 
     def probe_frames(self) -> None:
         """The select(2) loop's probes: the work after a reply stops for a frame that came
@@ -454,9 +457,8 @@ class Daemon:
         assert mod is not None
         srv = self._responder
         if srv is None:
-            out_fd = self.out.link.fileno() if self.out is not None else -1
             srv = self._responder = mod.Responder(
-                self._fd, self._watch, self.recorder, self.busy_poll, out_fd=out_fd
+                self._fd, self._watch, self.recorder, self.busy_poll, out_fd=self._out_fd()
             )
         return srv
 

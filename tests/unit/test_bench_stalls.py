@@ -11,8 +11,9 @@ import os
 import time
 from pathlib import Path
 
-from ecatsim.bench.bringup import stopped_line
+from ecatsim.bench.bringup import stopped_counts
 from ecatsim.bench.capture import Frame, late_replies
+from ecatsim.bench.netns import Daemon, Port
 from ecatsim.bench.stallwatch import StallWatch
 
 MS = 1_000_000
@@ -64,9 +65,13 @@ def test_the_watch_runs_on_every_cpu_and_records_stalls_in_the_capture_s_clock()
 
 def test_the_daemon_s_stopped_line_is_read_from_its_log(tmp_path: Path) -> None:
     log = tmp_path / "daemon.log"
+    d = Daemon(Port("ns", "veth0"), (), log)
+    d.starts = 2  # the lines of the current start count, after its marker
     stopped = {"event": "stopped", "frames": 10, "sync0_merged": 3, "gc_max_us": 120,
                "failures": 0, "level": "info", "timestamp": "x"}  # fmt: skip
-    log.write_text('{"event": "ready"}\nnot json\n' + json.dumps(stopped) + "\n")
-    assert stopped_line(log) == {"frames": 10, "sync0_merged": 3, "gc_max_us": 120, "failures": 0}
-    log.write_text('{"event": "ready"}\n')  # killed: no stopped line
-    assert stopped_line(log) == {}
+    earlier = json.dumps(stopped | {"frames": 99})
+    log.write_text(f"--- start 1: x\n{earlier}\n--- start 2: x\n" + '{"event": "ready"}\n'
+                   "not json\n" + json.dumps(stopped) + "\n")  # fmt: skip
+    assert stopped_counts(d) == {"frames": 10, "sync0_merged": 3, "gc_max_us": 120, "failures": 0}
+    log.write_text(f"--- start 1: x\n{earlier}\n--- start 2: x\n" + '{"event": "ready"}\n')
+    assert stopped_counts(d) == {}  # killed: no stopped line in this start
