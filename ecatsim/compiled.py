@@ -38,6 +38,7 @@ log = structlog.get_logger("ecatsim.compiled")
 #: daemon modules ran no faster than CPython's own interpreter, whose specialised attribute
 #: reads beat Cython's generic ones, and the daemon's CPU rose (docs/decisions.md P2, P13)
 CORE = (
+    "ecatsim.esc.context",
     "ecatsim.esc.sm",
     "ecatsim.esc.fmmu",
     "ecatsim.esc.watchdog",

@@ -1,6 +1,7 @@
 # The compiled core's declarations for core.py (Cython, pure-Python mode): the ESC's and
 # the frame context's state as typed fields. core.py stays the one source of the
 # behaviour; this file only gives types. Decisions P2, P13.
+from ecatsim.esc.context cimport FrameContext
 from ecatsim.esc.dc cimport DcUnit
 from ecatsim.esc.fmmu cimport FmmuMap
 from ecatsim.esc.sm cimport SmHost, SyncManager
@@ -21,34 +22,20 @@ cdef long long DL_STATUS, ECAT_EV_AL_STATUS, ECAT_EV_DL_STATUS, ECAT_EV_SM0, ECA
 cdef long long ECAT_EVENT_REQUEST, ECAT_PU_ERROR_COUNTER, ESC_CONFIG, EV_AL_CONTROL, EV_SM0
 cdef long long EV_SYNC0, EV_SYNC1, EV_WATCHDOG_PD, LOST_LINK_COUNTER, N_SM, PDI_ERROR_CODE
 cdef long long PDI_ERROR_COUNTER, PDRAM_END, PDRAM_START, REGISTER_END, RX_ERROR_COUNTER
-cdef long long SM_ACT_LATCH_ECAT, SM_ACT_LATCH_PDI, WD_COUNTER_PDI
+cdef long long SM_ACT_LATCH_ECAT, SM_ACT_LATCH_PDI, WD_COUNTER_PDI, EV_SM_ACTIVATION, SM_ACT_ENABLE
+cdef long long SM_BASE, SM_STRIDE
 cdef long long WD_STATUS_PD
 
 
 # the register helpers inline: a few loads or stores each, called at every event (P46)
 @cython.locals(b3="long long", p="const unsigned char*")
 cdef inline long long _get32(bytearray m, long long a) except? -1
-@cython.locals(i="long long")
+@cython.locals(i="long long", p="const unsigned char*")
 cdef long long _first(bytes hooked, long long s, long long e) except? -2
 @cython.locals(p="unsigned char*")
 cdef inline void _put16(bytearray m, long long a, long long v) except *
 @cython.locals(p="unsigned char*")
 cdef inline void _put32(bytearray m, long long a, long long v) except *
-
-
-@cython.final
-cdef class FrameContext:
-    cdef public long long frame_no
-    cdef public long long t_ns, pdi_ns
-    cdef public bint irq_dirty, addr_dirty, logical_dirty, topology_dirty, timers_dirty
-    cdef public bint latch_wait
-    cdef public bytearray raised
-    cdef public long long n_raised
-    cdef public set flush
-
-    # noexcept: the event paths below only move bits in memory and these fields (P48)
-    @cython.locals(r=bytearray, v="long long")
-    cpdef void set_raised(self, long long position, bint line) noexcept
 
 
 @cython.final
@@ -129,12 +116,22 @@ cdef class Esc(SmHost):
     cpdef bint _plain_read(self, long long ado, unsigned char[:] out) except -1
     @cython.locals(e="long long", i="long long", k="long long", m="long long",
                    wmask=bytes, hooked=bytes, change=bytes, mem=bytearray, hooks=tuple,
-                   entry=tuple, ra="long long", rs="long long", units=tuple)
+                   entry=tuple, ra="long long", rs="long long", units=tuple,
+                   pm="unsigned char*", pw="const unsigned char*", pd="const unsigned char*")
     cpdef void reg_write(self, long long s, bytes data, bint pdi) except *
-    @cython.locals(mem=bytearray, lo="long long", hi="long long", a="long long")
+    @cython.locals(mem=bytearray, lo="long long", hi="long long", a="long long",
+                   pm="const unsigned char*", po="const unsigned char*")
     cpdef bint _changed(self, long long ra, long long rs, bytes old, long long s) except -1
     @cython.locals(lo="long long", hi="long long")
     cpdef bytes old_reg(self, long long ra, long long rs, bytes old, long long s)
     @cython.locals(i="long long", hooked=bytes, hooks=tuple, entry=tuple, ra="long long",
                    rs="long long", units=tuple)
     cpdef void reg_read_hooks(self, long long s, long long e, bint pdi) except *
+    # the SM block's ECAT write hook and the SM restart: C calls, the windows once (P58)
+    @cython.locals(m=bytearray, windows=bint, route=bint, event=bint, n="long long", a="long long",
+                   o="long long", k="long long", d="long long", sm=SyncManager)
+    cpdef void _ec_sm(self, long long ra, long long rs, bytes old) except *
+    @cython.locals(p="const unsigned char*", b="long long", sm=SyncManager)
+    cpdef void _sm_configure(self, long long n) except *
+    @cython.locals(wins=list, sm=SyncManager)
+    cpdef void _compile_sm_windows(self) except *

@@ -13,10 +13,10 @@ Ref: TMC8460 §4, §5; ETG.1000.4 §6 (DL services and ESC memory).
 
 from __future__ import annotations
 
-import struct
 from collections.abc import Callable
+from operator import itemgetter
 
-from ecatsim.esc import regs
+from ecatsim.esc.context import FrameContext
 from ecatsim.esc.dc import DcUnit
 from ecatsim.esc.eeprom import EepromUnit
 from ecatsim.esc.fmmu import FmmuMap, compile_fmmus, copy_bits
@@ -42,6 +42,7 @@ from ecatsim.esc.regs import (
     ESC_CONFIG,
     EV_AL_CONTROL,
     EV_SM0,
+    EV_SM_ACTIVATION,
     EV_SYNC0,
     EV_SYNC1,
     EV_WATCHDOG_PD,
@@ -53,8 +54,11 @@ from ecatsim.esc.regs import (
     PDRAM_START,
     REGISTER_END,
     RX_ERROR_COUNTER,
+    SM_ACT_ENABLE,
     SM_ACT_LATCH_ECAT,
     SM_ACT_LATCH_PDI,
+    SM_BASE,
+    SM_STRIDE,
     WD_COUNTER_PDI,
     WD_STATUS_PD,
 )
@@ -77,8 +81,9 @@ def _get32(m: bytearray, a: int) -> int:
 
 def _first(hooked: bytes, s: int, e: int) -> int:
     """The first address in [s, e) whose register has a side effect (-1: none)."""
-    for i in range(s, e):
-        if hooked[i]:
+    p = hooked  # compiled: a C pointer, the loop bounded by the table's length
+    for i in range(s, min(e, len(hooked))):
+        if p[i]:
             return i
     return -1
 
@@ -95,60 +100,6 @@ def _put32(m: bytearray, a: int, v: int) -> None:
     p[a + 1] = (v >> 8) & 0xFF
     p[a + 2] = (v >> 16) & 0xFF
     p[a + 3] = (v >> 24) & 0xFF
-
-
-class FrameContext:
-    """Per-segment state shared by all ESCs: the frame being processed and dirty flags."""
-
-    __slots__ = (
-        "addr_dirty",
-        "flush",
-        "frame_no",
-        "irq_dirty",
-        "latch_wait",
-        "logical_dirty",
-        "n_raised",
-        "pdi_ns",
-        "raised",
-        "t_ns",
-        "timers_dirty",
-        "topology_dirty",
-    )
-
-    def __init__(self) -> None:
-        self.frame_no = 0
-        self.t_ns = 0
-        #: host time of the PDI work in progress (the firmware's service, a PDI access):
-        #: the time base of PDI-side DC event times (0x09F8, 0x09FC) and activations
-        self.pdi_ns = 0
-        self.irq_dirty = True
-        self.addr_dirty = True
-        self.logical_dirty = True
-        self.topology_dirty = True
-        #: an ESC waits for a frame entering at a port that leads out of the process, to
-        #: latch its receive time (DcUnit.latch_wait)
-        self.latch_wait = False
-        self.timers_dirty = True
-        #: ESCs whose PDI interrupt line (AL event & mask) is raised: a byte per position
-        #: and their number, C fields kept by ``Esc._pdi_irq`` (P43); ``pending``: the set
-        self.raised = bytearray()
-        self.n_raised = 0
-        #: positions of ESCs with an EEPROM image to persist
-        self.flush: set[int] = set()
-
-    @property
-    def pending(self) -> set[int]:
-        """Positions of the ESCs whose PDI interrupt line is raised."""
-        return {i for i, v in enumerate(self.raised) if v} if self.n_raised else set()
-
-    def set_raised(self, position: int, line: bool) -> None:
-        """Record the PDI interrupt line of the ESC at ``position`` (``Esc._pdi_irq``)."""
-        r = self.raised
-        if position >= len(r):
-            r.extend(bytes(position + 1 - len(r)))
-        v = 1 if line else 0
-        self.n_raised += v - r[position]
-        r[position] = v
 
 
 class Esc(SmHost):
@@ -668,10 +619,9 @@ class Esc(SmHost):
         Ref: TMC8460 §5.49 (SM start address in process memory), §5.53; decision E22."""
         wins = []
         for sm in self.sm:
-            w = sm.window()
-            if w is not None and w[0] >= PDRAM_START:
-                wins.append((w[0], w[1], sm))
-        wins.sort(key=lambda x: x[0])
+            if sm.active and sm.start >= PDRAM_START:
+                wins.append((sm.start, sm.start + sm.length, sm))
+        wins.sort(key=itemgetter(0))
         self.sm_windows = tuple(wins)
         self._route_fmmus()
 
@@ -751,10 +701,15 @@ class Esc(SmHost):
         mem = self.mem
         i = _first(hooked, s, e)
         old = bytes(mem[s:e]) if i >= 0 else b""
+        if s < 0 or e > len(wmask):  # the pointers below: within the table's bounds
+            raise IndexError(s)
+        pm = mem  # compiled: C pointers, the indexes checked above (P58)
+        pw = wmask
+        pd = data
         for k in range(e - s):
-            m = wmask[s + k]
+            m = pw[s + k]
             if m:
-                mem[s + k] = (mem[s + k] & ~m) | (data[k] & m)
+                pm[s + k] = (pm[s + k] & ~m) | (pd[k] & m)
         self.wr_s = s
         self.wr_e = e
         if i < 0:
@@ -777,9 +732,11 @@ class Esc(SmHost):
         register [ra, ra + rs) (decision P20)."""
         mem = self.mem
         lo = max(ra, s)
-        hi = min(ra + rs, s + len(old))
-        for a in range(lo, hi):  # noqa: SIM110 - compiled: a C loop (any() is a generator)
-            if mem[a] != old[a - s]:
+        hi = min(ra + rs, s + len(old), len(mem))
+        pm = mem  # compiled: C pointers (any() is a generator), the bounds above
+        po = old
+        for a in range(lo, hi):  # noqa: SIM110
+            if pm[a] != po[a - s]:
                 return True
         return False
 
@@ -933,14 +890,57 @@ class Esc(SmHost):
         self._route_fmmus()
         self.ctx.logical_dirty = True
 
-    def _sm_restart(self, n: int) -> None:
+    def _ec_sm(self, ra: int, rs: int, old: bytes) -> None:
+        """The SyncManagers' start, length, control and activate registers, one call per
+        write of the block (P20, P58). Start, length and control take a write only while
+        their SM is disabled (its state before this write); a change of the enable bit
+        restarts the SM, of the ECAT event bit routes the FMMUs anew, any change of an
+        activate byte raises AL event 0x0220.4; the windows are compiled once.
+        Ref: TMC8460 §5.49 Tables 86-88 (r/(w)), Table 90; §5.32 Table 46 bit 4."""
         m = self.mem
-        base = regs.sm_addr(n)
-        start, length = struct.unpack_from("<HH", m, base)
-        control = m[base + 4]
-        self.sm[n].configure(
-            start, length, control, bool(m[base + 6] & 0x01), bool(m[base + 7] & 0x01)
-        )
+        windows = route = event = False
+        for n in range(N_SM):
+            a = SM_BASE + n * SM_STRIDE
+            o = a - ra
+            sm = self.sm[n]
+            if sm.enabled:
+                for k in range(5):  # compiled: a C loop
+                    m[a + k] = old[o + k]
+            d = m[a + 6] ^ old[o + 6]
+            if d & SM_ACT_ENABLE:
+                self._sm_configure(n)
+                windows = True
+            elif d & SM_ACT_LATCH_ECAT:
+                route = True  # an SM with ECAT event times is left to the Python path
+            event = event or d != 0
+        if windows:
+            self._compile_sm_windows()
+        elif route:
+            self._route_fmmus()
+        if event:
+            self.set_al_event(EV_SM_ACTIVATION)
+
+    def _ec_sm_activate(self, ra: int, rs: int, old: bytes) -> None:
+        """An ECAT write of an activate register alone: the block hook (``_ec_sm``)."""
+        self._ec_sm(ra, rs, old)
+
+    def _pr_sm_activate(self, ra: int, rs: int) -> None:
+        """PDI read of an activate register clears AL event 0x0220.4. Ref: TMC8460 §5.49
+        Table 90 note *."""
+        self.clr_al_event(EV_SM_ACTIVATION)
+
+    def _sm_configure(self, n: int) -> None:
+        """(Re)start SM ``n`` with its registers. Ref: TMC8460 §5.49 Tables 86-91."""
+        p = self.mem  # compiled: a C pointer (registers only)
+        b = SM_BASE + n * SM_STRIDE
+        sm = self.sm[n]
+        sm.configure(
+            p[b] | (p[b + 1] << 8), p[b + 2] | (p[b + 3] << 8), p[b + 4],
+            (p[b + 6] & SM_ACT_ENABLE) != 0, (p[b + 7] & 0x01) != 0,
+        )  # fmt: skip
+
+    def sm_restart(self, n: int) -> None:
+        self._sm_configure(n)
         self._compile_sm_windows()
 
     def _pr_al_control(self, ra: int, rs: int) -> None:

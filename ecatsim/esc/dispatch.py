@@ -23,7 +23,15 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
-from ecatsim.esc.regs import FMMU_BASE, FMMU_STRIDE, N_FMMU, N_SM, REGISTER_END
+from ecatsim.esc.regs import (
+    FMMU_BASE,
+    FMMU_STRIDE,
+    N_FMMU,
+    N_SM,
+    REGISTER_END,
+    SM_BASE,
+    SM_STRIDE,
+)
 from ecatsim.spec.tables import UNITS, Register, SpecError, load_registers
 
 #: the slot of each unit in ``Esc.units``: the ESC, its DC, MII, EEPROM and watchdog
@@ -53,8 +61,14 @@ PASSIVE_SIDE_EFFECTS = frozenset(
         "esc.user_ram",  # plain RAM (§5.52)
     }
 )
-#: the six FMMUs' registers, one block for the hook: it recompiles them all at once (P20)
-FMMU_BLOCK = N_FMMU * FMMU_STRIDE
+#: Register blocks whose ECAT write hook runs once per write of the block, with the
+#: block's address and size: the six FMMUs (the hook recompiles them all at once, P20) and
+#: the SyncManagers' channels (the windows are compiled once, P58)
+WRITE_BLOCKS = {
+    "esc.fmmu": (FMMU_BASE, N_FMMU * FMMU_STRIDE),
+    "esc.sm": (SM_BASE, N_SM * SM_STRIDE),
+    "esc.sm_activate": (SM_BASE, N_SM * SM_STRIDE),
+}
 
 Hook = Callable[..., None]
 Entry = tuple[Hook, int, int]
@@ -113,8 +127,9 @@ def compile_tables(classes: Mapping[str, type]) -> Tables:
             fn = getattr(classes[unit], prefix + name, None)
             if fn is None:
                 continue
-            # the FMMU hook recompiles all six: one call per write of the block (P20)
-            ra, rs = (FMMU_BASE, FMMU_BLOCK) if r.side_effect == "esc.fmmu" else (r.addr, r.size)
+            ra, rs = (r.addr, r.size)
+            if prefix in ("_ew_", "_ec_"):  # a block's write hook: once per write (P20)
+                ra, rs = WRITE_BLOCKS.get(r.side_effect, (ra, rs))
             for a in range(r.addr, r.addr + r.size):
                 maps[prefix][a] = (fn, ra, rs)
                 bits[prefix][a] = slot + 1

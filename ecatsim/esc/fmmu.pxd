@@ -9,3 +9,9 @@ cdef class FmmuMap:
     cdef public long long lbit, lend, pbit, lstart, lstop, pstart
     cdef public bint read, write, aligned
     cdef public SyncManager sm
+
+cdef long long FMMU_BASE, FMMU_STRIDE, N_FMMU
+
+
+@cython.locals(p="const unsigned char*", n="long long", a="long long", f=FmmuMap)
+cpdef tuple compile_fmmus(bytearray mem)

@@ -8,7 +8,7 @@ from __future__ import annotations
 import struct
 from typing import TYPE_CHECKING
 
-from ecatsim.esc import regs
+from ecatsim.esc.regs import FMMU_BASE, FMMU_STRIDE, N_FMMU
 
 if TYPE_CHECKING:
     from ecatsim.esc.sm import SyncManager
@@ -65,12 +65,15 @@ def compile_fmmus(mem: bytearray) -> tuple[FmmuMap, ...]:
     for reading or writing. Ref: TMC8460 §5.48 Tables 82, 83.
     """
     out: list[FmmuMap] = []
-    for n in range(regs.N_FMMU):
-        lstart, length, lsb, lstop, pstart, psb, typ, act = FMMU_REG.unpack_from(
-            mem, regs.fmmu_addr(n)
-        )
-        if not (act & 1) or length == 0 or not (typ & 3):
+    if len(mem) < FMMU_BASE + N_FMMU * FMMU_STRIDE:
+        raise IndexError(len(mem))
+    p = mem  # compiled: a C pointer, the length checked above (P58)
+    for n in range(N_FMMU):
+        a = FMMU_BASE + n * FMMU_STRIDE
+        # the inactive ones cost three loads: a broadcast clears them on every slave
+        if not (p[a + 12] & 1) or (p[a + 4] | p[a + 5]) == 0 or not (p[a + 11] & 3):
             continue
+        lstart, length, lsb, lstop, pstart, psb, typ, _act = FMMU_REG.unpack_from(mem, a)
         f = FmmuMap(lstart, length, lsb, lstop, pstart, psb, typ)
         if f.lend > f.lbit:
             out.append(f)

@@ -7,7 +7,7 @@ cimport cython
 from libc.stdint cimport int64_t
 
 # the register bits, imported from regs.py: C constants here
-cdef long long DC_ECAT_EVENT_TIME, EV_SM_ACTIVATION, SM_ACT_LATCH_ECAT, SM_CTRL_ECAT_IRQ, SM_CTRL_PDI_IRQ, SM_CTRL_WATCHDOG, SM_DIR_MASK, SM_DIR_WRITE, SM_MODE_MAILBOX, SM_MODE_MASK, SM_ST_BUF_SHIFT, SM_ST_IRQ_READ, SM_ST_IRQ_WRITE, SM_ST_MBX_FULL, SM_ST_READ_OPEN, SM_ST_WRITE_OPEN
+cdef long long DC_ECAT_EVENT_TIME, SM_ACT_LATCH_ECAT, SM_CTRL_ECAT_IRQ, SM_CTRL_PDI_IRQ, SM_CTRL_WATCHDOG, SM_DIR_MASK, SM_DIR_WRITE, SM_MODE_MAILBOX, SM_MODE_MASK, SM_ST_BUF_SHIFT, SM_ST_IRQ_READ, SM_ST_IRQ_WRITE, SM_ST_MBX_FULL, SM_ST_READ_OPEN, SM_ST_WRITE_OPEN
 
 
 cdef class SyncManager
@@ -18,6 +18,7 @@ cdef class SmHost:
     cpdef void sm_status_changed(self, SyncManager sm) noexcept
     cpdef void wd_pd_trigger(self) except *
     cpdef void sm_event_time(self, long long reg) except *
+    cpdef void sm_restart(self, long long n) except *
 
 
 @cython.final
@@ -31,6 +32,9 @@ cdef class SyncManager:
     cdef public bint r_open, w_open
     cdef public long long status, mirror, changed, irq_to_ecat, irq_to_pdi
 
+    @cython.locals(to_ecat="long long", to_pdi="long long")
+    cpdef void configure(self, long long start, long long length, long long control, bint active,
+                         bint locked=*) except *
     @cython.locals(st="long long", mirror="long long")
     cpdef void _sync(self) except *
     @cython.locals(latest="long long")

@@ -10,12 +10,9 @@ Ref: TMC8460 §5.49 Tables 85-91; ETG.1000.4 §6.7 (SyncManager).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, cast
-
 from ecatsim.esc import regs
 from ecatsim.esc.regs import (
     DC_ECAT_EVENT_TIME,
-    EV_SM_ACTIVATION,
     SM_ACT_LATCH_ECAT,
     SM_CTRL_ECAT_IRQ,
     SM_CTRL_PDI_IRQ,
@@ -31,9 +28,6 @@ from ecatsim.esc.regs import (
     SM_ST_READ_OPEN,
     SM_ST_WRITE_OPEN,
 )
-
-if TYPE_CHECKING:
-    from ecatsim.esc.core import Esc
 
 
 class SmHost:
@@ -56,6 +50,10 @@ class SmHost:
 
     def sm_event_time(self, reg: int) -> None:
         """Take the SyncManager event time ``reg`` (0x09F0, 0x09F8 or 0x09FC) now."""
+        raise NotImplementedError
+
+    def sm_restart(self, n: int) -> None:
+        """Restart SM ``n`` with its registers' values and compile the ESC's windows."""
         raise NotImplementedError
 
 
@@ -375,37 +373,11 @@ class SyncManager:
     def pdi_may_read(self) -> bool:
         return self.ecat_side_writes and self.reader_may()
 
-    # -- register hooks (ecatsim/esc/dispatch.py: side_effect sm.<name> of SM n's rows) ---
-
-    def _esc(self) -> Esc:
-        """The ESC this SM belongs to, for its SM windows and AL events."""
-        return cast("Esc", self.host)
-
-    def _ec_config(self, ra: int, rs: int, old: bytes) -> None:
-        """SM start/length/control are writable only while the SM is disabled.
-        Ref: TMC8460 §5.49 Tables 86-88 note r/(w)."""
-        if self.enabled:  # state before this frame's activate byte is applied
-            self.mem[ra : ra + rs] = old
-
-    def _ec_activate(self, ra: int, rs: int, old: bytes) -> None:
-        """Enable/disable the SM, repeat request; a change raises AL event 0x0220.4.
-        Ref: TMC8460 §5.49 Table 90, §5.32 Table 46 bit 4."""
-        new = self.mem[ra]
-        esc = self._esc()
-        if (new ^ old[0]) & 0x01:
-            esc._sm_restart(self.n)
-        elif (new ^ old[0]) & SM_ACT_LATCH_ECAT:
-            esc._route_fmmus()  # an SM with ECAT event times is left to the Python path
-        if new != old[0]:
-            esc.set_al_event(EV_SM_ACTIVATION)
-
-    def _pr_activate(self, ra: int, rs: int) -> None:
-        """PDI read of an activation register clears AL event 0x0220.4. Ref: TMC8460
-        §5.49 Table 90 note *."""
-        self._esc().clr_al_event(EV_SM_ACTIVATION)
+    # -- register hooks (ecatsim/esc/dispatch.py: side_effect sm.<name> of SM n's rows;
+    # the ECAT writes of start, length, control and activate: the ESC's block hook) ----
 
     def _pw_pdi_control(self, ra: int, rs: int, old: bytes) -> None:
         """PDI deactivate (bit 0) resets and locks the SM; bit 1 is the repeat ack.
         Ref: TMC8460 §5.49 Table 91."""
         if (self.mem[ra] ^ old[0]) & 0x01:
-            self._esc()._sm_restart(self.n)
+            self.host.sm_restart(self.n)

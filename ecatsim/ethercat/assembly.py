@@ -25,7 +25,8 @@ from ecatsim.device.echo import EchoDevice
 from ecatsim.device.esi import EsiError, read_esi
 from ecatsim.device.factory import make_coe_device
 from ecatsim.errors import UserError
-from ecatsim.esc.core import Esc, FrameContext
+from ecatsim.esc.context import FrameContext
+from ecatsim.esc.core import Esc
 from ecatsim.esc.pdi import EV_SM0, Pdi
 from ecatsim.ethercat import topology
 from ecatsim.ethercat.schedule import Serviceable

@@ -3,7 +3,8 @@
 # source of the behaviour. Decisions P2, P12, P19.
 cimport cython
 
-from ecatsim.esc.core cimport Esc, FrameContext
+from ecatsim.esc.context cimport FrameContext
+from ecatsim.esc.core cimport Esc
 from ecatsim.esc.dc cimport DcUnit
 from ecatsim.slave.firmware cimport Firmware
 

@@ -19,7 +19,8 @@ import time
 from collections.abc import Callable, Sequence, Sized
 from typing import Protocol
 
-from ecatsim.esc.core import Esc, FrameContext
+from ecatsim.esc.context import FrameContext
+from ecatsim.esc.core import Esc
 from ecatsim.slave.firmware import Firmware
 
 #: overdue SYNC0 pulses fired one by one before the rest are skipped (a stall this long,

@@ -3,7 +3,8 @@
 # stays the one source of the behaviour; this file only gives types. Decisions P2, P13.
 cimport cython
 
-from ecatsim.esc.core cimport Esc, FrameContext
+from ecatsim.esc.context cimport FrameContext
+from ecatsim.esc.core cimport Esc
 from ecatsim.esc.dc cimport DcUnit
 from ecatsim.ethercat.schedule cimport Schedule
 

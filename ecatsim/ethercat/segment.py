@@ -15,7 +15,8 @@ from collections.abc import Callable, Sequence
 
 from ecatsim.clock import Clock
 from ecatsim.esc import regs
-from ecatsim.esc.core import Esc, FrameContext
+from ecatsim.esc.context import FrameContext
+from ecatsim.esc.core import Esc
 from ecatsim.esc.regs import DC_SYSTEM_TIME as _DC_SYSTEM_TIME  # compiled: a C constant
 from ecatsim.ethercat import topology
 from ecatsim.ethercat.schedule import Schedule, Serviceable

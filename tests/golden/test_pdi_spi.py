@@ -10,7 +10,8 @@ from pathlib import Path
 import pytest
 
 from ecatsim.clock import ManualClock
-from ecatsim.esc.core import Esc, FrameContext
+from ecatsim.esc.context import FrameContext
+from ecatsim.esc.core import Esc
 from ecatsim.ethercat.segment import Segment
 from ecatsim.pdi_spi.external import ExternalFirmware
 from ecatsim.pdi_spi.protocol import SpiTiming, transfer

@@ -112,6 +112,61 @@ def test_the_fmmu_hook_is_one_block_and_acts_on_a_change_only() -> None:
     assert t.ecat_w_change[0x0910] == 0  # the DC time loop: every write
 
 
+def test_the_sm_hook_is_one_block_for_the_ecat_writes() -> None:
+    """The SyncManagers' start, length, control and activate registers: one ECAT write
+    hook for the block (P58); the PDI read of an activate register keeps its own hook."""
+    t = tables()
+    for a in (0x0800, 0x0802, 0x0804, 0x082C):
+        assert t.ecat_w[a] == (Esc._ec_sm, 0x0800, 48)
+    assert t.ecat_w[0x0806] == t.ecat_w[0x082E] == (Esc._ec_sm_activate, 0x0800, 48)
+    assert t.ecat_w[0x0805] is None and t.ecat_w[0x0807] is None  # status, PDI control
+    assert t.pdi_r[0x0816] == (Esc._pr_sm_activate, 0x0816, 1)
+    assert t.pdi_r[0x0810] is None
+    assert t.ecat_w_change[0x0800] == 1 and t.ecat_w_change[0x0806] == 1
+
+
+def test_clearing_the_configured_sms_by_broadcast_disables_them_and_keeps_their_config() -> None:
+    """A BWR of 48 zero bytes to 0x0800 over slaves in OP: every SM is disabled (its
+    window gone, the FMMUs no longer routed to it), start, length and control keep the
+    values they had while enabled, and AL event 0x0220.4 is raised once per slave.
+    Ref: TMC8460 §5.49 Tables 86-88, 90."""
+    m, _, _ = op_segment(3)
+    before = [bytes(e.mem[0x0800:0x0830]) for e in m.seg.escs]
+    assert all(len(e.sm_windows) == 4 for e in m.seg.escs)
+    assert bwr_only(m, 0x0800, bytes(48)) == 3
+    for e, old in zip(m.seg.escs, before, strict=True):
+        assert e.sm_windows == ()
+        assert all(f.sm is None for f in e.fmmus)
+        assert [sm.enabled for sm in e.sm] == [False] * 6
+        for n in range(4):  # the four SMs that were enabled: their configuration stays
+            a = 8 * n
+            assert bytes(e.mem[0x0800 + a : 0x0805 + a]) == old[a : a + 5]
+            assert e.mem[0x0806 + a] == 0
+        assert e.mem[AL_EVENT] & 0x10 == 0x10
+    # again, over disabled SMs: now the configuration is taken, and no activate byte changed
+    for e in m.seg.escs:
+        e.clr_al_event(0x10)
+    assert bwr_only(m, 0x0800, bytes(48)) == 3
+    assert [bytes(e.mem[0x0800:0x0830:8]) for e in m.seg.escs] == [bytes(6)] * 3
+    assert [e.mem[AL_EVENT] & 0x10 for e in m.seg.escs] == [0, 0, 0]
+
+
+def test_one_write_of_an_sm_sets_its_config_and_enables_it() -> None:
+    """Start, length, control and activate in one write to a disabled SM: the SM starts
+    with the new values (they are taken before the activate byte). Ref: §5.49 Table 90."""
+    seg, _ = segment_of(1)
+    m = TinyMaster(seg)
+    e = seg.escs[0]
+    cfg = struct.pack("<HHBBBB", 0x1800, 6, 0x64, 0, 0x01, 0)
+    assert m.one(dg.build(dg.Cmd.APWR, 0, 0x0820, cfg), service=False).wkc == 1
+    sm = e.sm[4]
+    assert (sm.start, sm.length, sm.control, sm.active) == (0x1800, 6, 0x64, True)
+    assert e.sm_windows[-1][:2] == (0x1800, 0x1806)
+    assert e.mem[AL_EVENT] & 0x10 == 0x10  # until the firmware reads the activate byte
+    m.apwr(0, 0x0826, b"\x00")  # the activate byte alone disables it
+    assert not sm.active and all(w[2] is not sm for w in e.sm_windows)
+
+
 def test_broadcast_read_ors_every_slave() -> None:
     seg, _ = segment_of(3)
     m = TinyMaster(seg)

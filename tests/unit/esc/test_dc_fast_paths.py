@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import pytest
 
-from ecatsim.esc.core import Esc, FrameContext
+from ecatsim.esc.context import FrameContext
+from ecatsim.esc.core import Esc
 from ecatsim.esc.dc import DcUnit
 from ecatsim.esc.pdi import Pdi
 from ecatsim.esc.regs import (

@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import random
 
-from ecatsim.esc.core import Esc, FrameContext
+from ecatsim.esc.context import FrameContext
+from ecatsim.esc.core import Esc
 from ecatsim.esc.regs import AL_EVENT_MASK, EV_SYNC0
 
 

@@ -9,7 +9,8 @@ import itertools
 
 import pytest
 
-from ecatsim.esc.core import Esc, FrameContext
+from ecatsim.esc.context import FrameContext
+from ecatsim.esc.core import Esc
 from ecatsim.esc.dispatch import PASSIVE_SIDE_EFFECTS, compile_tables
 from ecatsim.esc.regs import DC_SYSTEM_TIME
 from ecatsim.esc.units import hook_names, tables, unit_classes

@@ -14,7 +14,8 @@ import random
 
 import pytest
 
-from ecatsim.esc.core import Esc, FrameContext
+from ecatsim.esc.context import FrameContext
+from ecatsim.esc.core import Esc
 from ecatsim.esc.regs import (
     AL_EVENT_MASK,
     AL_EVENT_REQUEST,
