@@ -32,7 +32,7 @@ import time
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from ecatsim.bench import redtest, results, soem, steadiness
 from ecatsim.bench.capture import Capture, Frame, analyse, late_replies, process_cycles
@@ -45,7 +45,20 @@ from ecatsim.bench.stallwatch import StallWatch
 PYSOEM_LIMITS = {"max_slaves": 199, "iomap_bytes": 4096, "sync0": True, "drives_enabled": True}
 
 
-def bring_up(m: Any, cap: Capture, pair: NetnsPair, n: int, period_us: int,
+class Marks(Protocol):
+    """Where a bring-up marks its phases: a capture, or nothing (:class:`Unmarked`)."""
+
+    def mark(self, name: str) -> None: ...
+
+
+class Unmarked:
+    """No marks: the bring-up of the master that ``--restart`` closes before the timed one."""
+
+    def mark(self, name: str) -> None:
+        return None
+
+
+def bring_up(m: Any, cap: Marks, pair: NetnsPair, n: int, period_us: int,
              overlap: bool) -> None:  # fmt: skip
     """The bring-up, each phase marked in the capture."""
     import pysoem
@@ -181,14 +194,25 @@ def daemon_pids(ds: list[Daemon]) -> list[int]:
 
 def run_bringup(n: int, cycles_k: int, period_us: int, overlap: bool,
                 extra: tuple[str, ...], spin: bool = False, master_rt: int | None = None,
-                master_cpu: int | None = None, chain: int = 1) -> dict[str, Any]:  # fmt: skip
+                master_cpu: int | None = None, chain: int = 1,
+                restart: bool = False) -> dict[str, Any]:  # fmt: skip
     """One bring-up of ``n`` drives (in ``chain`` chained daemons) and ``cycles_k`` cycles
-    on fresh daemons; the master scheduled as :func:`master_scheduling` says."""
+    on fresh daemons; the master scheduled as :func:`master_scheduling` says. With
+    ``restart``, the timed bring-up is a second master's: the first brought the drives to
+    OP, ran 200 cycles and closed."""
     import pysoem
 
     tmp = Path(tempfile.mkdtemp(prefix="ecatsim-bringup-"))
     with NetnsPair() as pair, daemons(pair, n, chain, extra, tmp) as ds:
         pids = daemon_pids(ds)
+        if restart:
+            first = pysoem.Master()
+            try:
+                bring_up(first, Unmarked(), pair, n, period_us, overlap)
+                cycles(first, 200 * period_us / 1e6, period_us, pids[0], spin=spin,
+                       overlap=overlap)  # fmt: skip
+            finally:
+                first.close()
         m = pysoem.Master()
         try:
             with (
@@ -221,6 +245,7 @@ def run_bringup(n: int, cycles_k: int, period_us: int, overlap: bool,
                                 "drives_enabled", "steal_s")}  # fmt: skip
     return {"slaves": n, "overlap": overlap, "period_us": period_us, "master": master,
             "master_name": f"pysoem {soem.pysoem_version()}", "master_limits": PYSOEM_LIMITS,
+            "restart": restart,
             "daemon_flags": list(extra), "chain": chain_text(n, chain, extra),
             "bring_up_s": round(bring_up_s, 2), "frames": frames,
             "cycles": {**kept, "daemon_cpu_percent": each},
@@ -303,7 +328,7 @@ def summary(r: dict[str, Any]) -> str:
     lines = [f"N={r['slaves']} ({'overlap map' if r['overlap'] else 'map'}, master "
              f"{r.get('master_name', 'pysoem')}"
              f"{'' if r.get('master_limits', {}).get('sync0', True) else ' without SYNC0'} "
-             f"{r['master']}, daemon "
+             f"{r['master']}{', restarted' if r.get('restart') else ''}, daemon "
              f"{' '.join(r['daemon_flags']) or 'default flags'}{chained(r)}) bring-up "
              f"{r['bring_up_s']} s, {c['cycles']} cycles: {f['frames']} frames, reply p50 "
              f"{f['p50_us']} p99.9 {f['p999_us']} max {f['max_us']} us, over 1 ms "
@@ -349,7 +374,7 @@ def run(args: BenchOptions) -> int:
         else:
             r = run_bringup(n, args.cycles, args.period_us, args.overlap, extra,
                             args.master_spin, args.master_rt, args.master_cpu,
-                            args.chain)  # fmt: skip
+                            args.chain, args.restart)  # fmt: skip
         r["host_steadiness"] = host
         out["runs"].append(r)
         print(summary(r), flush=True)

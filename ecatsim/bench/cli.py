@@ -157,6 +157,13 @@ NO_PYSOEM = "ecatsim bench needs pysoem: pip install 'ecatsim[bench]'"
     "modulo the CPUs.",
 )
 @click.option(
+    "--restart",
+    is_flag=True,
+    help="--bringup (pysoem): a first master brings the drives to OP, runs 200 cycles and "
+    "closes; the timed bring-up is a second master's against the running segment, as a "
+    "master restarted in a test meets it (broadcasts over configured slaves).",
+)
+@click.option(
     "--sync0",
     is_flag=True,
     help="--master soem: start every slave's SYNC0 at --period-us (SOEM's ec_dcsync0 added "
@@ -182,6 +189,8 @@ def bench(**kw: object) -> None:
     opts = BenchOptions(**kw)  # type: ignore[arg-type]
     if opts.master == "soem" and not opts.bringup:
         raise UserError("--master soem is the master of --bringup N: add --bringup N")
+    if opts.restart and (opts.master != "pysoem" or not opts.bringup):
+        raise UserError("--restart is for --bringup N with the pysoem master")
     if opts.sync0 and opts.master != "soem":
         raise UserError("--sync0 is for --master soem (the pysoem master starts SYNC0 itself)")
     try:

@@ -39,6 +39,8 @@ class BenchOptions:
     sync0: bool = False
     #: --bringup: the drives in this many chained daemons (each on its own CPU)
     chain: int = 1
+    #: --bringup (pysoem): time a second master's bring-up against the running segment
+    restart: bool = False
     results: Path = DEFAULT_DIR
 
     def scheduling_flags(self) -> tuple[str, ...]:

@@ -44,3 +44,17 @@ def test_the_bringup_bench_chains_daemons_into_one_segment() -> None:
     assert (cyc["lost"], cyc["wkc_errors"], cyc["drives_enabled"]) == (0, 0, 5)
     assert len(cyc["daemon_cpu_percent"]) == 2 and all(x > 0 for x in cyc["daemon_cpu_percent"])
     assert r["frames"]["resends"] == 0 and r["frames"]["unanswered"] == 0
+
+
+def test_the_bringup_bench_restarts_a_master_against_the_running_segment() -> None:
+    """``--restart``: a first master brings the drives to OP, runs 200 cycles and closes;
+    a second one's bring-up, over slaves still configured and in OP, is the one timed (its
+    config_init clears their FMMUs and SMs by broadcast) and ends with every drive enabled
+    again."""
+    r = run_bringup(DRIVES, 300, 1000, False, (), restart=True)
+    assert r["restart"] is True
+    assert r["frames"]["phases"]["config_init"]["frames"] > 0
+    cyc = r["cycles"]
+    assert (cyc["cycles"], cyc["lost"], cyc["wkc_errors"]) == (300, 0, 0)
+    assert cyc["drives_enabled"] == DRIVES
+    assert r["frames"]["resends"] == 0 and r["frames"]["unanswered"] == 0
