@@ -7,6 +7,8 @@ from libc.stdint cimport int64_t
 
 from ecatsim.ethercat.recorder cimport FrameRecorder
 from ecatsim.ethercat.segment cimport Segment
+# the frame helpers as C calls (imported by sequence.py as Python names: P59)
+from ecatsim.wire.frame cimport ecat_offset, mark_processed
 
 cdef long long _NOT_ECAT, _DROPPED, _REPLY
 

@@ -207,7 +207,8 @@ def test_the_soem_master_options_go_with_bringup_and_soem() -> None:
     cases = [(["--master", "soem"], "add --bringup N"),
              (["--bringup", "2", "--sync0"], "--sync0 is for --master soem"),
              (["--restart"], "--restart is for --bringup N"),
-             (["--bringup", "2", "--master", "soem", "--restart"], "with the pysoem master")]  # fmt: skip
+             (["--bringup", "2", "--master", "soem", "--restart"],
+              "with the pysoem master")]  # fmt: skip
     for args, text in cases:
         r = CliRunner().invoke(cli, ["bench", *args])
         assert isinstance(r.exception, UserError) and text in str(r.exception), r.output
