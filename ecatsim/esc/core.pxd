@@ -3,7 +3,7 @@
 # behaviour; this file only gives types. Decisions P2, P13.
 from ecatsim.esc.context cimport FrameContext
 from ecatsim.esc.dc cimport DcUnit
-from ecatsim.esc.fmmu cimport FmmuMap
+from ecatsim.esc.fmmu cimport FmmuMap, compile_fmmus
 from ecatsim.esc.sm cimport SmHost, SyncManager
 from ecatsim.esc.watchdog cimport Watchdog
 
