@@ -128,10 +128,14 @@ cdef class Esc(SmHost):
                    rs="long long", units=tuple)
     cpdef void reg_read_hooks(self, long long s, long long e, bint pdi) except *
     # the SM block's ECAT write hook and the SM restart: C calls, the windows once (P58)
-    @cython.locals(m=bytearray, windows=bint, route=bint, event=bint, n="long long", a="long long",
-                   o="long long", k="long long", d="long long", sm=SyncManager)
+    @cython.locals(m="unsigned char*", po="const unsigned char*", windows=bint, route=bint,
+                   event=bint, n="long long", a="long long", o="long long", k="long long",
+                   d="long long", sm=SyncManager)
     cpdef void _ec_sm(self, long long ra, long long rs, bytes old) except *
     @cython.locals(p="const unsigned char*", b="long long", sm=SyncManager)
     cpdef void _sm_configure(self, long long n) except *
     @cython.locals(wins=list, sm=SyncManager)
     cpdef void _compile_sm_windows(self) except *
+    @cython.locals(f=FmmuMap, ps="long long", pe="long long", hits=list, sm=SyncManager)
+    cpdef void _route_fmmus(self) except *
+    cpdef list _hits(self, long long ado, long long end)

@@ -895,18 +895,21 @@ class Esc(SmHost):
         write of the block (P20, P58). Start, length and control take a write only while
         their SM is disabled (its state before this write); a change of the enable bit
         restarts the SM, of the ECAT event bit routes the FMMUs anew, any change of an
-        activate byte raises AL event 0x0220.4; the windows are compiled once.
-        Ref: TMC8460 §5.49 Tables 86-88 (r/(w)), Table 90; §5.32 Table 46 bit 4."""
-        m = self.mem
+        activate byte raises AL event 0x0220.4; the windows are compiled once. Ref: TMC8460
+        §5.49 Tables 86-88 (r/(w)), Table 90; §5.32 Table 46 bit 4."""
+        if ra != SM_BASE or rs != N_SM * SM_STRIDE or len(old) < rs:  # the pointers below
+            raise IndexError(ra)
+        m = self.mem  # compiled: C pointers to the registers and the block's old bytes
+        po = old
         windows = route = event = False
         for n in range(N_SM):
             a = SM_BASE + n * SM_STRIDE
             o = a - ra
             sm = self.sm[n]
             if sm.enabled:
-                for k in range(5):  # compiled: a C loop
-                    m[a + k] = old[o + k]
-            d = m[a + 6] ^ old[o + 6]
+                for k in range(5):
+                    m[a + k] = po[o + k]
+            d = m[a + 6] ^ po[o + 6]
             if d & SM_ACT_ENABLE:
                 self._sm_configure(n)
                 windows = True
@@ -925,8 +928,7 @@ class Esc(SmHost):
         self._ec_sm(ra, rs, old)
 
     def _pr_sm_activate(self, ra: int, rs: int) -> None:
-        """PDI read of an activate register clears AL event 0x0220.4. Ref: TMC8460 §5.49
-        Table 90 note *."""
+        """PDI read of an activate register clears AL event 0x0220.4 (§5.49 Table 90 *)."""
         self.clr_al_event(EV_SM_ACTIVATION)
 
     def _sm_configure(self, n: int) -> None:
@@ -934,10 +936,8 @@ class Esc(SmHost):
         p = self.mem  # compiled: a C pointer (registers only)
         b = SM_BASE + n * SM_STRIDE
         sm = self.sm[n]
-        sm.configure(
-            p[b] | (p[b + 1] << 8), p[b + 2] | (p[b + 3] << 8), p[b + 4],
-            (p[b + 6] & SM_ACT_ENABLE) != 0, (p[b + 7] & 0x01) != 0,
-        )  # fmt: skip
+        sm.configure(p[b] | (p[b + 1] << 8), p[b + 2] | (p[b + 3] << 8), p[b + 4],
+                     (p[b + 6] & SM_ACT_ENABLE) != 0, (p[b + 7] & 0x01) != 0)  # fmt: skip
 
     def sm_restart(self, n: int) -> None:
         self._sm_configure(n)
