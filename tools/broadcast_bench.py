@@ -7,22 +7,27 @@ TMC8670 drives in OP.
 Frames: a BWR of 256 zero bytes to 0x0600 (clearing configured FMMUs, then clearing them
 again), a BWR of 48 zero bytes to 0x0800 (the SMs), a BWR of INIT to 0x0120 (then the
 firmware's INIT transitions after the reply), a BRD of 0x0130. Each figure is the best of
-``--repeat`` tries, each on a segment brought back to OP.
+``--repeat`` tries, each on a segment brought back to OP. ``--save`` records them in
+bench/results/broadcast-<time>.json (docs/performance.md).
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
+import os
+import platform
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import structlog
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from ecatsim.bench import results  # noqa: E402
 from ecatsim.compiled import core_line  # noqa: E402
 from ecatsim.wire import datagram as dg  # noqa: E402
 from ecatsim.wire.frame import ecat_offset, mark_processed  # noqa: E402
@@ -68,15 +73,24 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--slaves", type=int, action="append")
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--save", action="store_true", help="record the run in bench/results")
     args = ap.parse_args()
     # the firmware logs each AL transition: not part of the cost measured here
     structlog.configure(wrapper_class=structlog.make_filtering_bound_logger(logging.WARNING))
     print(core_line())
+    out: dict[str, Any] = {"when": time.strftime("%Y-%m-%d %H:%M:%S %Z"),
+                           "machine": platform.node(), "core": core_line(),
+                           "load_1min": os.getloadavg()[0], "repeat": args.repeat,
+                           "runs": []}  # fmt: skip
     for n in args.slaves or [128, 512]:
         for name, (walk, after) in run(n, args.repeat).items():
             print(
                 f"{n:4d} slaves  {name:32s} reply {walk * 1e6:9.1f} us  after {after * 1e6:9.1f} us"
             )
+            out["runs"].append({"slaves": n, "frame": name, "reply_us": round(walk * 1e6, 1),
+                                "after_us": round(after * 1e6, 1)})  # fmt: skip
+    if args.save:
+        results.write(results.DEFAULT_DIR, "broadcast", out)
     return 0
 
 
