@@ -303,6 +303,10 @@ class Servo:
         position_kind = _POSITION
         done = 0
         why = _STOP_NONE
+        # the revolution at the substep's start: the one the last substep ended in (the
+        # angle does not change in between), found at the first substep (decision P?)
+        rev = 0.0
+        rev_known = False
         while done < n:
             if kind == torque_kind:
                 out = ref
@@ -352,16 +356,20 @@ class Servo:
             new = omega + drive / inertia * dt
             if omega != 0.0 and (new > 0) != (omega > 0) and abs(torque - load) <= coulomb:
                 new = 0.0  # friction stops the motor, it does not reverse it
-            rev = _floor(angle / 6.283185307179586) if index else 0
+            if index and not rev_known:
+                rev = _floor(angle / 6.283185307179586)
+                rev_known = True
             omega = new
             angle += omega * dt
             done += 1
             if abs(iq) > i_trip_ma:
                 why = _STOP_OVERCURRENT
                 break
-            if index and _floor(angle / 6.283185307179586) != rev:
-                why = _STOP_INDEX
-                break
+            if index:
+                now = _floor(angle / 6.283185307179586)
+                if now != rev:
+                    why = _STOP_INDEX
+                    break
         self.angle = angle
         self.omega = omega
         self.iq_ma = iq

@@ -26,13 +26,14 @@ cdef long long ESC_CONFIG, EV_DC_LATCH, EV_SYNC0, EV_SYNC1, SYNC_LATCH_CONFIG
 cdef long long _trunc(double x) except? -1
 cdef long long _signed64(unsigned long long x)
 # the register helpers inline (P46)
-@cython.locals(v="unsigned long long", i="long long", p="const unsigned char*")
+@cython.locals(lo="unsigned long long", hi="unsigned long long", b3="unsigned long long",
+               b7="unsigned long long", p="const unsigned char*")
 cdef inline unsigned long long _get64(bytearray m, long long a) except? 0
 @cython.locals(b3="unsigned long long", p="const unsigned char*")
 cdef inline unsigned long long _get32(bytearray m, long long a) except? 0
-@cython.locals(i="long long", p="unsigned char*")
+@cython.locals(p="unsigned char*")
 cdef inline void _put64(bytearray m, long long a, unsigned long long v) except *
-@cython.locals(i="long long", p="unsigned char*")
+@cython.locals(p="unsigned char*")
 cdef inline void _put32(bytearray m, long long a, unsigned long long v) except *
 
 

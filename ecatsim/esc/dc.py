@@ -81,12 +81,14 @@ def _signed64(x: int) -> int:
 
 
 def _get64(m: bytearray, a: int) -> int:
-    """The little-endian 64-bit register at ``a``."""
+    """The little-endian 64-bit register at ``a`` (its bytes one by one, unrolled:
+    compiled, C reads them as one 64-bit load; decision P?)."""
     p = m  # compiled: a pointer to the bytearray's bytes
-    v = 0
-    for i in range(7, -1, -1):
-        v = (v << 8) | p[a + i]
-    return v
+    b3 = p[a + 3]  # compiled: 64-bit integers, so bit 31 does not sign-extend
+    b7 = p[a + 7]
+    lo = p[a] | (p[a + 1] << 8) | (p[a + 2] << 16) | (b3 << 24)
+    hi = p[a + 4] | (p[a + 5] << 8) | (p[a + 6] << 16) | (b7 << 24)
+    return lo | (hi << 32)
 
 
 def _get32(m: bytearray, a: int) -> int:
@@ -96,15 +98,23 @@ def _get32(m: bytearray, a: int) -> int:
 
 
 def _put64(m: bytearray, a: int, v: int) -> None:
-    p = m  # compiled: a pointer, as in _get64
-    for i in range(8):
-        p[a + i] = (v >> (8 * i)) & 0xFF
+    p = m  # compiled: a pointer, as in _get64; unrolled, one 64-bit store in C
+    p[a] = v & 0xFF
+    p[a + 1] = (v >> 8) & 0xFF
+    p[a + 2] = (v >> 16) & 0xFF
+    p[a + 3] = (v >> 24) & 0xFF
+    p[a + 4] = (v >> 32) & 0xFF
+    p[a + 5] = (v >> 40) & 0xFF
+    p[a + 6] = (v >> 48) & 0xFF
+    p[a + 7] = (v >> 56) & 0xFF
 
 
 def _put32(m: bytearray, a: int, v: int) -> None:
-    p = m  # compiled: a pointer, as in _get64
-    for i in range(4):
-        p[a + i] = (v >> (8 * i)) & 0xFF
+    p = m  # compiled: a pointer, as in _get64; unrolled, one 32-bit store in C
+    p[a] = v & 0xFF
+    p[a + 1] = (v >> 8) & 0xFF
+    p[a + 2] = (v >> 16) & 0xFF
+    p[a + 3] = (v >> 24) & 0xFF
 
 
 class DcUnit:

@@ -14,5 +14,5 @@ cdef class FrameRecorder:
     cdef public bytearray _lens
     cdef public long long _next
 
-    @cython.locals(i="long long", base="long long", k="long long", ring="unsigned char[:]")
+    @cython.locals(i="long long", base="long long", ring="unsigned char[:]")
     cpdef void record(self, const unsigned char[:] buf, long long n) except *

@@ -1,6 +1,6 @@
 # cython: boundscheck=False, wraparound=False
-# (compiled: the frame copy below is a C loop without index checks; every index is kept
-# inside both buffers by the clamp before it)
+# (compiled: the frame copy below has no index checks; every index is kept inside both
+# buffers by the clamp before it)
 """A small in-memory recorder of the last frames, for diagnostics when something fails.
 
 Slots are preallocated; recording is one copy into the next slot (no per-frame objects).
@@ -30,13 +30,14 @@ class FrameRecorder:
 
     def record(self, buf: bytearray | memoryview, n: int) -> None:
         """Keep ``buf[:n]`` (at most ``SLOT`` bytes) as the newest frame: one copy into the
-        next slot (compiled: a C loop between typed views)."""
+        next slot (compiled: a copy between typed views, memcpy where both are contiguous,
+        not a loop per byte; decision P?)."""
         i = self._next
         n = min(n, SLOT, len(buf))
         ring = self._view
         base = i * SLOT
-        for k in range(n):
-            ring[base + k] = buf[k]
+        if n > 0:
+            ring[base : base + n] = buf[:n]
         self._lens[2 * i] = n & 0xFF
         self._lens[2 * i + 1] = n >> 8
         self._next = i + 1 if i + 1 < self.depth else 0

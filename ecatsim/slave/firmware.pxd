@@ -42,15 +42,16 @@ cdef class Firmware:
     @cython.locals(p=Pdi, ev="long long")
     cpdef bint sync0_latch(self, long long now_ns) except *
     cdef void _latch(self, Pdi p, long long ev, long long now_ns) except *
-    # the pulse's time as one int object for the image's two calls (decision P45)
-    @cython.locals(pdo=PdoImage, now_ns=object)
+    # the pulse's time as a C integer down to the image's calls, which take one (an int
+    # object only for an Application called through Python; decision P?)
+    @cython.locals(pdo=PdoImage, now_ns="long long")
     cpdef void sync0_run(self) except *
     @cython.locals(now_ns="long long", mbx=MailboxEngine)
     cpdef void run_latched(self) except *
     @cython.locals(pdo=PdoImage)
-    cdef void _apply_outputs(self, object out, object now_ns) except *
+    cdef void _apply_outputs(self, object out, long long now_ns) except *
     @cython.locals(want="long long", pending=bint, mbx=MailboxEngine)
     cpdef void service_mailbox(self, long long ev, long long now_ns) except *
-    cpdef void _outputs_received(self, object now_ns) except *
+    cpdef void _outputs_received(self, long long now_ns) except *
     @cython.locals(pdo=PdoImage)
-    cpdef void _write_inputs(self, object now_ns) except *
+    cpdef void _write_inputs(self, long long now_ns) except *
