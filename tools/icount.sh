@@ -29,7 +29,8 @@ if [ "$cold" -eq 1 ]; then
 fi
 count() {
     local out; out=$(mktemp)
-    "${vg[@]}" --callgrind-out-file="$out" .venv/bin/python \
+    # a fixed hash seed: the start-up's dict lookups land alike in both runs
+    PYTHONHASHSEED=0 "${vg[@]}" --callgrind-out-file="$out" .venv/bin/python \
         tools/cycle_profile.py --drives "$drives" --cycles "$1" "${extra[@]}" >/dev/null 2>&1
     # events: Ir [Dr Dw I1mr D1mr D1mw ILmr DLmr DLmw]
     grep -m1 '^summary:\|^totals:' "$out" | awk '{print $2, $8 + 0, $9 + $10}'

@@ -128,6 +128,6 @@ cdef class Drive(CycleDevice):
     cpdef pub_flush(self)
 
 
-# k unsigned: no test for a negative index per array read (decision P?)
+# k unsigned: no test for a negative index per array read (decision P60)
 @cython.locals(lo="long long", hi="long long")
 cdef inline int _put(Drive d, size_t k, long long v) except -1

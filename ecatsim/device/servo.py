@@ -304,7 +304,7 @@ class Servo:
         done = 0
         why = _STOP_NONE
         # the revolution at the substep's start: the one the last substep ended in (the
-        # angle does not change in between), found at the first substep (decision P?)
+        # angle does not change in between), found at the first substep (decision P60)
         rev = 0.0
         rev_known = False
         while done < n:

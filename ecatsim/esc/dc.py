@@ -82,7 +82,7 @@ def _signed64(x: int) -> int:
 
 def _get64(m: bytearray, a: int) -> int:
     """The little-endian 64-bit register at ``a`` (its bytes one by one, unrolled:
-    compiled, C reads them as one 64-bit load; decision P?)."""
+    compiled, C reads them as one 64-bit load; decision P60)."""
     p = m  # compiled: a pointer to the bytearray's bytes
     b3 = p[a + 3]  # compiled: 64-bit integers, so bit 31 does not sign-extend
     b7 = p[a + 7]

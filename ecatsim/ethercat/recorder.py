@@ -31,7 +31,7 @@ class FrameRecorder:
     def record(self, buf: bytearray | memoryview, n: int) -> None:
         """Keep ``buf[:n]`` (at most ``SLOT`` bytes) as the newest frame: one copy into the
         next slot (compiled: a copy between typed views, memcpy where both are contiguous,
-        not a loop per byte; decision P?)."""
+        not a loop per byte; decision P60)."""
         i = self._next
         n = min(n, SLOT, len(buf))
         ring = self._view

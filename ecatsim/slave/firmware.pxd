@@ -43,7 +43,7 @@ cdef class Firmware:
     cpdef bint sync0_latch(self, long long now_ns) except *
     cdef void _latch(self, Pdi p, long long ev, long long now_ns) except *
     # the pulse's time as a C integer down to the image's calls, which take one (an int
-    # object only for an Application called through Python; decision P?)
+    # object only for an Application called through Python; decision P60)
     @cython.locals(pdo=PdoImage, now_ns="long long")
     cpdef void sync0_run(self) except *
     @cython.locals(now_ns="long long", mbx=MailboxEngine)

@@ -250,7 +250,7 @@ class Firmware:
     def sync0_run(self) -> None:
         """The latched pulse's work, at the pulse's time: the outputs taken at it applied
         (in OP), the inputs as of the pulse written to SM3. Ref: ETG.1000.6 §5.3."""
-        now_ns = self.sync_ns  # compiled: a C integer for both calls (decision P?)
+        now_ns = self.sync_ns  # compiled: a C integer for both calls (decision P60)
         out = self.sync_out
         self.sync_ns = -1
         self.sync_out = None
