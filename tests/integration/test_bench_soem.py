@@ -13,6 +13,7 @@ import pytest
 
 from ecatsim.bench import redtest
 from ecatsim.bench.capture import Capture, process_cycles
+from ecatsim.bench.stallwatch import StallWatch
 from tests.integration.conftest import DaemonFactory
 from tests.integration.netns import NetnsPair
 from tests.support.soem_build import red_test
@@ -23,6 +24,24 @@ PERIOD_US = 1000
 #: a TMC8670 maps outputs and inputs: an LRW counts 1 for the read and 2 for the write
 EXPECTED_WKC = 3 * DRIVES
 FPWR, BWR, LRW = 5, 8, 12
+#: red_test runs at most this often, again only for a host stall (decision K7)
+RUNS = 3
+
+
+def _missed_cycles(cap: Capture, timeout_ns: int) -> list[tuple[int, int]]:
+    """(request, deadline) of each cyclic LRW not answered within ``timeout_ns``."""
+    marks = {name: t for t, name in cap.marks}
+    if "cycles" not in marks or "end" not in marks:
+        return []
+    frames = sorted(cap.frames(), key=lambda f: f.t_ns)
+    out = []
+    for k, f in enumerate(frames):
+        if f.reply or f.cmd != LRW or not marks["cycles"] <= f.t_ns < marks["end"]:
+            continue
+        reply = next((r for r in frames[k + 1 :] if r.reply and r.idx == f.idx), None)
+        if reply is None or reply.t_ns - f.t_ns > timeout_ns:
+            out.append((f.t_ns, f.t_ns + timeout_ns))
+    return out
 
 
 @pytest.mark.parametrize("sync0", [False, True], ids=["stock", "sync0"])
@@ -36,8 +55,19 @@ def test_red_test_takes_four_drives_to_op_and_cycles_with_every_wkc(
     exe = red_test(CYCLES, PERIOD_US, overlap=False, sync0=sync0)
     d = daemon_factory("--slaves", str(DRIVES))
     assert d.pid is not None
-    with Capture.master_end(netns_pair.master_ns, netns_pair.master_if, keep_wkc=True) as cap:
-        rt = redtest.run(exe, netns_pair, cap, PERIOD_US, [d.pid], timeout=60)
+    timeout_ns = redtest.timeout_ns(PERIOD_US)
+    for attempt in range(RUNS):
+        with (
+            StallWatch() as watch,
+            Capture.master_end(netns_pair.master_ns, netns_pair.master_if, keep_wkc=True) as cap,
+        ):
+            rt = redtest.run(exe, netns_pair, cap, PERIOD_US, [d.pid], timeout=60)
+        missed = _missed_cycles(cap, timeout_ns)
+        # red_test again (it configures the running segment anew) only if the host
+        # stalled or slowed a CPU while each missed reply was due (decision K7)
+        if not missed or not all(watch.explains(a, b, 0.001) for a, b in missed):
+            break
+        assert attempt < RUNS - 1, f"the host stalled in each of {RUNS} runs: {missed}"
     assert rt.returncode == 0, rt.tail
     assert (rt.slaves, rt.expected_wkc, rt.all_op, rt.trouble) == (
         DRIVES, EXPECTED_WKC, True, []
@@ -54,7 +84,7 @@ def test_red_test_takes_four_drives_to_op_and_cycles_with_every_wkc(
     started = [f.adp for f in dc if f.cmd == FPWR and f.ado == 0x0981 and f.body[10:11] == b"\x03"]
     assert len(started) == (DRIVES if sync0 else 0)
     cyc = process_cycles(frames, marks["cycles"], marks["end"], EXPECTED_WKC,
-                         redtest.timeout_ns(PERIOD_US))  # fmt: skip
+                         timeout_ns)  # fmt: skip
     assert (cyc["lost"], cyc["late"], cyc["wkc_errors"], cyc["wkc_error_seen"]) == (0, 0, 0, [])
     assert cyc["frames"] == cyc["cycles"]  # 4 x 29 bytes: one LRW a cycle
     # red_test's main loop runs CYCLES / 20 loops of 20 ms while the cycle thread runs
