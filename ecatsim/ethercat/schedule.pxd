@@ -7,6 +7,10 @@ from ecatsim.esc.context cimport FrameContext
 from ecatsim.esc.core cimport Esc
 from ecatsim.esc.dc cimport DcUnit
 from ecatsim.slave.firmware cimport Firmware
+# time.monotonic_ns() in schedule.py as Cython's C function over the interpreter's own
+# monotonic clock (the one Python's time.monotonic_ns() reads): one C call and no int
+# object per look after a slave's SYNC0 work on the daemon's link (P30; decision P67)
+from cpython cimport time
 
 cdef long long NO_DEADLINE, MAX_SYNC0_CATCHUP, PULSE_HINT_MARGIN_NS, PROBE_NS
 

@@ -162,3 +162,33 @@ def test_an_emcy_the_latched_work_queues_behind_a_full_sm1_unmasks_the_sm1_event
     assert fw.device.state.name == "FAULT"
     assert fw.mbx.held is not None  # the following error's EMCY, behind the first
     assert int.from_bytes(esc.mem[al_event_mask : al_event_mask + 4], "little") & ev_sm1
+
+
+def test_a_frame_waits_for_probe_ns_of_work_by_the_monotonic_clock() -> None:
+    """The looks read the host's monotonic clock in nanoseconds (one C call when compiled,
+    decision P67): with a probe time of 10 s no look falls due within a pulse's work, so
+    a waiting frame defers nothing and is never asked about; with 0 it is asked after the
+    first slave's work, and the slaves after the next one only latch."""
+    ref, c, waiting, _ = twins()
+    asked = [0]
+
+    def frame_waits() -> bool:
+        asked[0] += 1
+        return waiting[0]
+
+    s = c.seg.schedule
+    s.frame_waiting = frame_waits
+    s.probe_ns = 10_000_000_000
+    waiting[0] = True
+    for _ in range(5):
+        ref.pulse()
+        c.pulse()
+        assert latched(c) == [False] * N
+        assert ref.exchange() == c.exchange()
+    assert s.sync0_deferred == 0
+    assert asked[0] == 0
+    s.probe_ns = 0
+    c.pulse()
+    assert asked[0] > 0  # after the first slave's work, as in the tests above
+    assert latched(c) == [False, False, True, True]
+    assert s.sync0_deferred == 3
