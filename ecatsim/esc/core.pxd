@@ -71,14 +71,12 @@ cdef class Esc(SmHost):
     cdef unsigned char[:] _scratch_view
     cdef public object on_reset
 
-    @cython.locals(lo="long long", hi="long long", wr=bint, rd=bint, f=FmmuMap)
-    cpdef int64_t ecat_logical(self, long long cmd, long long lad, bytearray frame, long long d0,
-                               long long n) except -1
-    @cython.locals(lo="long long", hi="long long", phys="long long", a="long long",
+    @cython.locals(n="long long", lo="long long", hi="long long", wr=bint, rd=bint, f=FmmuMap)
+    cpdef int64_t ecat_logical(self, long long cmd, long long lad, unsigned char[:] data) except -1
+    @cython.locals(n="long long", lo="long long", hi="long long", phys="long long",
                    sm=SyncManager, view="unsigned char[:]", b0="long long", b1="long long", nb="long long",
                    pb="long long", ps="long long", pe="long long", fb="long long")
-    cpdef bint _fmmu_xfer(self, FmmuMap f, long long lad, bytearray buf, long long d0, long long n,
-                          bint wr) except -1
+    cpdef bint _fmmu_xfer(self, FmmuMap f, long long lad, unsigned char[:] data, bint write) except -1
     @cython.locals(m=bytearray, v="long long")
     cpdef void _set_ecat_event(self, long long bits) noexcept
     @cython.locals(m=bytearray, v="long long")

@@ -500,46 +500,48 @@ class Esc(SmHost):
                 return self._ecat_write_sm(ado, data)
         return 1 if self._plain_write(ado, data) else 0
 
-    def ecat_logical(self, cmd: int, lad: int, frame: bytearray, d0: int, n: int) -> int:
-        """LRD/LWR/LRW through the FMMUs (the data at ``frame[d0 : d0 + n]``): the WKC's
-        increment. Writes use the datagram data as received, then reads overlay it. WKC: +1
-        for a read, +1 (LWR) or +2 (LRW) for a write, per slave. Ref: ETG.1000.4 §5.4.3
-        Table 12; TMC8460 §5.48.
+    def ecat_logical(self, cmd: int, lad: int, data: memoryview) -> int:
+        """LRD/LWR/LRW through the FMMUs; returns the WKC increment.
+
+        Writes use the datagram data as received, then reads overlay it. WKC: +1 for a
+        read, +1 (LWR) or +2 (LRW) for a write, per slave. Ref: ETG.1000.4 §5.4.3 Table 12;
+        TMC8460 §5.48.
         """
+        n = len(data)
         lo = lad * 8
         hi = lo + n * 8
         wr = rd = False
         if cmd != _LRD:
             for f in self.fmmus:
-                if f.write and f.lbit < hi and lo < f.lend:
-                    wr |= self._fmmu_xfer(f, lad, frame, d0, n, True)
+                if f.write and f.lbit < hi and lo < f.lend and self._fmmu_xfer(f, lad, data, True):
+                    wr = True
         if cmd != _LWR:
             for f in self.fmmus:
-                if f.read and f.lbit < hi and lo < f.lend:
-                    rd |= self._fmmu_xfer(f, lad, frame, d0, n, False)
+                if f.read and f.lbit < hi and lo < f.lend and self._fmmu_xfer(f, lad, data, False):
+                    rd = True
         if cmd == _LRW:
             return (1 if rd else 0) + (2 if wr else 0)
         return 1 if (rd or wr) else 0
 
-    def _fmmu_xfer(self, f: FmmuMap, lad: int, buf: bytearray, d0: int, n: int, wr: bool) -> bool:
+    def _fmmu_xfer(self, f: FmmuMap, lad: int, data: memoryview, write: bool) -> bool:
+        n = len(data)
         if f.aligned:
             lo = max(lad, f.lstart)
             hi = min(lad + n, f.lstop)
             phys = f.pstart + (lo - f.lstart)
-            a = d0 + lo - lad
+            view = data[lo - lad : hi - lad]
             sm = f.sm
-            if sm is not None:  # in one SM window: no window search, no view (P61)
-                if wr:
+            if sm is not None:  # the whole map lies in one SM window: no window search
+                if write:
                     if not sm.ecat_may_write():
                         return False
-                    sm.ecat_write_from(phys - sm.start, buf, a, hi - lo)
+                    sm.ecat_write(phys - sm.start, view)
                     return True
                 if not sm.ecat_may_read():
                     return False
-                sm.ecat_read_into(phys - sm.start, buf, a, hi - lo)
+                sm.ecat_read(phys - sm.start, view)
                 return True
-            view = memoryview(buf)[a : a + hi - lo]
-            if wr:
+            if write:
                 return bool(self.ecat_write(phys, view))
             return bool(self.ecat_read(phys, view))
         b0 = max(lad * 8, f.lbit)
@@ -549,14 +551,14 @@ class Esc(SmHost):
         ps = pb >> 3
         pe = (pb + nb + 7) >> 3
         fb = b0 - lad * 8
-        if wr:
+        if write:
             cur = bytearray(self.peek(ps, pe - ps))
-            copy_bits(buf, d0 * 8 + fb, cur, pb - ps * 8, nb)
+            copy_bits(data, fb, cur, pb - ps * 8, nb)
             return bool(self.ecat_write(ps, memoryview(cur)))
         tmp = bytearray(pe - ps)
         if not self.ecat_read(ps, memoryview(tmp)):
             return False
-        copy_bits(tmp, pb - ps * 8, buf, d0 * 8 + fb, nb)
+        copy_bits(tmp, pb - ps * 8, data, fb, nb)
         return True
 
     def peek(self, addr: int, n: int) -> bytes:

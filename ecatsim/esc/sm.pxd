@@ -62,13 +62,5 @@ cdef class SyncManager:
                    p="unsigned char*", d="const unsigned char*")
     cpdef void write_whole(self, bytes data) except *
     cpdef void ecat_write(self, long long off, const unsigned char[:] data) except *
-    cpdef void _ecat_done(self, long long end) except *
     @cython.locals(base="long long")
     cpdef void ecat_read(self, long long off, unsigned char[:] out) except *
-    @cython.locals(base="long long", k="long long", p="unsigned char*", q="const unsigned char*")
-    cpdef void ecat_write_from(self, long long off, bytearray frame, long long a,
-                               long long n) except *
-    @cython.locals(first=bint, base="long long", k="long long", p="const unsigned char*",
-                   q="unsigned char*", out="unsigned char[:]", mv="unsigned char[:]")
-    cpdef void ecat_read_into(self, long long off, bytearray frame, long long a,
-                              long long n) except *

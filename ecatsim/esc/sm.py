@@ -349,15 +349,9 @@ class SyncManager:
         with 0x0806+8n bit 6 the frame's time goes to 0x09F0. Ref: §5.49 Table 90,
         §5.50.6 Table 122."""
         self.writer_write(off, data)
-        self._ecat_done(off + len(data))
-
-    def _ecat_done(self, end: int) -> None:
-        """After an ECAT access up to window offset ``end``: the process-data watchdog's
-        trigger (write SMs with 0x0804+8n bit 6) and, at the buffer's last byte, the event
-        time (0x0806+8n bit 6). Ref: §5.49 Tables 87, 90."""
-        if self.ecat_side_writes and self.control & SM_CTRL_WATCHDOG:
+        if self.control & SM_CTRL_WATCHDOG:
             self.host.wd_pd_trigger()
-        if end >= self.length and self.mem[self.status_addr + 1] & SM_ACT_LATCH_ECAT:
+        if off + len(data) >= self.length and self.mem[self.status_addr + 1] & SM_ACT_LATCH_ECAT:
             self.host.sm_event_time(DC_ECAT_EVENT_TIME)
 
     def ecat_read(self, off: int, out: memoryview) -> None:
@@ -368,46 +362,8 @@ class SyncManager:
             out[:] = self.mv[base + off : base + off + len(out)]
             return
         self.reader_read(off, out)
-        self._ecat_done(off + len(out))
-
-    def ecat_write_from(self, off: int, frame: bytearray, a: int, n: int) -> None:
-        """``ecat_write(off, frame[a : a + n])`` straight from the frame: an FMMU's part
-        of a datagram, copied without a view of it (compiled: a C loop between two
-        pointers; decision P61). Where a buffer would run past its end, the checked path.
-        Ref: TMC8460 §5.49 Table 89."""
-        base = self._base_for_write() + off
-        if a < 0 or a + n > len(frame) or base < 0 or base + n > len(self.mem):
-            self.ecat_write(off, memoryview(frame)[a : a + n])
-            return
-        p = self.mem  # compiled: C pointers to both buffers, the indexes checked above
-        q = frame
-        for k in range(n):
-            p[base + k] = q[a + k]
-        self._writer_access(off == 0, off + n >= self.length)
-        self._ecat_done(off + n)
-
-    def ecat_read_into(self, off: int, frame: bytearray, a: int, n: int) -> None:
-        """``ecat_read(off, memoryview(frame)[a : a + n])`` straight into the frame (see
-        ecat_write_from; decision P61)."""
-        if self.ecat_side_writes or a < 0 or a + n > len(frame):
-            self.ecat_read(off, memoryview(frame)[a : a + n])
-            return
-        first = off == 0
-        if first:
-            self._reader_open()
-        base = self._base_for_read() + off
-        if base < 0 or base + n > len(self.mem):
-            out = memoryview(frame)[a : a + n]
-            mv = self.mv  # the checked loop of reader_read: raises where the memory ends
-            for k in range(n):
-                out[k] = mv[base + k]
-        else:
-            p = self.mem  # compiled: C pointers, the indexes checked above
-            q = frame
-            for k in range(n):
-                q[a + k] = p[base + k]
-        self._reader_access(first, off + n >= self.length)
-        self._ecat_done(off + n)
+        if off + len(out) >= self.length and self.mem[self.status_addr + 1] & SM_ACT_LATCH_ECAT:
+            self.host.sm_event_time(DC_ECAT_EVENT_TIME)
 
     # -- PDI face --------------------------------------------------------------------
 

@@ -417,7 +417,7 @@ class Segment:
             if cmd in (LRW, LRD, LWR):
                 lad = adp | (ado << 16)
                 for esc in self.logical:
-                    inc += esc.ecat_logical(cmd, lad, buf, d0, dlen)
+                    inc += esc.ecat_logical(cmd, lad, data)
             elif cmd in (FPRD, FPWR, FPRW):
                 for i in self.addr_map.get(adp, ()):
                     inc += _physical(escs[i], cmd - FPRD, ado, data)
