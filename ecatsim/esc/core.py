@@ -413,24 +413,18 @@ class Esc(SmHost):
     def sm_status_changed(self, sm: SyncManager) -> None:
         """Mirror an SM's interrupt bits (``sm.mirror``, bit 0 ECAT, bit 1 PDI) into 0x0210
         bit 4+n and 0x0220 bit 8+n. The SM calls this only when they change (only SM
-        accesses change these bits). Ref: §5.49 Tables 88, 89.
+        accesses change these bits), and only the bits that ``sm.changed`` are set or
+        cleared: no one else writes them (P29). No locals: an override in a final type
+        cannot type them (P17), the SM's fields are C fields (P62). Ref: §5.49 Tables 88, 89.
         """
-        self._sm_events(sm.mirror, sm.n, sm.changed)
-
-    def _sm_events(self, mirror: int, n: int, changed: int) -> None:
-        """sm_status_changed for SM ``n`` (a method of its own: the override of SmHost's
-        callback cannot carry typed locals in a final type, decision P17). Only the bits
-        that ``changed`` are set or cleared: no one else writes them (decision P29)."""
-        ebit = ECAT_EV_SM0 << n
-        abit = EV_SM0 << n
-        if changed & 1 and mirror & 1:
-            self._set_ecat_event(ebit)
-        elif changed & 1:
-            self._clr_ecat_event(ebit)
-        if changed & 2 and mirror & 2:
-            self.set_al_event(abit)
-        elif changed & 2:
-            self.clr_al_event(abit)
+        if sm.changed & 1 and sm.mirror & 1:
+            self._set_ecat_event(ECAT_EV_SM0 << sm.n)
+        elif sm.changed & 1:
+            self._clr_ecat_event(ECAT_EV_SM0 << sm.n)
+        if sm.changed & 2 and sm.mirror & 2:
+            self.set_al_event(EV_SM0 << sm.n)
+        elif sm.changed & 2:
+            self.clr_al_event(EV_SM0 << sm.n)
 
     def wd_pd_trigger(self) -> None:
         self.wd.trigger(self.ctx.t_ns)

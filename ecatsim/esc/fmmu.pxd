@@ -15,3 +15,12 @@ cdef long long FMMU_BASE, FMMU_STRIDE, N_FMMU
 
 @cython.locals(p="const unsigned char*", n="long long", a="long long", f=FmmuMap)
 cpdef tuple compile_fmmus(bytearray mem)
+
+cdef long long LRD, LRW, LWR
+
+
+# the frame walk's logical path (P61)
+@cython.locals(lo="long long", hi="long long", end="long long", a="long long", wr=bint,
+               rd=bint, f=FmmuMap, sm=SyncManager)
+cpdef long long logical_at(tuple fmmus, long long cmd, long long lad, bytearray buf,
+                           long long pos, long long n) except -2

@@ -9,6 +9,7 @@ import struct
 from typing import TYPE_CHECKING
 
 from ecatsim.esc.regs import FMMU_BASE, FMMU_STRIDE, N_FMMU
+from ecatsim.wire.datagram import LRD, LRW, LWR  # compiled: C constants (fmmu.pxd)
 
 if TYPE_CHECKING:
     from ecatsim.esc.sm import SyncManager
@@ -78,6 +79,45 @@ def compile_fmmus(mem: bytearray) -> tuple[FmmuMap, ...]:
         if f.lend > f.lbit:
             out.append(f)
     return tuple(out)
+
+
+def logical_at(
+    fmmus: tuple[FmmuMap, ...], cmd: int, lad: int, buf: bytearray, pos: int, n: int
+) -> int:
+    """``Esc.ecat_logical(cmd, lad, buf[pos:pos + n])`` of an ESC with these FMMUs, when
+    each FMMU the datagram touches is byte-aligned and given an SM (``FmmuMap.sm``): the
+    same writes first, then reads, the same WKC increment, each FMMU one C call to its SM
+    with pointers into the frame (the frame walk, decision P61). -1 if an FMMU it touches
+    is not (nothing done: the caller takes ``Esc.ecat_logical``).
+    Ref: ETG.1000.4 §5.4.3 Table 12; TMC8460 §5.48."""
+    lo = lad * 8
+    hi = lo + n * 8
+    for f in fmmus:
+        if f.sm is None and f.lbit < hi and lo < f.lend:
+            return -1
+    wr = rd = False
+    end = lad + n
+    if cmd != LRD:
+        for f in fmmus:
+            if f.write and f.lstart < end and lad < f.lstop:
+                a = max(lad, f.lstart)
+                sm = f.sm
+                if sm.ecat_write_at(
+                    f.pstart + (a - f.lstart) - sm.start, buf, pos + a - lad, min(end, f.lstop) - a
+                ):
+                    wr = True
+    if cmd != LWR:
+        for f in fmmus:
+            if f.read and f.lstart < end and lad < f.lstop:
+                a = max(lad, f.lstart)
+                sm = f.sm
+                if sm.ecat_read_at(
+                    f.pstart + (a - f.lstart) - sm.start, buf, pos + a - lad, min(end, f.lstop) - a
+                ):
+                    rd = True
+    if cmd == LRW:
+        return (1 if rd else 0) + (2 if wr else 0)
+    return 1 if (rd or wr) else 0
 
 
 def copy_bits(

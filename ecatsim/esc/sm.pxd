@@ -35,12 +35,14 @@ cdef class SyncManager:
     @cython.locals(to_ecat="long long", to_pdi="long long")
     cpdef void configure(self, long long start, long long length, long long control, bint active,
                          bint locked=*) except *
-    @cython.locals(st="long long", mirror="long long")
-    cpdef void _sync(self) except *
+    # noexcept: the buffer state, the status register through a pointer, the ESC's event
+    # bits (SmHost.sm_status_changed): nothing here raises (P62)
+    @cython.locals(st="long long", mirror="long long", p="unsigned char*")
+    cpdef void _sync(self) noexcept
     @cython.locals(latest="long long")
-    cpdef void _writer_access(self, bint first, bint last) except *
-    cpdef void _reader_open(self) except *
-    cpdef void _reader_access(self, bint first, bint last) except *
+    cpdef void _writer_access(self, bint first, bint last) noexcept
+    cpdef void _reader_open(self) noexcept
+    cpdef void _reader_access(self, bint first, bint last) noexcept
     cpdef int64_t _base_for_write(self) except? -1
     @cython.locals(b="long long")
     cpdef int64_t _base_for_read(self) except? -1
@@ -62,5 +64,14 @@ cdef class SyncManager:
                    p="unsigned char*", d="const unsigned char*")
     cpdef void write_whole(self, bytes data) except *
     cpdef void ecat_write(self, long long off, const unsigned char[:] data) except *
+    # the frame walk's logical path: one C call per SM access, pointers into the frame (P61)
+    @cython.locals(base="long long", k="long long", last=bint, p="unsigned char*",
+                   d="const unsigned char*")
+    cpdef bint ecat_write_at(self, long long off, bytearray buf, long long pos,
+                             long long n) except -1
+    @cython.locals(base="long long", k="long long", first=bint, last=bint, fast=bint,
+                   m=bytearray, p="const unsigned char*", d="unsigned char*")
+    cpdef bint ecat_read_at(self, long long off, bytearray buf, long long pos,
+                            long long n) except -1
     @cython.locals(base="long long")
     cpdef void ecat_read(self, long long off, unsigned char[:] out) except *
