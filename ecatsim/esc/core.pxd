@@ -92,7 +92,7 @@ cdef class Esc(SmHost):
     @cython.locals(m="unsigned char*", v="long long")
     cpdef void clr_al_event(self, long long bits) noexcept
     @cython.locals(line=bint)
-    cpdef void _pdi_irq(self, long long request) noexcept
+    cdef inline void _pdi_irq(self, long long request) noexcept
     # sm_status_changed, wd_pd_trigger, sm_event_time: SmHost's, overridden in core.py (a
     # final type may not declare its overrides again here)
     cpdef void sync0_tick(self, long long now_ns) except *

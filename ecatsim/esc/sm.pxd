@@ -25,6 +25,9 @@ cdef class SmHost:
 cdef class SyncManager:
     cdef public SmHost host
     cdef unsigned char[:] mv
+    # the ESC memory's bytes (mem, never resized: mv holds its buffer), for the status
+    # register and the frame walk's copies (P62)
+    cdef unsigned char* mp
     cdef public bytearray mem
     cdef public long long n, status_addr, start, length, control
     cdef public bint active, enabled, locked, mailbox, ecat_side_writes, mbx_full
@@ -35,23 +38,23 @@ cdef class SyncManager:
     @cython.locals(to_ecat="long long", to_pdi="long long")
     cpdef void configure(self, long long start, long long length, long long control, bint active,
                          bint locked=*) except *
-    # noexcept: the buffer state, the status register through a pointer, the ESC's event
-    # bits (SmHost.sm_status_changed): nothing here raises (P62)
+    # inline and noexcept: the buffer state, the status register through the pointer mp,
+    # the ESC's event bits (SmHost.sm_status_changed): nothing here raises (P62)
     @cython.locals(st="long long", mirror="long long", p="unsigned char*")
-    cpdef void _sync(self) noexcept
+    cdef inline void _sync(self) noexcept
     @cython.locals(latest="long long")
-    cpdef void _writer_access(self, bint first, bint last) noexcept
-    cpdef void _reader_open(self) noexcept
-    cpdef void _reader_access(self, bint first, bint last) noexcept
-    cpdef int64_t _base_for_write(self) except? -1
+    cdef inline void _writer_access(self, bint first, bint last) noexcept
+    cdef inline void _reader_open(self) noexcept
+    cdef inline void _reader_access(self, bint first, bint last) noexcept
+    cdef inline long long _base_for_write(self) noexcept
     @cython.locals(b="long long")
-    cpdef int64_t _base_for_read(self) except? -1
-    cpdef bint writer_may(self) except -1
-    cpdef bint reader_may(self) except -1
-    cpdef bint ecat_may_write(self) except -1
-    cpdef bint ecat_may_read(self) except -1
-    cpdef bint pdi_may_write(self) except -1
-    cpdef bint pdi_may_read(self) except -1
+    cdef inline long long _base_for_read(self) noexcept
+    cpdef bint writer_may(self) noexcept
+    cpdef bint reader_may(self) noexcept
+    cpdef bint ecat_may_write(self) noexcept
+    cpdef bint ecat_may_read(self) noexcept
+    cpdef bint pdi_may_write(self) noexcept
+    cpdef bint pdi_may_read(self) noexcept
     @cython.locals(first=bint, last=bint, base="long long", mv="unsigned char[:]", k="long long",
                    n="long long", p="unsigned char*")
     cpdef void writer_write(self, long long off, const unsigned char[:] data) except *
@@ -69,8 +72,8 @@ cdef class SyncManager:
                    d="const unsigned char*")
     cpdef bint ecat_write_at(self, long long off, bytearray buf, long long pos,
                              long long n) except -1
-    @cython.locals(base="long long", k="long long", first=bint, last=bint, fast=bint,
-                   m=bytearray, p="const unsigned char*", d="unsigned char*")
+    @cython.locals(base="long long", k="long long", reader=bint, first=bint, last=bint,
+                   p="const unsigned char*", d="unsigned char*")
     cpdef bint ecat_read_at(self, long long off, bytearray buf, long long pos,
                             long long n) except -1
     @cython.locals(base="long long")

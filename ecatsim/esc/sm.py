@@ -76,6 +76,7 @@ class SyncManager:
         "mbx_full",
         "mem",
         "mirror",
+        "mp",
         "mv",
         "n",
         "r",
@@ -92,6 +93,8 @@ class SyncManager:
         #: the ESC memory the windows and buffers live in (the host's, for its lifetime)
         self.mem = host.memory()
         self.mv = memoryview(self.mem)
+        #: compiled: a pointer to the memory's bytes (fixed: the view holds the buffer)
+        self.mp = self.mem
         self.n = n
         self.status_addr = regs.sm_addr(n, 5)
         if len(self.mem) < self.status_addr + 2:  # the status and activate registers
@@ -177,7 +180,7 @@ class SyncManager:
             if self.w_open:
                 st |= SM_ST_WRITE_OPEN
         self.status = st
-        p = self.mem  # compiled: a C pointer (status_addr checked in __init__)
+        p = self.mp  # compiled: a C pointer (status_addr checked in __init__)
         p[self.status_addr] = st
         mirror = (1 if st & self.irq_to_ecat else 0) | (2 if st & self.irq_to_pdi else 0)
         if mirror != self.mirror:  # the event registers change only when these bits do
@@ -379,7 +382,7 @@ class SyncManager:
         if off < 0 or pos < 0 or pos + n > len(buf) or base < 0 or base + n > len(self.mem):
             self.ecat_write(off, memoryview(buf)[pos : pos + n])
             return True
-        p = self.mem  # compiled: C pointers, the ranges checked above
+        p = self.mp  # compiled: C pointers, the ranges checked above
         d = buf
         for k in range(n):
             p[base + k] = d[pos + k]
@@ -396,34 +399,30 @@ class SyncManager:
         without a view of the data, as ``ecat_write_at`` (decision P61)."""
         if not self.ecat_may_read():
             return False
-        m = self.mem
-        # every buffer the read may take lies inside the memory and the frame: pointers
-        if off < 0 or pos < 0 or pos + n > len(buf) or self.start < 0:
-            fast = False
-        else:
-            fast = self.start + (1 if self.mailbox else 3) * self.length + off + n <= len(m)
-        if not fast:
+        # pointers where every buffer the read may take lies inside the memory and the frame
+        if (
+            off < 0
+            or pos < 0
+            or pos + n > len(buf)
+            or self.start < 0
+            or self.start + (1 if self.mailbox else 3) * self.length + off + n > len(self.mem)
+        ):
             self.ecat_read(off, memoryview(buf)[pos : pos + n])
             return True
-        if self.ecat_side_writes:  # the written SM read back: peek(), no side effects
-            base = self._base_for_read() + off
-            p = m  # compiled: C pointers, the ranges checked above
-            d = buf
-            for k in range(n):
-                d[pos + k] = p[base + k]
-            return True
-        first = off == 0
-        last = off + n >= self.length
+        reader = not self.ecat_side_writes  # else the written SM read back: no side effects
+        first = reader and off == 0
+        last = reader and off + n >= self.length
         if first:
             self._reader_open()
         base = self._base_for_read() + off
-        p = m
+        p = self.mp  # compiled: C pointers, the ranges checked above
         d = buf
         for k in range(n):
             d[pos + k] = p[base + k]
-        self._reader_access(first, last)
-        if last and p[self.status_addr + 1] & SM_ACT_LATCH_ECAT:
-            self.host.sm_event_time(DC_ECAT_EVENT_TIME)
+        if reader:
+            self._reader_access(first, last)
+            if last and p[self.status_addr + 1] & SM_ACT_LATCH_ECAT:
+                self.host.sm_event_time(DC_ECAT_EVENT_TIME)
         return True
 
     # -- PDI face --------------------------------------------------------------------
