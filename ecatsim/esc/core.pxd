@@ -47,6 +47,7 @@ cdef class Esc(SmHost):
     cdef public FrameContext ctx
     cdef public bytearray mem
     cdef unsigned char[:] memv
+    cdef unsigned char* mp
     cdef public object t
     cdef public bytes ecat_wmask, pdi_wmask, ecat_w_hooked, pdi_w_hooked, ecat_r_hooked
     cdef public bytes pdi_r_hooked, ecat_w_change

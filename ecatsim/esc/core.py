@@ -125,6 +125,7 @@ class Esc(SmHost):
         "link_down",
         "mem",
         "memv",
+        "mp",
         "mii",
         "on_reset",
         "pdi_emulation",
@@ -170,6 +171,7 @@ class Esc(SmHost):
         self.mem = bytearray(0x10000)
         #: a view of mem for the read paths (mem is never resized or replaced)
         self.memv = memoryview(self.mem)
+        self.mp = self.mem  # compiled: a pointer to its bytes (fixed: memv holds them), P62
         from ecatsim.esc.units import tables  # the table names this class: built at first use
 
         t = self.t = tables()
@@ -357,14 +359,14 @@ class Esc(SmHost):
     # ================================================================ events
 
     def _set_ecat_event(self, bits: int) -> None:
-        m = self.mem
+        m = self.mp
         v = m[ECAT_EVENT_REQUEST] | (m[ECAT_EVENT_REQUEST + 1] << 8)
         if (v | bits) != v:
             _put16(m, ECAT_EVENT_REQUEST, v | bits)
             self._irq_update()
 
     def _clr_ecat_event(self, bits: int) -> None:
-        m = self.mem
+        m = self.mp
         v = m[ECAT_EVENT_REQUEST] | (m[ECAT_EVENT_REQUEST + 1] << 8)
         if v & bits:
             _put16(m, ECAT_EVENT_REQUEST, v & ~bits)
@@ -372,7 +374,7 @@ class Esc(SmHost):
 
     def _irq_update(self) -> None:
         """IRQ field contribution: ECAT event request AND ECAT event mask. Ref: §5.29, 5.31."""
-        m = self.mem
+        m = self.mp
         req = m[ECAT_EVENT_REQUEST] | (m[ECAT_EVENT_REQUEST + 1] << 8)
         mask = m[ECAT_EVENT_MASK] | (m[ECAT_EVENT_MASK + 1] << 8)
         irq = req & mask
@@ -385,13 +387,13 @@ class Esc(SmHost):
 
     def set_al_event(self, bits: int) -> None:
         """Raise AL event request bits (the PDI interrupt source). Ref: §5.32 Table 46."""
-        m = self.mem
+        m = self.mp
         v = _get32(m, AL_EVENT_REQUEST) | bits
         _put32(m, AL_EVENT_REQUEST, v)
         self._pdi_irq(v)
 
     def clr_al_event(self, bits: int) -> None:
-        m = self.mem
+        m = self.mp
         v = _get32(m, AL_EVENT_REQUEST)
         if v & bits:
             v &= ~bits
@@ -401,7 +403,7 @@ class Esc(SmHost):
     def _pdi_irq(self, request: int) -> None:
         """The PDI interrupt: AL event request AND AL event mask. Ref: §5.32, §5.33. The
         context's record changes only where the line does (most changes leave it high)."""
-        line = (request & _get32(self.mem, AL_EVENT_MASK)) != 0
+        line = (request & _get32(self.mp, AL_EVENT_MASK)) != 0
         if line == self.irq_line:
             return
         self.irq_line = line

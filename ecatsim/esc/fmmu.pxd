@@ -19,8 +19,9 @@ cpdef tuple compile_fmmus(bytearray mem)
 cdef long long LRD, LRW, LWR
 
 
-# the frame walk's logical path (P61)
-@cython.locals(lo="long long", hi="long long", end="long long", a="long long", wr=bint,
-               rd=bint, f=FmmuMap, sm=SyncManager)
-cpdef long long logical_at(tuple fmmus, long long cmd, long long lad, bytearray buf,
-                           long long pos, long long n) except -2
+# the frame walk's logical path (P61); esc: the ESC (ecatsim.esc.core.Esc), for an FMMU
+# without an SM
+@cython.locals(end="long long", a="long long", b="long long", wr=bint, rd=bint, f=FmmuMap,
+               sm=SyncManager)
+cpdef long long logical_at(object esc, tuple fmmus, long long cmd, long long lad, bytearray buf,
+                           long long pos, long long n) except -1

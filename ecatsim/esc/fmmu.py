@@ -12,6 +12,7 @@ from ecatsim.esc.regs import FMMU_BASE, FMMU_STRIDE, N_FMMU
 from ecatsim.wire.datagram import LRD, LRW, LWR  # compiled: C constants (fmmu.pxd)
 
 if TYPE_CHECKING:
+    from ecatsim.esc.core import Esc
     from ecatsim.esc.sm import SyncManager
 
 #: logical start u32, length u16, log start bit u8, log stop bit u8, phys start u16,
@@ -82,38 +83,47 @@ def compile_fmmus(mem: bytearray) -> tuple[FmmuMap, ...]:
 
 
 def logical_at(
-    fmmus: tuple[FmmuMap, ...], cmd: int, lad: int, buf: bytearray, pos: int, n: int
+    esc: Esc, fmmus: tuple[FmmuMap, ...], cmd: int, lad: int, buf: bytearray, pos: int, n: int
 ) -> int:
-    """``Esc.ecat_logical(cmd, lad, buf[pos:pos + n])`` of an ESC with these FMMUs, when
-    each FMMU the datagram touches is byte-aligned and given an SM (``FmmuMap.sm``): the
-    same writes first, then reads, the same WKC increment, each FMMU one C call to its SM
-    with pointers into the frame (the frame walk, decision P61). -1 if an FMMU it touches
-    is not (nothing done: the caller takes ``Esc.ecat_logical``).
+    """``esc.ecat_logical(cmd, lad, buf[pos:pos + n])`` (``fmmus``: ``esc.fmmus``): the same
+    writes first, then reads, the same WKC increment, each FMMU given an SM
+    (``FmmuMap.sm``) one C call to it with pointers into the frame (the frame walk,
+    decision P61); any other FMMU the ESC's ``_fmmu_xfer``, with a view of the data.
     Ref: ETG.1000.4 §5.4.3 Table 12; TMC8460 §5.48."""
-    lo = lad * 8
-    hi = lo + n * 8
-    for f in fmmus:
-        if f.sm is None and f.lbit < hi and lo < f.lend:
-            return -1
     wr = rd = False
     end = lad + n
+    view = None
     if cmd != LRD:
         for f in fmmus:
-            if f.write and f.lstart < end and lad < f.lstop:
-                a = max(lad, f.lstart)
+            if f.write and f.lstart < end and lad < f.lstop:  # lbit < hi and lo < lend
                 sm = f.sm
-                if sm.ecat_write_at(
-                    f.pstart + (a - f.lstart) - sm.start, buf, pos + a - lad, min(end, f.lstop) - a
-                ):
+                if sm is not None:
+                    a = max(lad, f.lstart)
+                    b = min(end, f.lstop)
+                    if sm.ecat_write_at(
+                        f.pstart + (a - f.lstart) - sm.start, buf, pos + a - lad, b - a
+                    ):
+                        wr = True
+                    continue
+                if view is None:
+                    view = memoryview(buf)[pos : pos + n]
+                if esc._fmmu_xfer(f, lad, view, True):
                     wr = True
     if cmd != LWR:
         for f in fmmus:
             if f.read and f.lstart < end and lad < f.lstop:
-                a = max(lad, f.lstart)
                 sm = f.sm
-                if sm.ecat_read_at(
-                    f.pstart + (a - f.lstart) - sm.start, buf, pos + a - lad, min(end, f.lstop) - a
-                ):
+                if sm is not None:
+                    a = max(lad, f.lstart)
+                    b = min(end, f.lstop)
+                    if sm.ecat_read_at(
+                        f.pstart + (a - f.lstart) - sm.start, buf, pos + a - lad, b - a
+                    ):
+                        rd = True
+                    continue
+                if view is None:
+                    view = memoryview(buf)[pos : pos + n]
+                if esc._fmmu_xfer(f, lad, view, False):
                     rd = True
     if cmd == LRW:
         return (1 if rd else 0) + (2 if wr else 0)

@@ -13,6 +13,11 @@ cdef long long DC_ECAT_EVENT_TIME, SM_ACT_LATCH_ECAT, SM_CTRL_ECAT_IRQ, SM_CTRL_
 cdef class SyncManager
 
 
+@cython.locals(k="long long")
+cdef inline void _copy(unsigned char* dst, long long d, const unsigned char* src, long long s,
+                       long long n) noexcept
+
+
 cdef class SmHost:
     # noexcept: the ESC only moves its event bits (core.pxd, P48)
     cpdef void sm_status_changed(self, SyncManager sm) noexcept
@@ -68,12 +73,10 @@ cdef class SyncManager:
     cpdef void write_whole(self, bytes data) except *
     cpdef void ecat_write(self, long long off, const unsigned char[:] data) except *
     # the frame walk's logical path: one C call per SM access, pointers into the frame (P61)
-    @cython.locals(base="long long", k="long long", last=bint, p="unsigned char*",
-                   d="const unsigned char*")
+    @cython.locals(base="long long", last=bint, p="unsigned char*")
     cpdef bint ecat_write_at(self, long long off, bytearray buf, long long pos,
                              long long n) except -1
-    @cython.locals(base="long long", k="long long", reader=bint, first=bint, last=bint,
-                   p="const unsigned char*", d="unsigned char*")
+    @cython.locals(reader=bint, first=bint, last=bint, p="unsigned char*")
     cpdef bint ecat_read_at(self, long long off, bytearray buf, long long pos,
                             long long n) except -1
     @cython.locals(base="long long")

@@ -30,6 +30,21 @@ from ecatsim.esc.regs import (
 )
 
 
+def _copy(dst: bytearray, d: int, src: bytearray, s: int, n: int) -> None:
+    """``dst[d:d + n] = src[s:s + n]`` for ranges the caller checked (compiled: C pointers,
+    four bytes a step: a byte loop costs its count and test per byte, decision P62)."""
+    k = 0
+    while k + 4 <= n:
+        dst[d + k] = src[s + k]
+        dst[d + k + 1] = src[s + k + 1]
+        dst[d + k + 2] = src[s + k + 2]
+        dst[d + k + 3] = src[s + k + 3]
+        k += 4
+    while k < n:
+        dst[d + k] = src[s + k]
+        k += 1
+
+
 class SmHost:
     """What an SM needs from its ESC: memory and event lines. The ESC derives from this
     class (compiled: the SM calls these through the C method table, sm.pxd)."""
@@ -376,16 +391,16 @@ class SyncManager:
         without a view of the data: the frame walk's logical path (decision P61). Returns
         whether the write counts. A range the pointers cannot take (past the memory, the
         window or the frame) goes the checked way, ``ecat_write``, with its errors."""
-        if not (self.ecat_side_writes and self.writer_may()):
+        if not self.ecat_side_writes or not self.active or self.locked:
+            return False
+        if self.mailbox and self.mbx_full:
             return False
         base = self._base_for_write() + off
         if off < 0 or pos < 0 or pos + n > len(buf) or base < 0 or base + n > len(self.mem):
             self.ecat_write(off, memoryview(buf)[pos : pos + n])
             return True
         p = self.mp  # compiled: C pointers, the ranges checked above
-        d = buf
-        for k in range(n):
-            p[base + k] = d[pos + k]
+        _copy(p, base, buf, pos, n)
         last = off + n >= self.length
         self._writer_access(off == 0, last)
         if self.control & SM_CTRL_WATCHDOG:
@@ -397,7 +412,12 @@ class SyncManager:
     def ecat_read_at(self, off: int, buf: bytearray, pos: int, n: int) -> bool:
         """``ecat_may_read()``, then ``ecat_read(off, buf[pos:pos + n])``, in one call and
         without a view of the data, as ``ecat_write_at`` (decision P61)."""
-        if not self.ecat_may_read():
+        if not self.active or self.locked:
+            return False
+        reader = not self.ecat_side_writes  # else the written SM read back: no side effects
+        if reader and self.mailbox and not self.mbx_full:
+            return False
+        if not reader and self.mailbox:
             return False
         # pointers where every buffer the read may take lies inside the memory and the frame
         if (
@@ -409,16 +429,12 @@ class SyncManager:
         ):
             self.ecat_read(off, memoryview(buf)[pos : pos + n])
             return True
-        reader = not self.ecat_side_writes  # else the written SM read back: no side effects
         first = reader and off == 0
         last = reader and off + n >= self.length
         if first:
             self._reader_open()
-        base = self._base_for_read() + off
         p = self.mp  # compiled: C pointers, the ranges checked above
-        d = buf
-        for k in range(n):
-            d[pos + k] = p[base + k]
+        _copy(buf, pos, p, self._base_for_read() + off, n)
         if reader:
             self._reader_access(first, last)
             if last and p[self.status_addr + 1] & SM_ACT_LATCH_ECAT:

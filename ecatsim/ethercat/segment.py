@@ -418,9 +418,8 @@ class Segment:
             if cmd in (LRW, LRD, LWR):
                 lad = adp | (ado << 16)
                 for esc in self.logical:
-                    # an ESC whose FMMUs all go to an SM: C calls with pointers (P61)
-                    k = logical_at(esc.fmmus, cmd, lad, buf, d0, dlen)
-                    inc += k if k >= 0 else esc.ecat_logical(cmd, lad, data)
+                    # esc.ecat_logical(cmd, lad, data): C calls, pointers into buf (P61)
+                    inc += logical_at(esc, esc.fmmus, cmd, lad, buf, d0, dlen)
             elif cmd in (FPRD, FPWR, FPRW):
                 for i in self.addr_map.get(adp, ()):
                     inc += _physical(escs[i], cmd - FPRD, ado, data)
