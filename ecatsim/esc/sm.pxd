@@ -79,5 +79,7 @@ cdef class SyncManager:
     @cython.locals(reader=bint, first=bint, last=bint, p="unsigned char*")
     cpdef bint ecat_read_at(self, long long off, bytearray buf, long long pos,
                             long long n) except -1
+    cdef void _ecat_checked(self, long long off, bytearray buf, long long pos, long long n,
+                            bint write) except *
     @cython.locals(base="long long")
     cpdef void ecat_read(self, long long off, unsigned char[:] out) except *

@@ -397,7 +397,7 @@ class SyncManager:
             return False
         base = self._base_for_write() + off
         if off < 0 or pos < 0 or pos + n > len(buf) or base < 0 or base + n > len(self.mem):
-            self.ecat_write(off, memoryview(buf)[pos : pos + n])
+            self._ecat_checked(off, buf, pos, n, True)
             return True
         p = self.mp  # compiled: C pointers, the ranges checked above
         _copy(p, base, buf, pos, n)
@@ -427,7 +427,7 @@ class SyncManager:
             or self.start < 0
             or self.start + (1 if self.mailbox else 3) * self.length + off + n > len(self.mem)
         ):
-            self.ecat_read(off, memoryview(buf)[pos : pos + n])
+            self._ecat_checked(off, buf, pos, n, False)
             return True
         first = reader and off == 0
         last = reader and off + n >= self.length
@@ -440,6 +440,16 @@ class SyncManager:
             if last and p[self.status_addr + 1] & SM_ACT_LATCH_ECAT:
                 self.host.sm_event_time(DC_ECAT_EVENT_TIME)
         return True
+
+    def _ecat_checked(self, off: int, buf: bytearray, pos: int, n: int, write: bool) -> None:
+        """``ecat_write`` / ``ecat_read`` of ``buf[pos:pos + n]``: the checked way of
+        ``ecat_write_at`` and ``ecat_read_at`` (a method of its own: the view is made here
+        only)."""
+        view = memoryview(buf)[pos : pos + n]
+        if write:
+            self.ecat_write(off, view)
+        else:
+            self.ecat_read(off, view)
 
     # -- PDI face --------------------------------------------------------------------
 
