@@ -88,14 +88,16 @@ cdef class Esc(SmHost):
     cpdef void _irq_update(self) noexcept
     cpdef int64_t al_event(self) except -1
     cpdef void pdi_buffer_event(self, SyncManager sm, bint first, bint last) except *
-    @cython.locals(m="unsigned char*", v="long long")
     cpdef void set_al_event(self, long long bits) noexcept
-    @cython.locals(m="unsigned char*", v="long long")
+    @cython.locals(v="long long")
     cpdef void clr_al_event(self, long long bits) noexcept
+    cdef inline void _al_request(self, long long v) noexcept
     @cython.locals(line=bint)
     cdef inline void _pdi_irq(self, long long request) noexcept
     # sm_status_changed, wd_pd_trigger, sm_event_time: SmHost's, overridden in core.py (a
     # final type may not declare its overrides again here)
+    @cython.locals(v="long long")
+    cdef inline void _sm_events(self, long long mirror, long long n, long long changed) noexcept
     cpdef void sync0_tick(self, long long now_ns) except *
     cpdef void sync1_tick(self) except *
     # the encoder index pulse of a drive in motion, to the latch in unit: C calls (P49)

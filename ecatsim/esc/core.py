@@ -387,18 +387,17 @@ class Esc(SmHost):
 
     def set_al_event(self, bits: int) -> None:
         """Raise AL event request bits (the PDI interrupt source). Ref: §5.32 Table 46."""
-        m = self.mp
-        v = _get32(m, AL_EVENT_REQUEST) | bits
-        _put32(m, AL_EVENT_REQUEST, v)
-        self._pdi_irq(v)
+        self._al_request(_get32(self.mp, AL_EVENT_REQUEST) | bits)
 
     def clr_al_event(self, bits: int) -> None:
-        m = self.mp
-        v = _get32(m, AL_EVENT_REQUEST)
+        v = _get32(self.mp, AL_EVENT_REQUEST)
         if v & bits:
-            v &= ~bits
-            _put32(m, AL_EVENT_REQUEST, v)
-            self._pdi_irq(v)
+            self._al_request(v & ~bits)
+
+    def _al_request(self, v: int) -> None:
+        """0x0220 := ``v`` and the PDI interrupt (inline in the event paths, P62)."""
+        _put32(self.mp, AL_EVENT_REQUEST, v)
+        self._pdi_irq(v)
 
     def _pdi_irq(self, request: int) -> None:
         """The PDI interrupt: AL event request AND AL event mask. Ref: §5.32, §5.33. The
@@ -415,18 +414,22 @@ class Esc(SmHost):
     def sm_status_changed(self, sm: SyncManager) -> None:
         """Mirror an SM's interrupt bits (``sm.mirror``, bit 0 ECAT, bit 1 PDI) into 0x0210
         bit 4+n and 0x0220 bit 8+n. The SM calls this only when they change (only SM
-        accesses change these bits), and only the bits that ``sm.changed`` are set or
-        cleared: no one else writes them (P29). No locals: an override in a final type
-        cannot type them (P17), the SM's fields are C fields (P62). Ref: §5.49 Tables 88, 89.
-        """
-        if sm.changed & 1 and sm.mirror & 1:
-            self._set_ecat_event(ECAT_EV_SM0 << sm.n)
-        elif sm.changed & 1:
-            self._clr_ecat_event(ECAT_EV_SM0 << sm.n)
-        if sm.changed & 2 and sm.mirror & 2:
-            self.set_al_event(EV_SM0 << sm.n)
-        elif sm.changed & 2:
-            self.clr_al_event(EV_SM0 << sm.n)
+        accesses change these bits). Ref: §5.49 Tables 88, 89."""
+        self._sm_events(sm.mirror, sm.n, sm.changed)
+
+    def _sm_events(self, mirror: int, n: int, changed: int) -> None:
+        """sm_status_changed's work, inline (an override in a final type cannot type its
+        locals, P17, P62): only the bits that ``changed`` are set or cleared (P29)."""
+        if changed & 1 and mirror & 1:
+            self._set_ecat_event(ECAT_EV_SM0 << n)
+        elif changed & 1:
+            self._clr_ecat_event(ECAT_EV_SM0 << n)
+        if changed & 2:
+            v = _get32(self.mp, AL_EVENT_REQUEST)
+            if mirror & 2:
+                self._al_request(v | (EV_SM0 << n))
+            elif v & (EV_SM0 << n):
+                self._al_request(v & ~(EV_SM0 << n))
 
     def wd_pd_trigger(self) -> None:
         self.wd.trigger(self.ctx.t_ns)

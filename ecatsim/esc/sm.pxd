@@ -21,7 +21,7 @@ cdef inline void _copy(unsigned char* dst, long long d, const unsigned char* src
 cdef class SmHost:
     # noexcept: the ESC only moves its event bits (core.pxd, P48)
     cpdef void sm_status_changed(self, SyncManager sm) noexcept
-    cpdef void wd_pd_trigger(self) except *
+    cpdef void wd_pd_trigger(self) noexcept
     cpdef void sm_event_time(self, long long reg) except *
     cpdef void sm_restart(self, long long n) except *
 
