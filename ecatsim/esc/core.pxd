@@ -27,15 +27,17 @@ cdef long long SM_BASE, SM_STRIDE
 cdef long long WD_STATUS_PD
 
 
-# the register helpers inline: a few loads or stores each, called at every event (P46)
+# the register helpers inline: a few loads or stores each, called at every event (P46);
+# they take a pointer (a caller's bytearray is made one where it calls), so they cannot
+# raise (P62)
 @cython.locals(b3="long long", p="const unsigned char*")
-cdef inline long long _get32(bytearray m, long long a) except? -1
+cdef inline long long _get32(const unsigned char* m, long long a) noexcept
 @cython.locals(i="long long", p="const unsigned char*")
 cdef long long _first(bytes hooked, long long s, long long e) except? -2
 @cython.locals(p="unsigned char*")
-cdef inline void _put16(bytearray m, long long a, long long v) except *
+cdef inline void _put16(unsigned char* m, long long a, long long v) noexcept
 @cython.locals(p="unsigned char*")
-cdef inline void _put32(bytearray m, long long a, long long v) except *
+cdef inline void _put32(unsigned char* m, long long a, long long v) noexcept
 
 
 @cython.final
@@ -45,6 +47,7 @@ cdef class Esc(SmHost):
     cdef public FrameContext ctx
     cdef public bytearray mem
     cdef unsigned char[:] memv
+    cdef unsigned char* mp
     cdef public object t
     cdef public bytes ecat_wmask, pdi_wmask, ecat_w_hooked, pdi_w_hooked, ecat_r_hooked
     cdef public bytes pdi_r_hooked, ecat_w_change
@@ -77,24 +80,24 @@ cdef class Esc(SmHost):
                    sm=SyncManager, view="unsigned char[:]", b0="long long", b1="long long", nb="long long",
                    pb="long long", ps="long long", pe="long long", fb="long long")
     cpdef bint _fmmu_xfer(self, FmmuMap f, long long lad, unsigned char[:] data, bint write) except -1
-    @cython.locals(m=bytearray, v="long long")
+    @cython.locals(m="unsigned char*", v="long long")
     cpdef void _set_ecat_event(self, long long bits) noexcept
-    @cython.locals(m=bytearray, v="long long")
+    @cython.locals(m="unsigned char*", v="long long")
     cpdef void _clr_ecat_event(self, long long bits) noexcept
-    @cython.locals(m=bytearray, req="long long", mask="long long", irq="long long")
+    @cython.locals(m="unsigned char*", req="long long", mask="long long", irq="long long")
     cpdef void _irq_update(self) noexcept
     cpdef int64_t al_event(self) except -1
     cpdef void pdi_buffer_event(self, SyncManager sm, bint first, bint last) except *
-    @cython.locals(m=bytearray, v="long long")
     cpdef void set_al_event(self, long long bits) noexcept
-    @cython.locals(m=bytearray, v="long long")
+    @cython.locals(v="long long")
     cpdef void clr_al_event(self, long long bits) noexcept
+    cdef inline void _al_request(self, long long v) noexcept
     @cython.locals(line=bint)
-    cpdef void _pdi_irq(self, long long request) noexcept
+    cdef inline void _pdi_irq(self, long long request) noexcept
     # sm_status_changed, wd_pd_trigger, sm_event_time: SmHost's, overridden in core.py (a
     # final type may not declare its overrides again here)
-    @cython.locals(ebit="long long", abit="long long")
-    cpdef void _sm_events(self, long long mirror, long long n, long long changed) noexcept
+    @cython.locals(v="long long")
+    cdef inline void _sm_events(self, long long mirror, long long n, long long changed) noexcept
     cpdef void sync0_tick(self, long long now_ns) except *
     cpdef void sync1_tick(self) except *
     # the encoder index pulse of a drive in motion, to the latch in unit: C calls (P49)

@@ -126,6 +126,7 @@ class Esc(SmHost):
         "mem",
         "memv",
         "mii",
+        "mp",
         "on_reset",
         "pdi_emulation",
         "pdi_r_hooked",
@@ -170,6 +171,7 @@ class Esc(SmHost):
         self.mem = bytearray(0x10000)
         #: a view of mem for the read paths (mem is never resized or replaced)
         self.memv = memoryview(self.mem)
+        self.mp = self.mem  # compiled: a pointer to its bytes (fixed: memv holds them), P62
         from ecatsim.esc.units import tables  # the table names this class: built at first use
 
         t = self.t = tables()
@@ -357,14 +359,14 @@ class Esc(SmHost):
     # ================================================================ events
 
     def _set_ecat_event(self, bits: int) -> None:
-        m = self.mem
+        m = self.mp
         v = m[ECAT_EVENT_REQUEST] | (m[ECAT_EVENT_REQUEST + 1] << 8)
         if (v | bits) != v:
             _put16(m, ECAT_EVENT_REQUEST, v | bits)
             self._irq_update()
 
     def _clr_ecat_event(self, bits: int) -> None:
-        m = self.mem
+        m = self.mp
         v = m[ECAT_EVENT_REQUEST] | (m[ECAT_EVENT_REQUEST + 1] << 8)
         if v & bits:
             _put16(m, ECAT_EVENT_REQUEST, v & ~bits)
@@ -372,7 +374,7 @@ class Esc(SmHost):
 
     def _irq_update(self) -> None:
         """IRQ field contribution: ECAT event request AND ECAT event mask. Ref: §5.29, 5.31."""
-        m = self.mem
+        m = self.mp
         req = m[ECAT_EVENT_REQUEST] | (m[ECAT_EVENT_REQUEST + 1] << 8)
         mask = m[ECAT_EVENT_MASK] | (m[ECAT_EVENT_MASK + 1] << 8)
         irq = req & mask
@@ -385,23 +387,22 @@ class Esc(SmHost):
 
     def set_al_event(self, bits: int) -> None:
         """Raise AL event request bits (the PDI interrupt source). Ref: §5.32 Table 46."""
-        m = self.mem
-        v = _get32(m, AL_EVENT_REQUEST) | bits
-        _put32(m, AL_EVENT_REQUEST, v)
-        self._pdi_irq(v)
+        self._al_request(_get32(self.mp, AL_EVENT_REQUEST) | bits)
 
     def clr_al_event(self, bits: int) -> None:
-        m = self.mem
-        v = _get32(m, AL_EVENT_REQUEST)
+        v = _get32(self.mp, AL_EVENT_REQUEST)
         if v & bits:
-            v &= ~bits
-            _put32(m, AL_EVENT_REQUEST, v)
-            self._pdi_irq(v)
+            self._al_request(v & ~bits)
+
+    def _al_request(self, v: int) -> None:
+        """0x0220 := ``v`` and the PDI interrupt (inline in the event paths, P62)."""
+        _put32(self.mp, AL_EVENT_REQUEST, v)
+        self._pdi_irq(v)
 
     def _pdi_irq(self, request: int) -> None:
         """The PDI interrupt: AL event request AND AL event mask. Ref: §5.32, §5.33. The
         context's record changes only where the line does (most changes leave it high)."""
-        line = (request & _get32(self.mem, AL_EVENT_MASK)) != 0
+        line = (request & _get32(self.mp, AL_EVENT_MASK)) != 0
         if line == self.irq_line:
             return
         self.irq_line = line
@@ -413,24 +414,22 @@ class Esc(SmHost):
     def sm_status_changed(self, sm: SyncManager) -> None:
         """Mirror an SM's interrupt bits (``sm.mirror``, bit 0 ECAT, bit 1 PDI) into 0x0210
         bit 4+n and 0x0220 bit 8+n. The SM calls this only when they change (only SM
-        accesses change these bits). Ref: §5.49 Tables 88, 89.
-        """
+        accesses change these bits). Ref: §5.49 Tables 88, 89."""
         self._sm_events(sm.mirror, sm.n, sm.changed)
 
     def _sm_events(self, mirror: int, n: int, changed: int) -> None:
-        """sm_status_changed for SM ``n`` (a method of its own: the override of SmHost's
-        callback cannot carry typed locals in a final type, decision P17). Only the bits
-        that ``changed`` are set or cleared: no one else writes them (decision P29)."""
-        ebit = ECAT_EV_SM0 << n
-        abit = EV_SM0 << n
+        """sm_status_changed's work, inline (an override in a final type cannot type its
+        locals, P17, P62): only the bits that ``changed`` are set or cleared (P29)."""
         if changed & 1 and mirror & 1:
-            self._set_ecat_event(ebit)
+            self._set_ecat_event(ECAT_EV_SM0 << n)
         elif changed & 1:
-            self._clr_ecat_event(ebit)
-        if changed & 2 and mirror & 2:
-            self.set_al_event(abit)
-        elif changed & 2:
-            self.clr_al_event(abit)
+            self._clr_ecat_event(ECAT_EV_SM0 << n)
+        if changed & 2:
+            v = _get32(self.mp, AL_EVENT_REQUEST)
+            if mirror & 2:
+                self._al_request(v | (EV_SM0 << n))
+            elif v & (EV_SM0 << n):
+                self._al_request(v & ~(EV_SM0 << n))
 
     def wd_pd_trigger(self) -> None:
         self.wd.trigger(self.ctx.t_ns)

@@ -9,8 +9,10 @@ import struct
 from typing import TYPE_CHECKING
 
 from ecatsim.esc.regs import FMMU_BASE, FMMU_STRIDE, N_FMMU
+from ecatsim.wire.datagram import LRD, LRW, LWR  # compiled: C constants (fmmu.pxd)
 
 if TYPE_CHECKING:
+    from ecatsim.esc.core import Esc
     from ecatsim.esc.sm import SyncManager
 
 #: logical start u32, length u16, log start bit u8, log stop bit u8, phys start u16,
@@ -28,6 +30,8 @@ class FmmuMap:
     that the first logical bit maps to. ``aligned`` marks byte-aligned maps (fast path).
     ``sm`` is the SyncManager whose window holds the whole physical range, if exactly one
     does (set by the ESC whenever FMMUs or SM windows change): the copy goes straight to it.
+    ``wnext``/``rnext``: the next FMMU of the same compiled tuple that writes / reads (set
+    by ``compile_fmmus``; the frame walk follows them, decision P61).
     """
 
     __slots__ = (
@@ -39,7 +43,9 @@ class FmmuMap:
         "pbit",
         "pstart",
         "read",
+        "rnext",
         "sm",
+        "wnext",
         "write",
     )
 
@@ -56,6 +62,8 @@ class FmmuMap:
         self.lstop = lstart + length
         self.pstart = pstart
         self.sm: SyncManager | None = None
+        self.wnext: FmmuMap | None = None
+        self.rnext: FmmuMap | None = None
 
 
 def compile_fmmus(mem: bytearray) -> tuple[FmmuMap, ...]:
@@ -77,7 +85,60 @@ def compile_fmmus(mem: bytearray) -> tuple[FmmuMap, ...]:
         f = FmmuMap(lstart, length, lsb, lstop, pstart, psb, typ)
         if f.lend > f.lbit:
             out.append(f)
+    w = r = None  # each FMMU to the next one that writes / reads
+    for f in reversed(out):
+        f.wnext = w
+        f.rnext = r
+        if f.write:
+            w = f
+        if f.read:
+            r = f
     return tuple(out)
+
+
+def logical_at(
+    esc: Esc, fmmus: tuple[FmmuMap, ...], cmd: int, lad: int, buf: bytearray, pos: int, n: int
+) -> int:
+    """``esc.ecat_logical(cmd, lad, buf[pos:pos + n])`` (``fmmus``: ``esc.fmmus``, as
+    ``compile_fmmus`` made them): the same writes first, then reads, the same WKC
+    increment. An FMMU given an SM (``FmmuMap.sm``) is one C call to it with pointers into
+    the frame, the FMMUs followed through their links (the frame walk, decision P61); any
+    other FMMU is the ESC's ``_fmmu_xfer`` with a view of the data.
+    Ref: ETG.1000.4 §5.4.3 Table 12; TMC8460 §5.48."""
+    if not fmmus:
+        return 0
+    wr = rd = False
+    end = lad + n
+    head = fmmus[0]
+    if cmd != LRD:
+        f = head if head.write else head.wnext
+        while f is not None:
+            if f.lstart < end and lad < f.lstop:  # lbit < hi and lo < lend, in bytes
+                sm = f.sm
+                a = max(lad, f.lstart)
+                if sm is None:  # the ESC's own path, with a view of the datagram's data
+                    wr |= bool(esc._fmmu_xfer(f, lad, memoryview(buf)[pos : pos + n], True))
+                elif sm.ecat_write_at(
+                    f.pstart + (a - f.lstart) - sm.start, buf, pos + a - lad, min(end, f.lstop) - a
+                ):
+                    wr = True
+            f = f.wnext
+    if cmd != LWR:
+        f = head if head.read else head.rnext
+        while f is not None:
+            if f.lstart < end and lad < f.lstop:
+                sm = f.sm
+                a = max(lad, f.lstart)
+                if sm is None:
+                    rd |= bool(esc._fmmu_xfer(f, lad, memoryview(buf)[pos : pos + n], False))
+                elif sm.ecat_read_at(
+                    f.pstart + (a - f.lstart) - sm.start, buf, pos + a - lad, min(end, f.lstop) - a
+                ):
+                    rd = True
+            f = f.rnext
+    if cmd == LRW:
+        return (1 if rd else 0) + (2 if wr else 0)
+    return 1 if (rd or wr) else 0
 
 
 def copy_bits(

@@ -30,6 +30,21 @@ from ecatsim.esc.regs import (
 )
 
 
+def _copy(dst: bytearray, d: int, src: bytearray, s: int, n: int) -> None:
+    """``dst[d:d + n] = src[s:s + n]`` for ranges the caller checked (compiled: C pointers,
+    four bytes a step: a byte loop costs its count and test per byte, decision P62)."""
+    k = 0
+    while k + 4 <= n:
+        dst[d + k] = src[s + k]
+        dst[d + k + 1] = src[s + k + 1]
+        dst[d + k + 2] = src[s + k + 2]
+        dst[d + k + 3] = src[s + k + 3]
+        k += 4
+    while k < n:
+        dst[d + k] = src[s + k]
+        k += 1
+
+
 class SmHost:
     """What an SM needs from its ESC: memory and event lines. The ESC derives from this
     class (compiled: the SM calls these through the C method table, sm.pxd)."""
@@ -76,6 +91,7 @@ class SyncManager:
         "mbx_full",
         "mem",
         "mirror",
+        "mp",
         "mv",
         "n",
         "r",
@@ -92,8 +108,12 @@ class SyncManager:
         #: the ESC memory the windows and buffers live in (the host's, for its lifetime)
         self.mem = host.memory()
         self.mv = memoryview(self.mem)
+        #: compiled: a pointer to the memory's bytes (fixed: the view holds the buffer)
+        self.mp = self.mem
         self.n = n
         self.status_addr = regs.sm_addr(n, 5)
+        if len(self.mem) < self.status_addr + 2:  # the status and activate registers
+            raise IndexError(self.status_addr)
         self.start = 0
         self.length = 0
         self.control = 0
@@ -175,7 +195,8 @@ class SyncManager:
             if self.w_open:
                 st |= SM_ST_WRITE_OPEN
         self.status = st
-        self.mem[self.status_addr] = st
+        p = self.mp  # compiled: a C pointer (status_addr checked in __init__)
+        p[self.status_addr] = st
         mirror = (1 if st & self.irq_to_ecat else 0) | (2 if st & self.irq_to_pdi else 0)
         if mirror != self.mirror:  # the event registers change only when these bits do
             self.changed = 3 if self.mirror < 0 else mirror ^ self.mirror
@@ -364,6 +385,71 @@ class SyncManager:
         self.reader_read(off, out)
         if off + len(out) >= self.length and self.mem[self.status_addr + 1] & SM_ACT_LATCH_ECAT:
             self.host.sm_event_time(DC_ECAT_EVENT_TIME)
+
+    def ecat_write_at(self, off: int, buf: bytearray, pos: int, n: int) -> bool:
+        """``ecat_may_write()``, then ``ecat_write(off, buf[pos:pos + n])``, in one call and
+        without a view of the data: the frame walk's logical path (decision P61). Returns
+        whether the write counts. A range the pointers cannot take (past the memory, the
+        window or the frame) goes the checked way, ``ecat_write``, with its errors."""
+        if not self.ecat_side_writes or not self.active or self.locked:
+            return False
+        if self.mailbox and self.mbx_full:
+            return False
+        base = self._base_for_write() + off
+        if off < 0 or pos < 0 or pos + n > len(buf) or base < 0 or base + n > len(self.mem):
+            self._ecat_checked(off, buf, pos, n, True)
+            return True
+        p = self.mp  # compiled: C pointers, the ranges checked above
+        _copy(p, base, buf, pos, n)
+        last = off + n >= self.length
+        self._writer_access(off == 0, last)
+        if self.control & SM_CTRL_WATCHDOG:
+            self.host.wd_pd_trigger()
+        if last and p[self.status_addr + 1] & SM_ACT_LATCH_ECAT:
+            self.host.sm_event_time(DC_ECAT_EVENT_TIME)
+        return True
+
+    def ecat_read_at(self, off: int, buf: bytearray, pos: int, n: int) -> bool:
+        """``ecat_may_read()``, then ``ecat_read(off, buf[pos:pos + n])``, in one call and
+        without a view of the data, as ``ecat_write_at`` (decision P61)."""
+        if not self.active or self.locked:
+            return False
+        reader = not self.ecat_side_writes  # else the written SM read back: no side effects
+        if reader and self.mailbox and not self.mbx_full:
+            return False
+        if not reader and self.mailbox:
+            return False
+        # pointers where every buffer the read may take lies inside the memory and the frame
+        if (
+            off < 0
+            or pos < 0
+            or pos + n > len(buf)
+            or self.start < 0
+            or self.start + (1 if self.mailbox else 3) * self.length + off + n > len(self.mem)
+        ):
+            self._ecat_checked(off, buf, pos, n, False)
+            return True
+        first = reader and off == 0
+        last = reader and off + n >= self.length
+        if first:
+            self._reader_open()
+        p = self.mp  # compiled: C pointers, the ranges checked above
+        _copy(buf, pos, p, self._base_for_read() + off, n)
+        if reader:
+            self._reader_access(first, last)
+            if last and p[self.status_addr + 1] & SM_ACT_LATCH_ECAT:
+                self.host.sm_event_time(DC_ECAT_EVENT_TIME)
+        return True
+
+    def _ecat_checked(self, off: int, buf: bytearray, pos: int, n: int, write: bool) -> None:
+        """``ecat_write`` / ``ecat_read`` of ``buf[pos:pos + n]``: the checked way of
+        ``ecat_write_at`` and ``ecat_read_at`` (a method of its own: the view is made here
+        only)."""
+        view = memoryview(buf)[pos : pos + n]
+        if write:
+            self.ecat_write(off, view)
+        else:
+            self.ecat_read(off, view)
 
     # -- PDI face --------------------------------------------------------------------
 

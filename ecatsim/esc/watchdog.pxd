@@ -10,5 +10,7 @@ cdef class Watchdog:
     cdef public bytearray mem
     cdef public long long deadline_ns, increment_ns, timeout_ns
 
-    cpdef void trigger(self, long long now_ns) except *
+    # noexcept: each process-data write of the frame walk triggers it (P62)
+    @cython.locals(p="unsigned char*")
+    cpdef void trigger(self, long long now_ns) noexcept
     cpdef bint expired(self, long long now_ns) except -1

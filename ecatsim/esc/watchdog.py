@@ -56,7 +56,8 @@ class Watchdog:
         """Restart on an SM write. Ref: TMC8460 §5.41 Table 55."""
         if self.timeout_ns:
             self.deadline_ns = now_ns + self.timeout_ns
-        self.mem[WD_STATUS_PD] |= 0x01
+        p = self.mem  # compiled: a C pointer (a register of the ESC's memory): no raise
+        p[WD_STATUS_PD] |= 0x01
 
     def expired(self, now_ns: int) -> bool:
         """Check for expiry; on expiry update status and counter and return True.

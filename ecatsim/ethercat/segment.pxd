@@ -6,6 +6,7 @@ cimport cython
 from ecatsim.esc.context cimport FrameContext
 from ecatsim.esc.core cimport Esc
 from ecatsim.esc.dc cimport DcUnit
+from ecatsim.esc.fmmu cimport logical_at
 from ecatsim.ethercat.schedule cimport Schedule
 
 

@@ -17,6 +17,7 @@ from ecatsim.clock import Clock
 from ecatsim.esc import regs
 from ecatsim.esc.context import FrameContext
 from ecatsim.esc.core import Esc
+from ecatsim.esc.fmmu import logical_at
 from ecatsim.esc.regs import DC_SYSTEM_TIME as _DC_SYSTEM_TIME  # compiled: a C constant
 from ecatsim.ethercat import topology
 from ecatsim.ethercat.schedule import Schedule, Serviceable
@@ -417,7 +418,8 @@ class Segment:
             if cmd in (LRW, LRD, LWR):
                 lad = adp | (ado << 16)
                 for esc in self.logical:
-                    inc += esc.ecat_logical(cmd, lad, data)
+                    # esc.ecat_logical(cmd, lad, data): C calls, pointers into buf (P61)
+                    inc += logical_at(esc, esc.fmmus, cmd, lad, buf, d0, dlen)
             elif cmd in (FPRD, FPWR, FPRW):
                 for i in self.addr_map.get(adp, ()):
                     inc += _physical(escs[i], cmd - FPRD, ado, data)
