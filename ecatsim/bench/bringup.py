@@ -122,9 +122,12 @@ LATE_US = 2000
 #: the fields of each daemon's ``stopped`` log line kept in the JSON (``daemons``)
 STOPPED_FIELDS = ("frames", "replies", "compiled_replies", "bad_frames", "sync0_pulses",
                   "sync0_max_late_us", "sync0_deferred", "sync0_merged", "failures",
-                  "cpu_moves", "cpu_follow_pauses", "gc_collections", "gc_max_us")  # fmt: skip
+                  "cpu_moves", "cpu_follow_pauses", "gc_collections", "gc_max_us",
+                  "reply_max_us", "replies_over_1ms", "replies_over_2ms", "pickup_max_us",
+                  "late_picked_up_late")  # fmt: skip
 #: of those, the ones the summary prints
-DAEMON_SUMMARY = ("sync0_merged", "sync0_max_late_us", "failures", "gc_max_us")
+DAEMON_SUMMARY = ("sync0_merged", "sync0_max_late_us", "failures", "gc_max_us",
+                  "replies_over_2ms", "late_picked_up_late", "reply_max_us")  # fmt: skip
 
 
 def stopped_counts(d: Daemon) -> dict[str, Any]:

@@ -451,6 +451,13 @@ class Daemon:
             self._service_timers()
         return int(code)
 
+    def reply_times(self) -> dict[str, int]:
+        """The daemon's own reply times, from each frame's kernel receive time stamp to
+        after its reply's send (decision B9): measured by the compiled responder, {} when
+        it has served no frame."""
+        srv = self._responder
+        return srv.reply_times() if srv is not None and srv.replied else {}
+
     def _make_responder(self) -> ResponderType:
         """The compiled responder serving the link, made on first use."""
         mod = responder

@@ -23,6 +23,11 @@ class Responder:
     busy: bool
     replied: int
     entry: int
+    reply_max_ns: int
+    replies_over_1ms: int
+    replies_over_2ms: int
+    pickup_max_ns: int
+    late_picked_up_late: int
     def __init__(
         self,
         fd: int,
@@ -41,5 +46,6 @@ class Responder:
         t_rx: int = 0,
         timers: bool = False,
     ) -> tuple[int, int, int]: ...
+    def reply_times(self) -> dict[str, int]: ...
     def frame_waiting(self) -> bool: ...
     def close(self) -> None: ...

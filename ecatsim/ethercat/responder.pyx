@@ -304,6 +304,14 @@ cdef class Responder:
     cdef long long follow_at
     cdef bint follow_due
     cdef readonly long long replied
+    #: the daemon's own reply times (decision B9), for frames whose arrival time is the
+    #: kernel's receive time stamp: from it to after send(2) the longest and how many took
+    #: 1 ms or more and 2 ms or more; from it to the start of the frame's processing (the
+    #: frame waited in the socket) the longest, and how many of the replies of 2 ms or
+    #: more waited 1 ms or more before it
+    cdef readonly long long reply_max_ns, replies_over_1ms, replies_over_2ms
+    cdef readonly long long pickup_max_ns, late_picked_up_late
+    cdef bint timed
     #: the process runs SCHED_FIFO/RR: a yield after the reply gives nothing to a master
     cdef bint rt
     #: the segment call running (IN_*), and the frame's length, time and serve() code
@@ -511,6 +519,7 @@ cdef class Responder:
         REPLIED, DROPPED (destroyed: no reply) or FRAME (not an EtherCAT frame: Python
         ignores it). Ref: ETG.1000.4 §5.3-5.4."""
         cdef long long code
+        cdef long long picked = clock_ns(CLOCK_MONOTONIC) if self.timed else 0
         cdef int fd
         self.stage = IN_FRAME
         self.stage_n = n
@@ -525,9 +534,37 @@ cdef class Responder:
             if errno not in (ENOBUFS, EAGAIN, ENETDOWN, ENXIO):  # dropped, as a wire would
                 PyErr_SetFromErrno(OSError)
         self.replied += 1
+        if self.timed:
+            self.time_reply(t_rx, picked)
         if not self.rt:
             sched_yield()  # a master woken on this CPU takes the reply first (Daemon._answer)
         return REPLIED
+
+    cdef void time_reply(self, long long t_rx, long long picked) noexcept:
+        """Count a reply sent now to a frame received at ``t_rx`` and picked up at
+        ``picked`` (host monotonic ns; decision B9)."""
+        cdef long long took = clock_ns(CLOCK_MONOTONIC) - t_rx
+        cdef long long waited = picked - t_rx
+        if took > self.reply_max_ns:
+            self.reply_max_ns = took
+        if waited > self.pickup_max_ns:
+            self.pickup_max_ns = waited
+        if took >= 1_000_000:
+            self.replies_over_1ms += 1
+            if took >= 2_000_000:
+                self.replies_over_2ms += 1
+                if waited >= 1_000_000:
+                    self.late_picked_up_late += 1
+
+    def reply_times(self) -> dict:
+        """The daemon's own reply times (decision B9) for its ``stopped`` line."""
+        return {
+            "reply_max_us": self.reply_max_ns // 1000,
+            "replies_over_1ms": self.replies_over_1ms,
+            "replies_over_2ms": self.replies_over_2ms,
+            "pickup_max_us": self.pickup_max_ns // 1000,
+            "late_picked_up_late": self.late_picked_up_late,
+        }
 
     cdef int after(self, FrameSequence seq, long long t, int code) except -1:
         """The sequence's steps after the send: the work the frame left for after its reply
@@ -598,6 +635,7 @@ cdef class Responder:
         cdef long n
         cdef int code, i
         cdef Segment seg = seq.segment if seq is not None else None
+        self.timed = t_rx == 0  # the kernel's time stamps: the host's monotonic clock
         for i in range(self.nothers + 4):
             self.pfd[i].revents = 0
         while True:

@@ -286,4 +286,5 @@ def serve(opts: RunOptions, cfg: SegmentConfig) -> None:
             cpu_follow_pauses=daemon.follower.pauses if daemon.follower is not None else 0,
             gc_collections=pauses.count,
             gc_max_us=pauses.max_ns // 1000,
+            **daemon.reply_times(),
         )

@@ -8,6 +8,7 @@ Daemon.handle_frame."""
 from __future__ import annotations
 
 import os
+import socket
 import struct
 import threading
 import time
@@ -26,6 +27,7 @@ from ecatsim.ethercat.recorder import FrameRecorder
 from ecatsim.ethercat.segment import Segment
 from ecatsim.ethercat.segment_file import SegmentConfig, SlaveConfig
 from ecatsim.ethercat.sequence import FrameSequence
+from ecatsim.link.raw import SO_TIMESTAMPNS
 from ecatsim.wire import datagram as dg
 from tests.perf.hotpath import IN, MS, OUT, CspCycle
 from tests.support.compiled import record_results, require_built
@@ -517,3 +519,40 @@ def test_hot_lines_name_what_a_cyclic_frame_reads() -> None:
         mine = [(a, b) for m, a, b in ranges if m is esc.mem]
         assert (0x0200, 0x0240) in mine and (0x0900, 0x0940) in mine
         assert all(0 <= a < b <= len(esc.mem) for a, b in mine)
+
+
+def test_the_responder_times_its_own_replies(srv: ModuleType, link: SocketLink) -> None:
+    """Decision B9: from each frame's kernel receive time stamp to after its reply's send.
+    A frame served at once counts in none of the late counts; one left 3 ms in the
+    socket counts as a reply of 1 ms and 2 ms or more that waited 1 ms or more before
+    its processing; a frame whose arrival time the caller gives (a manual clock) is not
+    timed. The daemon's ``reply_times`` are the responder's."""
+    link.sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+    seg = build_segment(SegmentConfig((SlaveConfig(device="echo", serial=1),)), MonotonicClock())
+    d = Daemon(link, seg)
+    assert d.reply_times() == {}  # no responder yet
+    brd = dg.ethernet_frame([dg.build(dg.Cmd.BRD, 0, 0x0130, bytes(2))])
+    buf = bytearray(2048)
+    link.master_send(brd)
+    assert d.serve_once(buf, time.monotonic_ns() + 10**9) == REPLIED
+    first = d.reply_times()
+    assert first["replies_over_1ms"] == first["replies_over_2ms"] == 0, first
+    assert first["late_picked_up_late"] == 0
+    assert 0 <= first["pickup_max_us"] <= first["reply_max_us"] < 1000
+    link.master_send(brd)
+    time.sleep(0.003)  # the frame waits in the socket
+    assert d.serve_once(buf, time.monotonic_ns() + 10**9) == REPLIED
+    late = d.reply_times()
+    assert (late["replies_over_1ms"], late["replies_over_2ms"], late["late_picked_up_late"]) == (
+        1,
+        1,
+        1,
+    )
+    assert 3000 <= late["pickup_max_us"] <= late["reply_max_us"] < 10**6
+    link.master_send(brd)
+    time.sleep(0.003)
+    assert d.serve_once(buf, time.monotonic_ns() + 10**9, t_rx_ns=time.monotonic_ns()) == REPLIED
+    assert d.reply_times() == late  # given an arrival time: not timed
+    assert d.replies == 3
+    for _ in range(3):
+        assert link.master_recv() is not None
