@@ -28,8 +28,6 @@ cdef class PdoImage(SmImage):
     cdef long long[::1] _rx_spec, _tx_spec
     cdef bytearray _tx_buf
     cdef long long[::1] _tx_slot
-    cdef long long[::1] _tx_vals
-    cdef bint _tx_gaps
 
     @cython.locals(entries=tuple, values=tuple, i="Py_ssize_t", e=Entry, dev=CycleDevice,
                    layout=tuple, buf=bytes, ba=bytearray)
@@ -47,19 +45,17 @@ cdef class PdoImage(SmImage):
     cpdef bytes pack_inputs(self)
     @cython.locals(out=bytearray, p="unsigned char*")
     cdef object _pack_small(self)
-    # the inputs straight into SM3's buffer (Pdi.sm_fill, P71): values checked first, then
-    # stored, so a value that does not fit leaves the buffer untouched
     # fill: SmImage's, declared there (a final type cannot redeclare an inherited cpdef);
-    # its work on a pointer to the ESC memory:
+    # the inputs encoded into _tx_buf, then copied into SM3's buffer (P71)
     @cython.locals(k="long long")
-    cdef void _fill_at(self, unsigned char* p, long long base, long long n) noexcept
-    @cython.locals(entries=tuple, i="Py_ssize_t", e=Entry, c="long long", spec="long long",
-                   n="long long", half="long long", dev=CycleDevice, pending=bint,
-                   slot="Py_ssize_t")
-    cdef bint _tx_values(self) except -1
-    @cython.locals(i="Py_ssize_t", c="long long", spec="long long", off="Py_ssize_t",
-                   n="long long")
-    cdef void _tx_store(self, unsigned char* p, long long base) noexcept
+    cdef void _copy_to(self, unsigned char* dst, long long d, const unsigned char* src,
+                       long long n) noexcept
+    @cython.locals(entries=tuple, out=bytearray, p="unsigned char*", i="Py_ssize_t", e=Entry,
+                   c="long long",
+                   spec="long long", off="Py_ssize_t", n="long long",
+                   half="long long", dev=CycleDevice,
+                   pending=bint, slot="Py_ssize_t")
+    cdef bint _pack_buf(self) except -1
 
 
 cpdef long long _c_int(object v) except? -1

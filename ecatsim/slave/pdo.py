@@ -393,11 +393,6 @@ class PdoImage(SmImage):
         #: the input image the C encoder fills: its padding stays zero, its entries'
         #: bytes are all written by every fill (decision P33)
         self._tx_buf = bytearray(plan.tx_size)
-        #: the entries' values checked and held as C integers until stored (P71)
-        self._tx_vals = array("q", bytes(8 * len(self._tx_entries)))
-        #: padding in the image: a fill in place zeroes it first (P71)
-        spans = [(spec >> 1) & 7 for spec in self._tx_layout or ()]
-        self._tx_gaps = sum(spans) != plan.tx_size
         self._bind_slots()
 
     def prepare(self) -> int:
@@ -522,39 +517,45 @@ class PdoImage(SmImage):
         """The struct's bytes, encoded in C into the image buffer where every value is an
         int within its field's type; None (the struct path decides) for any other (P33).
         A value the device keeps for its entry is taken from the device (P38)."""
-        if not self._tx_values():
+        if not self._pack_buf():
             return None
         out = self._tx_buf
-        p = out  # compiled: a pointer to the buffer (every field lies inside it)
-        self._tx_store(p, 0)
+        p = out  # compiled: a pointer to the buffer
         # compiled, the pointer's slice is made as bytes at once, with no call and no
         # buffer export (P51); in Python it is a bytearray, which pack_inputs makes bytes
         return p[: len(out)]
 
     def fill(self, mem: bytearray, base: int, n: int) -> bool:
         """``_pack_small``'s bytes straight into an SM's buffer at ``base`` of the ESC
-        memory, its padding zeroed (``Pdi.sm_fill``, decision P71); False, with nothing
-        written, where ``pack_inputs`` must make them (no layout, another size, a value
-        not an int in its field's range)."""
-        if self._tx_layout is None or n != len(self._tx_buf) or not self._tx_values():
+        memory (``Pdi.sm_fill``, decision P71): encoded into the image buffer, then copied
+        (its padding zero), so a value that does not fit leaves the SM's buffer untouched.
+        False, with nothing written there, where ``pack_inputs`` must make the bytes (no
+        layout, another size, a value not an int in its field's range)."""
+        if self._tx_layout is None or n != len(self._tx_buf) or not self._pack_buf():
             return False
-        self._fill_at(mem, base, n)  # compiled: a pointer to the memory
+        self._copy_to(mem, base, self._tx_buf, n)  # compiled: pointers (range checked)
         return True
 
-    def _fill_at(self, p: bytearray, base: int, n: int) -> None:
-        """The checked values and zero padding into ``p[base:base + n]`` (the caller
-        checked the range)."""
-        if self._tx_gaps:
-            for k in range(n):
-                p[base + k] = 0
-        self._tx_store(p, base)
+    def _copy_to(self, dst: bytearray, d: int, src: bytearray, n: int) -> None:
+        """``dst[d:d + n] = src[:n]`` for ranges the caller checked, four bytes a step."""
+        k = 0
+        while k + 4 <= n:
+            dst[d + k] = src[k]
+            dst[d + k + 1] = src[k + 1]
+            dst[d + k + 2] = src[k + 2]
+            dst[d + k + 3] = src[k + 3]
+            k += 4
+        while k < n:
+            dst[d + k] = src[k]
+            k += 1
 
-    def _tx_values(self) -> bool:
-        """Each TxPDO entry's value as a C integer into ``_tx_vals``, checked against its
-        field's type: False for a value not an int or out of range (nothing written yet,
-        so the general path can still make every byte; P33, P71). A value the device keeps
-        for its entry is taken from the device (P38)."""
+    def _pack_buf(self) -> bool:
+        """Encode the TxPDO entries' values into the image buffer (its padding stays zero)
+        in C where every value is an int within its field's type; False for any other
+        (P33), the buffer then partly written and the struct path deciding."""
         entries: tuple[Entry, ...] = self._tx_entries
+        out = self._tx_buf
+        p = out  # compiled: a pointer to the buffer (every field lies inside it)
         dev = self._dev
         # the device's values where it keeps them (the fields themselves in the compiled
         # core, not local views acquired and released per call: P51)
@@ -575,6 +576,7 @@ class PdoImage(SmImage):
                 except OverflowError:
                     return False
             spec = self._tx_spec[i]
+            off = spec >> 4
             n = (spec >> 1) & 7
             half = 1  # the sign bit's value: a C long long shifted in the core
             half <<= 8 * n - 1
@@ -583,17 +585,6 @@ class PdoImage(SmImage):
                     return False
             elif c < 0 or c >= half << 1:
                 return False
-            self._tx_vals[i] = c
-        return True
-
-    def _tx_store(self, p: bytearray, base: int) -> None:
-        """The values ``_tx_values`` checked, little-endian at their offsets from
-        ``base`` (compiled: ``p`` a pointer)."""
-        for i in range(len(self._tx_entries)):
-            c = self._tx_vals[i]
-            spec = self._tx_spec[i]
-            off = base + (spec >> 4)
-            n = (spec >> 1) & 7
             p[off] = c & 0xFF  # 1, 2 or 4 bytes (the layout holds no more), unrolled
             if n > 1:
                 p[off + 1] = (c >> 8) & 0xFF
@@ -601,6 +592,7 @@ class PdoImage(SmImage):
                     p[off + 2] = (c >> 16) & 0xFF
                     if n > 3:
                         p[off + 3] = (c >> 24) & 0xFF
+        return True
 
     def al_state_changed(self, state: AlState, now_ns: int) -> None:
         self.device.al_state_changed(state, now_ns)
