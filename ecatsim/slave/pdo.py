@@ -412,7 +412,7 @@ class PdoImage(SmImage):
     def tx_size(self) -> int:
         return self.plan.tx_size
 
-    def set_outputs(self, data: bytes, now_ns: int) -> None:
+    def set_outputs(self, data: bytes | bytearray, now_ns: int) -> None:
         st = self._rx_st
         if st is not None and len(data) >= self._rx_need:
             entries: tuple[Entry, ...] = self._rx_entries

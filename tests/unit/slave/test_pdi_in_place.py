@@ -57,7 +57,9 @@ def _mappings(od: ObjectDictionary, rx: bool) -> list[list[int]]:
                 values += [index << 16 | e.sub << 8 | bits for bits in (e.bits, *e.pdo_bits)]
     values.insert(3, 0x0000_0008)  # padding: 8 and 16 bits
     values.insert(7, 0x0000_0010)
-    chunks, chunk, size = [], [], 0
+    chunks: list[list[int]] = []
+    chunk: list[int] = []
+    size = 0
     for v in values + values[::-1]:
         if len(chunk) == 9 or size + (v & 0xFF) > 256:
             chunks.append(chunk)
@@ -75,7 +77,7 @@ def _map(od: ObjectDictionary, index: int, mapping: list[int]) -> Plan:
     return compile_plan(od)
 
 
-def _value(rnd: random.Random, bits: int, signed: bool, wild: bool) -> object:
+def _value(rnd: random.Random, bits: int, signed: bool, wild: bool) -> int:
     lo, hi = (-(1 << (bits - 1)), (1 << (bits - 1)) - 1) if signed else (0, (1 << bits) - 1)
     if not wild:
         return rnd.randint(lo, hi)
@@ -128,7 +130,7 @@ def test_sm3_filled_in_place_is_sm_write_of_the_packed_inputs() -> None:
     declines, the SM's buffer is untouched."""
     rnd = random.Random(71)
     od = build_od(default_description())
-    img = PdoImage(od, Quiet())  # type: ignore[arg-type]
+    img = PdoImage(od, Quiet())
     filled = declined = 0
     for mapping in _mappings(od, False):
         plan = _map(od, 0x1A00, mapping)
@@ -226,7 +228,7 @@ def test_outputs_decoded_from_the_buffer_are_those_decoded_from_bytes() -> None:
     ``set_outputs`` of the same bytes, on the C decoder, the struct and per-entry paths."""
     rnd = random.Random(72)
     od = build_od(default_description())
-    img = PdoImage(od, Quiet())  # type: ignore[arg-type]
+    img = PdoImage(od, Quiet())
     for mapping in _mappings(od, True):
         plan = _map(od, 0x1600, mapping)
         codec_ = plan.rx_codec
@@ -240,6 +242,6 @@ def test_outputs_decoded_from_the_buffer_are_those_decoded_from_bytes() -> None:
                 img.set_outputs(data, 0)
                 want = [e.value for e in entries]
                 for e in entries:
-                    e.value = None
+                    e.value = "unset"
                 img.set_outputs(bytearray(data), 0)
                 assert [e.value for e in entries] == want
