@@ -417,13 +417,13 @@ class PdoImage(SmImage):
         if st is not None and len(data) >= self._rx_need:
             entries: tuple[Entry, ...] = self._rx_entries
             layout = self._rx_layout
-            if layout is not None and type(data) is bytes:
-                buf: bytes = data
-                self._rx_decode(buf)  # compiled: a pointer to the bytes
-            elif layout is not None and type(data) is bytearray:
+            if layout is not None and type(data) is bytearray:
                 # the outputs the firmware latched into its buffer (decision P70)
                 ba: bytearray = data
                 self._rx_decode(ba)  # compiled: a pointer to the buffer's bytes
+            elif layout is not None and type(data) is bytes:
+                buf: bytes = data
+                self._rx_decode(buf)  # compiled: a pointer to the bytes
             else:
                 values: tuple[int, ...] = st.unpack_from(data)
                 for i in range(len(entries)):
