@@ -12,6 +12,11 @@ from ecatsim.esc.sm cimport SyncManager
 cdef long long _REG_END, _DL_STATUS, _SYNC0_STATUS, _SYNC1_STATUS
 
 
+# what fills an SM's buffer in place (the firmware's process image derives from it: P71)
+cdef class SmImage:
+    cpdef bint fill(self, bytearray mem, long long base, long long n) except -1
+
+
 @cython.final
 cdef class Pdi:
     cdef public Esc _esc
@@ -35,3 +40,7 @@ cdef class Pdi:
     cpdef object sm_read(self, long long n)
     @cython.locals(esc=Esc, sm=SyncManager)
     cpdef bint sm_write(self, long long n, object data) except -1
+    @cython.locals(esc=Esc, sm=SyncManager)
+    cpdef bint sm_read_into(self, long long n, bytearray out) except -1
+    @cython.locals(esc=Esc, sm=SyncManager, size="long long", base="long long")
+    cpdef bint sm_fill(self, long long n, SmImage image) except -1

@@ -76,6 +76,7 @@ __all__ = [
     "SM_CTRL_PDI_IRQ",
     "WD_STATUS_PD",
     "Pdi",
+    "SmImage",
     "SmSettings",
     "sm_addr",
 ]
@@ -93,6 +94,20 @@ class SmSettings:
     control: int
     enabled: bool
     pdi_deactivated: bool
+
+
+class SmImage:
+    """A process image that fills an SM's whole buffer in place (``Pdi.sm_fill``), as an
+    SPI burst puts its bytes straight into the ESC's buffer: no bytes object between the
+    firmware and the SM (decision P71). Ref: TMC8460 §5.49 (PDI side of a 3-buffer SM)."""
+
+    __slots__ = ()
+
+    def fill(self, mem: bytearray, base: int, n: int) -> bool:
+        """Write the image's ``n`` bytes to ``mem[base:base + n]`` (every byte, padding
+        zero), or touch nothing and return False: the caller then writes the bytes the
+        general way (``Pdi.sm_write``)."""
+        return False
 
 
 class Pdi:
@@ -277,6 +292,36 @@ class Pdi:
         if len(data) != sm.length:
             data = bytes(data[: sm.length]).ljust(sm.length, b"\x00")
         sm.write_whole(data)
+        esc.pdi_buffer_event(sm, True, True)
+        return True
+
+    def sm_read_into(self, n: int, out: bytearray) -> bool:
+        """``sm_read`` into ``out`` (the same bytes, ``out`` taking their length), for a
+        caller that keeps one buffer for SM n's data; False (``out`` untouched) if not
+        readable now (decision P70)."""
+        esc = self._esc
+        sm: SyncManager = esc.sm[n]
+        if not sm.pdi_may_read():
+            return False
+        sm.read_into(out)
+        esc.pdi_buffer_event(sm, True, True)
+        return True
+
+    def sm_fill(self, n: int, image: SmImage) -> bool:
+        """``sm_write`` of ``image``'s bytes filled straight into SM n's buffer (decision
+        P71): the same bytes, buffer exchange and events. False, with nothing done, where
+        ``sm_write`` must write them: SM n not writable now, its length not the image's
+        (padded or truncated there), its buffer not inside the memory, or ``image.fill``
+        declines."""
+        esc = self._esc
+        sm: SyncManager = esc.sm[n]
+        if not sm.pdi_may_write():
+            return False
+        size = sm.length
+        base = sm.whole_base(size)
+        if base < 0 or not image.fill(esc.mem, base, size):
+            return False
+        sm.written()
         esc.pdi_buffer_event(sm, True, True)
         return True
 

@@ -71,6 +71,12 @@ cdef class SyncManager:
     @cython.locals(base="long long", mem=bytearray, i="long long", n="long long",
                    p="unsigned char*", d="const unsigned char*")
     cpdef void write_whole(self, bytes data) except *
+    # the PDI's process data without a bytes object (P70, P71)
+    @cython.locals(base="long long", mem=bytearray, k="long long", q="unsigned char*")
+    cpdef void read_into(self, bytearray out) except *
+    @cython.locals(base="long long")
+    cpdef long long whole_base(self, long long n) noexcept
+    cpdef void written(self) noexcept
     cpdef void ecat_write(self, long long off, const unsigned char[:] data) except *
     # the frame walk's logical path: one C call per SM access, pointers into the frame (P61)
     @cython.locals(base="long long", last=bint, p="unsigned char*")

@@ -337,6 +337,37 @@ class SyncManager:
             p[base + i] = d[i]
         self._writer_access(True, True)
 
+    def read_into(self, out: bytearray) -> None:
+        """``read_whole`` into ``out``, made the same bytes (its length the bytes read):
+        the reader's whole buffer copied through pointers into a buffer its caller keeps,
+        no bytes object made (decision P70)."""
+        self._reader_open()
+        base = self._base_for_read()
+        mem = self.mem
+        k = min(base + self.length, len(mem)) - base  # a slice stops at the memory's end
+        if k < 0:
+            k = 0
+        if len(out) != k:
+            out[:] = bytes(k)  # a new length: the buffer resized (not per cycle)
+        q = out  # compiled: C pointers, the ranges checked above
+        _copy(q, 0, self.mp, base, k)
+        self._reader_access(True, True)
+
+    def whole_base(self, n: int) -> int:
+        """Where the writing side's whole buffer starts in the memory, for a writer that
+        fills its ``n`` bytes in place and then calls ``written``; -1 where it cannot and
+        ``write_whole`` must: ``n`` not the SM's length, or the buffer not inside the
+        memory (decision P71)."""
+        base = self._base_for_write()
+        if n != self.length or base < 0 or base + n > len(self.mem):
+            return -1
+        return base
+
+    def written(self) -> None:
+        """The writing side filled its whole buffer in place (``whole_base``): the buffer
+        exchange and events of ``write_whole``."""
+        self._writer_access(True, True)
+
     def wd_tap(self) -> bool:
         """An enabled write SM of length 1 with the watchdog trigger bit: a write of its
         byte (plain memory) triggers the process-data watchdog. Ref: TMC8460 §5.49

@@ -30,7 +30,8 @@ cdef class Firmware:
     cdef public bint outputs_seen
     cdef public long long op_requested_ns
     cdef public long long sync_ns
-    cdef public object sync_out
+    cdef public bytearray sync_out
+    cdef public bint sync_has_out
     cdef public bint bootstrap_supported
     cdef public object state
     cdef public bint error
@@ -44,7 +45,7 @@ cdef class Firmware:
     cdef void _latch(self, Pdi p, long long ev, long long now_ns) except *
     # the pulse's time as a C integer down to the image's calls, which take one (an int
     # object only for an Application called through Python; decision P60)
-    @cython.locals(pdo=PdoImage, now_ns="long long")
+    @cython.locals(pdo=PdoImage, now_ns="long long", has_out=bint)
     cpdef void sync0_run(self) except *
     @cython.locals(now_ns="long long", mbx=MailboxEngine)
     cpdef void run_latched(self) except *
@@ -53,5 +54,5 @@ cdef class Firmware:
     @cython.locals(want="long long", pending=bint, mbx=MailboxEngine)
     cpdef void service_mailbox(self, long long ev, long long now_ns) except *
     cpdef void _outputs_received(self, long long now_ns) except *
-    @cython.locals(pdo=PdoImage)
+    @cython.locals(pdo=PdoImage, p=Pdi)
     cpdef void _write_inputs(self, long long now_ns) except *

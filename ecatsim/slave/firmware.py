@@ -122,9 +122,12 @@ class Firmware:
         #: host time of a SAFEOP -> OP request waiting for the first outputs (0: none)
         self.op_requested_ns = 0
         #: the SYNC0 work latched at a pulse and not run yet (decision P30): the pulse's
-        #: time (-1: none) and the outputs taken from SM2 at it (None: no new outputs)
+        #: time (-1: none) and the outputs taken from SM2 at it, copied into this
+        #: firmware's one buffer (valid while ``sync_has_out``; False: no new outputs), so
+        #: a frame that writes SM2 before the work runs does not change them (P70)
         self.sync_ns = -1
-        self.sync_out: bytes | None = None
+        self.sync_out = bytearray()
+        self.sync_has_out = False
         self.bootstrap_supported = bootstrap_supported
         self.state = AlState.INIT
         self.error = False
@@ -156,7 +159,7 @@ class Firmware:
         self.outputs_seen = False
         self.op_requested_ns = 0
         self.sync_ns = -1
-        self.sync_out = None
+        self.sync_has_out = False
         p = self.pdi
         if not p.operational():
             return
@@ -241,21 +244,19 @@ class Firmware:
 
     def _latch(self, p: Pdi, ev: int, now_ns: int) -> None:
         p.u8(DC_SYNC0_STATUS)  # acknowledges the event
-        if ev & (EV_SM0 << SM_PD_OUT):
-            out = p.sm_read(SM_PD_OUT)
-            if out is not None:
-                self.sync_out = out
+        if ev & (EV_SM0 << SM_PD_OUT) and p.sm_read_into(SM_PD_OUT, self.sync_out):
+            self.sync_has_out = True  # sm_read's bytes, in the buffer (P70)
         self.sync_ns = now_ns
 
     def sync0_run(self) -> None:
         """The latched pulse's work, at the pulse's time: the outputs taken at it applied
         (in OP), the inputs as of the pulse written to SM3. Ref: ETG.1000.6 §5.3."""
         now_ns = self.sync_ns  # compiled: a C integer for both calls (decision P60)
-        out = self.sync_out
+        has_out = self.sync_has_out
         self.sync_ns = -1
-        self.sync_out = None
-        if out is not None:
-            self._apply_outputs(out, now_ns)
+        self.sync_has_out = False
+        if has_out:
+            self._apply_outputs(self.sync_out, now_ns)
         self._write_inputs(now_ns)
 
     def run_latched(self) -> None:
@@ -267,15 +268,16 @@ class Firmware:
         if mbx is not None and mbx.queued():
             self.service_mailbox(0, now_ns)
 
-    def _apply_outputs(self, out: bytes, now_ns: int) -> None:
-        """Outputs taken from SM2: valid from now on (F5), applied in OP."""
+    def _apply_outputs(self, out: bytes | bytearray, now_ns: int) -> None:
+        """Outputs taken from SM2: valid from now on (F5), applied in OP. The process
+        image decodes the latched buffer itself; any other application gets bytes."""
         self._outputs_received(now_ns)
         if self.state is _OP:
             pdo = self._pdo
             if pdo is not None:
                 pdo.set_outputs(out, now_ns)
             else:
-                self._app.set_outputs(out, now_ns)
+                self._app.set_outputs(out if type(out) is bytes else bytes(out), now_ns)
 
     def service_mailbox(self, ev: int, now_ns: int) -> None:
         """Serve SM0 (requests) and SM1 (replies taken by the master), then set the event
@@ -319,12 +321,17 @@ class Firmware:
             self._enter(Transition.SO, _OP, now_ns)
 
     def _write_inputs(self, now_ns: int) -> None:
+        """The inputs as of ``now_ns`` into SM3: the process image fills the buffer in
+        place where it can, else (and for any other application) as bytes (P71)."""
         if self.state is _SAFEOP or self.state is _OP:
             pdo = self._pdo
+            p = self.pdi
             if pdo is not None:
-                self.pdi.sm_write(SM_PD_IN, pdo.get_inputs(now_ns))
+                pdo.update_inputs(now_ns)
+                if not p.sm_fill(SM_PD_IN, pdo):
+                    p.sm_write(SM_PD_IN, pdo.pack_inputs())
             else:
-                self.pdi.sm_write(SM_PD_IN, self._app.get_inputs(now_ns))
+                p.sm_write(SM_PD_IN, self._app.get_inputs(now_ns))
 
     # ----------------------------------------------------------------- AL control
 

@@ -207,7 +207,7 @@ class Entry:
         iv = int(v) if not isinstance(v, bytes) else int.from_bytes(v, "little")
         return (iv & ((1 << (8 * n)) - 1)).to_bytes(n, "little")
 
-    def decode(self, data: bytes) -> int | str | bytes:
+    def decode(self, data: bytes | bytearray) -> int | str | bytes:
         if self.is_string:
             return data.decode("latin-1") if self.dtype == "VISIBLE_STRING" else bytes(data)
         return int.from_bytes(data, "little", signed=_signed(self.dtype))

@@ -3,6 +3,7 @@
 # compiled code. pdo.py stays the one source of the behaviour. Decisions P2, P3, P13.
 cimport cython
 
+from ecatsim.esc.pdi cimport SmImage
 from ecatsim.slave.od cimport Entry
 
 
@@ -15,7 +16,7 @@ cdef class CycleDevice:
 
 
 @cython.final
-cdef class PdoImage:
+cdef class PdoImage(SmImage):
     cdef public object od, rules
     cdef object _device
     cdef CycleDevice _dev
@@ -29,22 +30,32 @@ cdef class PdoImage:
     cdef long long[::1] _tx_slot
 
     @cython.locals(entries=tuple, values=tuple, i="Py_ssize_t", e=Entry, dev=CycleDevice,
-                   layout=tuple, buf=bytes, q="const unsigned char*", spec="long long",
-                   off="Py_ssize_t",
-                   n="long long", raw="long long", half="long long",
-                   byte="long long")
+                   layout=tuple, buf=bytes, ba=bytearray)
     cpdef void set_outputs(self, object data, long long now_ns) except *
-    @cython.locals(dev=CycleDevice)
+    # the outputs from a pointer to bytes or to the firmware's latched buffer (P33, P70)
+    @cython.locals(entries=tuple, i="Py_ssize_t", e=Entry, spec="long long",
+                   off="Py_ssize_t", n="long long", raw="long long", half="long long",
+                   byte="long long")
+    cdef void _rx_decode(self, const unsigned char* q) except *
     cpdef bytes get_inputs(self, long long now_ns)
+    @cython.locals(dev=CycleDevice)
+    cpdef void update_inputs(self, long long now_ns) except *
     @cython.locals(entries=tuple, values=list, i="Py_ssize_t", e=Entry, layout=tuple,
                    dev=CycleDevice)
     cpdef bytes pack_inputs(self)
+    @cython.locals(out=bytearray, p="unsigned char*")
+    cdef object _pack_small(self)
+    # fill: SmImage's, declared there (a final type cannot redeclare an inherited cpdef);
+    # the inputs encoded into _tx_buf, then copied into SM3's buffer (P71)
+    @cython.locals(k="long long")
+    cdef void _copy_to(self, unsigned char* dst, long long d, const unsigned char* src,
+                       long long n) noexcept
     @cython.locals(entries=tuple, out=bytearray, p="unsigned char*", i="Py_ssize_t", e=Entry,
                    c="long long",
                    spec="long long", off="Py_ssize_t", n="long long",
                    half="long long", dev=CycleDevice,
                    pending=bint, slot="Py_ssize_t")
-    cdef object _pack_small(self)
+    cdef bint _pack_buf(self) except -1
 
 
 cpdef long long _c_int(object v) except? -1

@@ -16,6 +16,7 @@ from array import array
 from dataclasses import dataclass, field
 from typing import Protocol
 
+from ecatsim.esc.pdi import SmImage
 from ecatsim.slave.al import AlState
 from ecatsim.slave.od import (
     ABORT_NO_OBJECT,
@@ -331,8 +332,9 @@ class CycleDevice:
         return None
 
 
-class PdoImage:
-    """The firmware's Application for a CoE device: process images through the OD."""
+class PdoImage(SmImage):
+    """The firmware's Application for a CoE device: process images through the OD; it
+    fills SM3's buffer in place where it can (``fill``, decision P71)."""
 
     def __init__(
         self, od: ObjectDictionary, device: CoeDevice, rules: PdoRules = DEFAULT_RULES
@@ -410,38 +412,18 @@ class PdoImage:
     def tx_size(self) -> int:
         return self.plan.tx_size
 
-    def set_outputs(self, data: bytes, now_ns: int) -> None:
+    def set_outputs(self, data: bytes | bytearray, now_ns: int) -> None:
         st = self._rx_st
         if st is not None and len(data) >= self._rx_need:
             entries: tuple[Entry, ...] = self._rx_entries
             layout = self._rx_layout
-            if layout is not None and type(data) is bytes:
-                # the struct's values, decoded in C from the bytes (decision P33)
+            if layout is not None and type(data) is bytearray:
+                # the outputs the firmware latched into its buffer (decision P70)
+                ba: bytearray = data
+                self._rx_decode(ba)  # compiled: a pointer to the buffer's bytes
+            elif layout is not None and type(data) is bytes:
                 buf: bytes = data
-                q = buf  # compiled: a pointer to the bytes (the struct fits: tested above)
-                for i in range(len(entries)):
-                    spec = self._rx_spec[i]
-                    off = spec >> 4
-                    n = (spec >> 1) & 7
-                    # 1, 2 or 4 bytes (the layout holds no more), each as a C long long
-                    # before its shift (an unsigned char shifted is a C int, whose bit 31
-                    # made a sign; P51)
-                    raw = q[off]
-                    if n > 1:
-                        byte = q[off + 1]
-                        raw |= byte << 8
-                        if n > 2:
-                            byte = q[off + 2]
-                            raw |= byte << 16
-                            if n > 3:
-                                byte = q[off + 3]
-                                raw |= byte << 24
-                    half = 1  # the sign bit's value: a C long long shifted in the core
-                    half <<= 8 * n - 1
-                    if spec & 1 and raw >= half:
-                        raw -= half << 1
-                    e = entries[i]
-                    e.value = raw
+                self._rx_decode(buf)  # compiled: a pointer to the bytes
             else:
                 values: tuple[int, ...] = st.unpack_from(data)
                 for i in range(len(entries)):
@@ -460,13 +442,45 @@ class PdoImage:
         else:
             self._device.outputs_applied(now_ns)
 
+    def _rx_decode(self, q: bytes | bytearray) -> None:
+        """The struct's values, decoded in C from the bytes (decision P33); the caller
+        checked that the struct fits."""
+        entries: tuple[Entry, ...] = self._rx_entries
+        for i in range(len(entries)):
+            spec = self._rx_spec[i]
+            off = spec >> 4
+            n = (spec >> 1) & 7
+            # 1, 2 or 4 bytes (the layout holds no more), each as a C long long before its
+            # shift (an unsigned char shifted is a C int, whose bit 31 made a sign; P51)
+            raw = q[off]
+            if n > 1:
+                byte = q[off + 1]
+                raw |= byte << 8
+                if n > 2:
+                    byte = q[off + 2]
+                    raw |= byte << 16
+                    if n > 3:
+                        byte = q[off + 3]
+                        raw |= byte << 24
+            half = 1  # the sign bit's value: a C long long shifted in the core
+            half <<= 8 * n - 1
+            if spec & 1 and raw >= half:
+                raw -= half << 1
+            e = entries[i]
+            e.value = raw
+
     def get_inputs(self, now_ns: int) -> bytes:
+        self.update_inputs(now_ns)
+        return self.pack_inputs()
+
+    def update_inputs(self, now_ns: int) -> None:
+        """The device's values as of ``now_ns`` (``get_inputs`` without the bytes: the
+        firmware then fills SM3 in place, decision P71)."""
         dev = self._dev
         if dev is not None:
             dev.update_inputs(now_ns)
         else:
             self._device.update_inputs(now_ns)
-        return self.pack_inputs()
 
     def pack_inputs(self) -> bytes:
         """The input image from the OD values, as they are now."""
@@ -503,6 +517,42 @@ class PdoImage:
         """The struct's bytes, encoded in C into the image buffer where every value is an
         int within its field's type; None (the struct path decides) for any other (P33).
         A value the device keeps for its entry is taken from the device (P38)."""
+        if not self._pack_buf():
+            return None
+        out = self._tx_buf
+        p = out  # compiled: a pointer to the buffer
+        # compiled, the pointer's slice is made as bytes at once, with no call and no
+        # buffer export (P51); in Python it is a bytearray, which pack_inputs makes bytes
+        return p[: len(out)]
+
+    def fill(self, mem: bytearray, base: int, n: int) -> bool:
+        """``_pack_small``'s bytes straight into an SM's buffer at ``base`` of the ESC
+        memory (``Pdi.sm_fill``, decision P71): encoded into the image buffer, then copied
+        (its padding zero), so a value that does not fit leaves the SM's buffer untouched.
+        False, with nothing written there, where ``pack_inputs`` must make the bytes (no
+        layout, another size, a value not an int in its field's range)."""
+        if self._tx_layout is None or n != len(self._tx_buf) or not self._pack_buf():
+            return False
+        self._copy_to(mem, base, self._tx_buf, n)  # compiled: pointers (range checked)
+        return True
+
+    def _copy_to(self, dst: bytearray, d: int, src: bytearray, n: int) -> None:
+        """``dst[d:d + n] = src[:n]`` for ranges the caller checked, four bytes a step."""
+        k = 0
+        while k + 4 <= n:
+            dst[d + k] = src[k]
+            dst[d + k + 1] = src[k + 1]
+            dst[d + k + 2] = src[k + 2]
+            dst[d + k + 3] = src[k + 3]
+            k += 4
+        while k < n:
+            dst[d + k] = src[k]
+            k += 1
+
+    def _pack_buf(self) -> bool:
+        """Encode the TxPDO entries' values into the image buffer (its padding stays zero)
+        in C where every value is an int within its field's type; False for any other
+        (P33), the buffer then partly written and the struct path deciding."""
         entries: tuple[Entry, ...] = self._tx_entries
         out = self._tx_buf
         p = out  # compiled: a pointer to the buffer (every field lies inside it)
@@ -520,11 +570,11 @@ class PdoImage:
                 e = entries[i]
                 v = e.value
                 if type(v) is not int:
-                    return None
+                    return False
                 try:
                     c = _c_int(v)
                 except OverflowError:
-                    return None
+                    return False
             spec = self._tx_spec[i]
             off = spec >> 4
             n = (spec >> 1) & 7
@@ -532,9 +582,9 @@ class PdoImage:
             half <<= 8 * n - 1
             if spec & 1:
                 if c < -half or c >= half:
-                    return None
+                    return False
             elif c < 0 or c >= half << 1:
-                return None
+                return False
             p[off] = c & 0xFF  # 1, 2 or 4 bytes (the layout holds no more), unrolled
             if n > 1:
                 p[off + 1] = (c >> 8) & 0xFF
@@ -542,9 +592,7 @@ class PdoImage:
                     p[off + 2] = (c >> 16) & 0xFF
                     if n > 3:
                         p[off + 3] = (c >> 24) & 0xFF
-        # compiled, the pointer's slice is made as bytes at once, with no call and no
-        # buffer export (P51); in Python it is a bytearray, which pack_inputs makes bytes
-        return p[: len(out)]
+        return True
 
     def al_state_changed(self, state: AlState, now_ns: int) -> None:
         self.device.al_state_changed(state, now_ns)
