@@ -64,18 +64,19 @@ cdef class DcUnit:
     @cython.locals(t="long long", m=bytearray, delay="unsigned long long",
                    offset="unsigned long long", local_now="unsigned long long",
                    local="unsigned long long", diff="long long", start="long long",
-                   gain=double, step="long long", mag="long long")
+                   gain=double, step="long long", mag="long long", p="unsigned char*")
     cpdef bint system_time_written(self, long long frame_t_ns, unsigned long long value, long long nbytes) except -1
     cpdef int64_t host_time_of(self, object system_ns) except? -1
     @cython.locals(local="long long")
     cpdef int64_t _host_time(self, unsigned long long system_ns) except? -1
     cpdef object sync0_deadline(self)
     @cython.locals(m=bytearray, n0="unsigned long long", cycle="long long",
-                   behind="long long")
+                   behind="long long", p="unsigned char*", local="unsigned long long",
+                   now_sys="unsigned long long")
     cpdef bint sync0_pulse(self, long long now_ns) except -1
     cpdef void _schedule_sync1(self, object sync0_time, object cycle0) except *
     cpdef object sync1_deadline(self)
-    @cython.locals(n0="unsigned long long")
+    @cython.locals(local="long long")
     cpdef int64_t sync0_deadline_or(self, long long none) except? -1
     cpdef int64_t sync1_deadline_or(self, long long none) except? -1
     cpdef bint sync1_pulse(self) except -1
@@ -86,7 +87,7 @@ cdef class DcUnit:
                    reg="long long")
     cpdef bint latch_edge(self, long long unit, bint rising, long long host_ns) except -1
     cpdef bint latch_pdi(self, long long unit) except -1
-    @cython.locals(lim="long long", x="long long", m=bytearray)
+    @cython.locals(lim="long long", x="long long", p="unsigned char*")
     cpdef void _speed_counter_diff(self, long long start) except *
     # the register hooks that the frames of every DC cycle run: C calls from the ESC
     cpdef void _er_system_time(self, long long ra, long long rs) except *
