@@ -76,7 +76,7 @@ cdef class DcUnit:
     cpdef bint sync0_pulse(self, long long now_ns) except -1
     cpdef void _schedule_sync1(self, object sync0_time, object cycle0) except *
     cpdef object sync1_deadline(self)
-    @cython.locals(local="long long")
+    @cython.locals(local="long long", offset="unsigned long long")
     cpdef int64_t sync0_deadline_or(self, long long none) except? -1
     cpdef int64_t sync1_deadline_or(self, long long none) except? -1
     cpdef bint sync1_pulse(self) except -1
@@ -96,5 +96,5 @@ cdef class DcUnit:
     @cython.locals(m=bytearray)
     cpdef int64_t sync_status_read(self, long long ra) except? -1
     cpdef void _ew_system_time(self, long long ra, long long rs, object old) except *
-    @cython.locals(m=bytearray, value="unsigned long long")
+    @cython.locals(value="unsigned long long")
     cpdef bint system_time_stored(self, long long frame_t_ns, long long nbytes) except -1

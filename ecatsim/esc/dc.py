@@ -426,7 +426,8 @@ class DcUnit:
             return none
         # _host_time(sync0_at) written out (sync0_at is in [0, 2^64)): C arithmetic
         # without two method calls; the schedule asks several times per pulse (P76)
-        local = _signed64((self.sync0_at - _get64(self.mem, DC_SYSTEM_TIME_OFFSET) - self.local_ref) & MASK64)
+        offset = _get64(self.mem, DC_SYSTEM_TIME_OFFSET)
+        local = _signed64((self.sync0_at - offset - self.local_ref) & MASK64)
         return self.t_ref + _trunc(local / self.spd)
 
     def sync1_deadline_or(self, none: int) -> int:
@@ -531,8 +532,7 @@ class DcUnit:
         memory, fed to the time control loop; True if the clock jumped (the ESC calls this
         directly for the writers of every DC cycle, decision P26). Ref: TMC8460 §5.50.2
         Table 95."""
-        m = self.mem
-        value = _get32(m, DC_SYSTEM_TIME) | (_get32(m, DC_SYSTEM_TIME + 4) << 32)
+        value = _get64(self.mem, DC_SYSTEM_TIME)  # one load (P76)
         return self.system_time_written(frame_t_ns, value, nbytes)
 
     def _ec_system_time_offset(self, ra: int, rs: int, old: bytes) -> None:

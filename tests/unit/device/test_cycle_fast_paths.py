@@ -16,10 +16,11 @@ from __future__ import annotations
 
 import math
 import random
+
 import pytest
 
 from ecatsim.device.description import default_description
-from ecatsim.device.drive import CSP, CSV, CST, HM, PP, PV, Drive
+from ecatsim.device.drive import CSP, CST, CSV, HM, PP, PV, Drive
 from ecatsim.device.servo import POSITION, STOP_INDEX, STOP_NONE, VELOCITY, MotorParams, Servo
 from ecatsim.slave.al import AlState
 from ecatsim.slave.od_build import build_od
