@@ -22,9 +22,10 @@ cdef long long DC_TIME_DIFF_FILTER, ECAT_EV_DC_LATCH, ESC_CFG_LATCH_IN, ESC_CFG_
 cdef long long ESC_CONFIG, EV_DC_LATCH, EV_SYNC0, EV_SYNC1, SYNC_LATCH_CONFIG
 
 
+# a C cast and a C conditional: inline, no error test after each call (P76)
 @cython.locals(k="long long")
-cdef long long _trunc(double x) except? -1
-cdef long long _signed64(unsigned long long x)
+cdef inline long long _trunc(double x) noexcept
+cdef inline long long _signed64(unsigned long long x) noexcept
 # the register helpers inline (P46)
 @cython.locals(lo="unsigned long long", hi="unsigned long long", b3="unsigned long long",
                b7="unsigned long long", p="const unsigned char*")
