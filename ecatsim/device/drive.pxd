@@ -69,6 +69,8 @@ cdef class Drive(CycleDevice):
     cdef double _lt
     cdef bint _t_set, _lt_set, _ltn_set
     cdef public long long prev_cw
+    cdef public long long _quiet_cw
+    cdef public object _quiet_state
     cdef public long long mode
     cdef object _al_state
     cdef bint _al_op
@@ -116,7 +118,7 @@ cdef class Drive(CycleDevice):
     cpdef bint _steady_demand(self) except -1
     cdef bint _demand(self, int kind, double ref, double v_ff, double window)
 
-    @cython.locals(cw="long long", mode="long long")
+    @cython.locals(cw="long long", mode="long long", prev="long long")
     cpdef _controlword(self)
 
     @cython.locals(s=Servo, sw="long long", rpm=double, mode="long long", hits=tuple,

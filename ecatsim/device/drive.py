@@ -229,6 +229,10 @@ class Drive(CycleDevice):
         self._ltn = 0
         self._ltn_set = False
         self.prev_cw = 0
+        #: the controlword that, repeated, commanded nothing in ``_quiet_state`` (-1 and
+        #: None: none yet): _controlword's fast path (decision P75)
+        self._quiet_cw = -1
+        self._quiet_state: PdsState | None = None
         self.mode = 0
         self._al_state = AlState.INIT
         #: whether the AL state is OP (kept with it: the cycle tests a C flag)
@@ -486,7 +490,19 @@ class Drive(CycleDevice):
         if not self._bound:
             self._bind()
         cw = _int_of(self._c_6040)  # 6040h
-        cmd = cia402.decode(cw, self.prev_cw)
+        prev = self.prev_cw
+        if cw == prev and cw == self._quiet_cw and self.state is self._quiet_state:
+            # the last cycle's controlword again, in a state where it commanded nothing:
+            # decode() gives the same command (no edge: no fault reset) and step() the
+            # same None (a function of state and command; the mode change below leaves
+            # the state), so only the mode and pp's set point can act (decision P75)
+            mode = _int_of(self._c_6060)  # 6060h
+            if mode != self.mode and mode in MODES:
+                self._mode_change(mode)
+            if self._al_op and self.state is _OE and self.mode == _PP:
+                self._pp_setpoint()
+            return
+        cmd = cia402.decode(cw, prev)
         self.prev_cw = cw
         mode = _int_of(self._c_6060)  # 6060h
         if mode != self.mode and mode in MODES:
@@ -505,6 +521,9 @@ class Drive(CycleDevice):
             return
         tr = cia402.step(self.state, cmd)
         if tr is None:
+            if cw == prev:  # repeated, no edge: the same again in this state does nothing
+                self._quiet_cw = cw
+                self._quiet_state = self.state
             if self.state is _OE and self.mode == _PP:
                 self._pp_setpoint()
             return

@@ -45,7 +45,8 @@ cdef class Servo:
         cur_ki=double, angle=double, omega=double, iq=double, iq_integ=double, integ=double,
         iq_ref=double, flux=bint, done=long, why=int, out=double, err_p=double, v_ref=double,
         err=double, emf=double, err_a=double, v=double, torque=double, drive=double,
-        new=double, rev=double, rev_known=bint, now=double, torque_kind=int, position_kind=int,
+        new=double, rev=double, rev_known=bint, now=double, q=double, rev_hi=double,
+        rev_cmp=bint, torque_kind=int, position_kind=int,
         g=Gains,
     )
     cpdef long _run(self, long n, int kind, double ref, double v_ff_rpm, double window,

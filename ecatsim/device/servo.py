@@ -307,6 +307,10 @@ class Servo:
         # angle does not change in between), found at the first substep (decision P60)
         rev = 0.0
         rev_known = False
+        # floor(q) == rev  <=>  rev <= q < rev + 1, rev + 1 exact for |rev| < 2^52: two
+        # comparisons instead of a floor per substep (decision P77)
+        rev_hi = 0.0
+        rev_cmp = False
         while done < n:
             if kind == torque_kind:
                 out = ref
@@ -359,6 +363,8 @@ class Servo:
             if index and not rev_known:
                 rev = _floor(angle / 6.283185307179586)
                 rev_known = True
+                rev_cmp = -4.0e15 < rev < 4.0e15
+                rev_hi = rev + 1.0
             omega = new
             angle += omega * dt
             done += 1
@@ -366,10 +372,12 @@ class Servo:
                 why = _STOP_OVERCURRENT
                 break
             if index:
-                now = _floor(angle / 6.283185307179586)
-                if now != rev:
-                    why = _STOP_INDEX
-                    break
+                q = angle / 6.283185307179586
+                if not (rev_cmp and rev <= q < rev_hi):  # else floor(q) is rev
+                    now = _floor(q)  # nan and infinities raise here as before
+                    if now != rev:
+                        why = _STOP_INDEX
+                        break
         self.angle = angle
         self.omega = omega
         self.iq_ma = iq

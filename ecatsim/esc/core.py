@@ -468,7 +468,7 @@ class Esc(SmHost):
         the hook table. Returns the WKC increment (1). Ref: TMC8460 §5.50.2 Table 95."""
         n = len(data)
         wmask = self.ecat_wmask  # compiled: C pointers to the bytes (a register, P27)
-        mem = self.mem
+        mem = self.mp  # compiled: the pointer kept (P62), no conversion per call (P76)
         d = data
         for k in range(n):
             m = wmask[DC_SYSTEM_TIME + k]

@@ -22,9 +22,10 @@ cdef long long DC_TIME_DIFF_FILTER, ECAT_EV_DC_LATCH, ESC_CFG_LATCH_IN, ESC_CFG_
 cdef long long ESC_CONFIG, EV_DC_LATCH, EV_SYNC0, EV_SYNC1, SYNC_LATCH_CONFIG
 
 
+# a C cast and a C conditional: inline, no error test after each call (P76)
 @cython.locals(k="long long")
-cdef long long _trunc(double x) except? -1
-cdef long long _signed64(unsigned long long x)
+cdef inline long long _trunc(double x) noexcept
+cdef inline long long _signed64(unsigned long long x) noexcept
 # the register helpers inline (P46)
 @cython.locals(lo="unsigned long long", hi="unsigned long long", b3="unsigned long long",
                b7="unsigned long long", p="const unsigned char*")
@@ -64,18 +65,19 @@ cdef class DcUnit:
     @cython.locals(t="long long", m=bytearray, delay="unsigned long long",
                    offset="unsigned long long", local_now="unsigned long long",
                    local="unsigned long long", diff="long long", start="long long",
-                   gain=double, step="long long", mag="long long")
+                   gain=double, step="long long", mag="long long", p="unsigned char*")
     cpdef bint system_time_written(self, long long frame_t_ns, unsigned long long value, long long nbytes) except -1
     cpdef int64_t host_time_of(self, object system_ns) except? -1
     @cython.locals(local="long long")
     cpdef int64_t _host_time(self, unsigned long long system_ns) except? -1
     cpdef object sync0_deadline(self)
     @cython.locals(m=bytearray, n0="unsigned long long", cycle="long long",
-                   behind="long long")
+                   behind="long long", p="unsigned char*", local="unsigned long long",
+                   now_sys="unsigned long long")
     cpdef bint sync0_pulse(self, long long now_ns) except -1
     cpdef void _schedule_sync1(self, object sync0_time, object cycle0) except *
     cpdef object sync1_deadline(self)
-    @cython.locals(n0="unsigned long long")
+    @cython.locals(local="long long", offset="unsigned long long")
     cpdef int64_t sync0_deadline_or(self, long long none) except? -1
     cpdef int64_t sync1_deadline_or(self, long long none) except? -1
     cpdef bint sync1_pulse(self) except -1
@@ -86,7 +88,7 @@ cdef class DcUnit:
                    reg="long long")
     cpdef bint latch_edge(self, long long unit, bint rising, long long host_ns) except -1
     cpdef bint latch_pdi(self, long long unit) except -1
-    @cython.locals(lim="long long", x="long long", m=bytearray)
+    @cython.locals(lim="long long", x="long long", p="unsigned char*")
     cpdef void _speed_counter_diff(self, long long start) except *
     # the register hooks that the frames of every DC cycle run: C calls from the ESC
     cpdef void _er_system_time(self, long long ra, long long rs) except *
@@ -95,5 +97,5 @@ cdef class DcUnit:
     @cython.locals(m=bytearray)
     cpdef int64_t sync_status_read(self, long long ra) except? -1
     cpdef void _ew_system_time(self, long long ra, long long rs, object old) except *
-    @cython.locals(m=bytearray, value="unsigned long long")
+    @cython.locals(value="unsigned long long")
     cpdef bint system_time_stored(self, long long frame_t_ns, long long nbytes) except -1

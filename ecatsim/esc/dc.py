@@ -263,11 +263,12 @@ class DcUnit:
         MOVE_NS (SYNC deadlines cached in host time are then stale).
         Ref: TMC8460 §5.50.2 Tables 95, 98, 101.
         """
-        t = self.arrival_ns(frame_t_ns)
+        t = frame_t_ns + self.arrive_ns  # arrival_ns(), local_time() written out (P76)
         m = self.mem
+        p = m  # compiled: a pointer to the registers' bytes
         delay = _get32(m, DC_SYSTEM_TIME_DELAY)
         offset = _get64(m, DC_SYSTEM_TIME_OFFSET)
-        local_now = self.local_time(t)
+        local_now = (self.local_ref + _trunc((t - self.t_ref) * self.spd)) & MASK64
         local = (local_now + offset - delay) & MASK64
         if nbytes < 8:
             diff = ((local - value + HALF32) & 0xFFFFFFFF) - HALF32
@@ -275,7 +276,7 @@ class DcUnit:
             diff = _signed64((local - value) & MASK64)
         # Proportional step on the time and integral action on the rate: the loop the
         # speed counter implements, with a bandwidth from 0x0930 (larger = smoother).
-        start = (m[DC_SPEED_COUNTER_START] | (m[DC_SPEED_COUNTER_START + 1] << 8)) & 0x7FFF
+        start = (p[DC_SPEED_COUNTER_START] | (p[DC_SPEED_COUNTER_START + 1] << 8)) & 0x7FFF
         gain = 1.0 / max(2.0, start / 0x400)
         self.t_ref = t  # rebase at t
         if abs(diff) > 1_000_000:
@@ -366,30 +367,34 @@ class DcUnit:
         m = self.mem
         if not self.sync0_on:
             return False
+        p = m  # compiled: a pointer to the registers' bytes (P76)
         n0 = self.sync0_at
         cycle = _get32(m, DC_SYNC0_CYCLE)
-        if m[DC_ACTIVATION] & 0x04:
+        if p[DC_ACTIVATION] & 0x04:
             self._schedule_sync1(n0, cycle)
-        if not m[DC_ACTIVATION] & 0x02:
+        if not p[DC_ACTIVATION] & 0x02:
             if cycle:  # SYNC1 only
                 self.sync0_at = (n0 + cycle) & MASK64
             else:
                 self.sync0_on = False
                 self.sync0_at = 0
             return False
-        m[DC_ACTIVATION_STATUS] &= 0xFE
-        m[DC_SYNC0_STATUS] |= 0x01
+        p[DC_ACTIVATION_STATUS] &= 0xFE
+        p[DC_SYNC0_STATUS] |= 0x01
         if cycle == 0:
             self.sync0_on = False  # single shot
             self.sync0_at = 0
         else:
             n0 = (n0 + cycle) & MASK64
-            behind = _signed64((self.system_time(now_ns) - n0) & MASK64)
+            # system_time(now_ns) written out: local_time's expression plus 0x0920 (P76)
+            local = (self.local_ref + _trunc((now_ns - self.t_ref) * self.spd)) & MASK64
+            now_sys = (local + _get64(m, DC_SYSTEM_TIME_OFFSET)) & MASK64
+            behind = _signed64((now_sys - n0) & MASK64)
             if behind >= cycle:
                 n0 = (n0 + (behind // cycle) * cycle) & MASK64
             self.sync0_at = n0
             _put64(m, DC_START_TIME, n0)
-        return bool(m[SYNC_LATCH_CONFIG] & 0x08)
+        return bool(p[SYNC_LATCH_CONFIG] & 0x08)
 
     def reset_sync(self) -> None:
         """Reset: the SYNC unit stops and the time loop forgets its correction (the local
@@ -419,7 +424,11 @@ class DcUnit:
         either way: a C integer in the compiled core)."""
         if not self.sync0_on:
             return none
-        return self._host_time(self.sync0_at)  # in [0, 2^64): sync0_pulse, next_sync0
+        # _host_time(sync0_at) written out (sync0_at is in [0, 2^64)): C arithmetic
+        # without two method calls; the schedule asks several times per pulse (P76)
+        offset = _get64(self.mem, DC_SYSTEM_TIME_OFFSET)
+        local = _signed64((self.sync0_at - offset - self.local_ref) & MASK64)
+        return self.t_ref + _trunc(local / self.spd)
 
     def sync1_deadline_or(self, none: int) -> int:
         """sync1_deadline(), or ``none`` while no SYNC1 pulse is scheduled."""
@@ -472,9 +481,9 @@ class DcUnit:
         lim = max(0, start - 0x7F)
         x = _trunc(self.rate_ppb * 5e-9 * (start + 2) * (start + 2))
         x = max(-lim, min(lim, x))
-        m = self.mem
-        m[DC_SPEED_COUNTER_DIFF] = x & 0xFF
-        m[DC_SPEED_COUNTER_DIFF + 1] = (x >> 8) & 0xFF
+        p = self.mem  # compiled: a pointer to the registers' bytes (P76)
+        p[DC_SPEED_COUNTER_DIFF] = x & 0xFF
+        p[DC_SPEED_COUNTER_DIFF + 1] = (x >> 8) & 0xFF
 
     def reset_speed_counter(self) -> None:
         """Writing 0x0930 resets the difference 0x092C and the speed counter: 0x0932 and
@@ -523,8 +532,7 @@ class DcUnit:
         memory, fed to the time control loop; True if the clock jumped (the ESC calls this
         directly for the writers of every DC cycle, decision P26). Ref: TMC8460 §5.50.2
         Table 95."""
-        m = self.mem
-        value = _get32(m, DC_SYSTEM_TIME) | (_get32(m, DC_SYSTEM_TIME + 4) << 32)
+        value = _get64(self.mem, DC_SYSTEM_TIME)  # one load (P76)
         return self.system_time_written(frame_t_ns, value, nbytes)
 
     def _ec_system_time_offset(self, ra: int, rs: int, old: bytes) -> None:
