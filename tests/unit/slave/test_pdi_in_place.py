@@ -31,9 +31,9 @@ from ecatsim.esc.regs import (
     SM_MODE_MAILBOX,
 )
 from ecatsim.esc.sm import SyncManager
-from ecatsim.slave.od import ObjectDictionary
 from ecatsim.slave.od_build import build_od
 from ecatsim.slave.pdo import PdoImage, Plan, compile_plan
+from tests.support.pdo_mappings import every_mapping, set_mapping
 
 IRQS = SM_CTRL_ECAT_IRQ | SM_CTRL_PDI_IRQ
 STATE = ("w", "l", "r", "r_open", "w_open", "mbx_full", "status", "mirror", "changed")
@@ -45,36 +45,6 @@ class Quiet:
     def update_inputs(self, now_ns: int) -> None: ...
 
     def al_state_changed(self, state: object, now_ns: int) -> None: ...
-
-
-def _mappings(od: ObjectDictionary, rx: bool) -> list[list[int]]:
-    """Every entry the direction may map, at each length it allows, with padding, in
-    chunks of at most 9 entries and 256 bits (the TMC8670's limits)."""
-    values = []
-    for index in sorted(od.objects):
-        for e in od.objects[index].entries.values():
-            if e.pdo and not (rx and e.access == "ro"):
-                values += [index << 16 | e.sub << 8 | bits for bits in (e.bits, *e.pdo_bits)]
-    values.insert(3, 0x0000_0008)  # padding: 8 and 16 bits
-    values.insert(7, 0x0000_0010)
-    chunks: list[list[int]] = []
-    chunk: list[int] = []
-    size = 0
-    for v in values + values[::-1]:
-        if len(chunk) == 9 or size + (v & 0xFF) > 256:
-            chunks.append(chunk)
-            chunk, size = [], 0
-        chunk.append(v)
-        size += v & 0xFF
-    return [*chunks, chunk]
-
-
-def _map(od: ObjectDictionary, index: int, mapping: list[int]) -> Plan:
-    od.set(index, 0, 0)
-    for sub, value in enumerate(mapping, 1):
-        od.set(index, sub, value)
-    od.set(index, 0, len(mapping))
-    return compile_plan(od)
 
 
 def _value(rnd: random.Random, bits: int, signed: bool, wild: bool) -> int:
@@ -132,8 +102,9 @@ def test_sm3_filled_in_place_is_sm_write_of_the_packed_inputs() -> None:
     od = build_od(default_description())
     img = PdoImage(od, Quiet())
     filled = declined = 0
-    for mapping in _mappings(od, False):
-        plan = _map(od, 0x1A00, mapping)
+    for mapping in every_mapping(od, False):
+        set_mapping(od, 0x1A00, mapping)
+        plan = compile_plan(od)
         img.plan = plan
         assert plan.tx_codec is not None and plan.tx_codec.layout is not None
         fields = [f for f in plan.tx if f.entry is not None]
@@ -229,8 +200,9 @@ def test_outputs_decoded_from_the_buffer_are_those_decoded_from_bytes() -> None:
     rnd = random.Random(72)
     od = build_od(default_description())
     img = PdoImage(od, Quiet())
-    for mapping in _mappings(od, True):
-        plan = _map(od, 0x1600, mapping)
+    for mapping in every_mapping(od, True):
+        set_mapping(od, 0x1600, mapping)
+        plan = compile_plan(od)
         codec_ = plan.rx_codec
         assert codec_ is not None
         entries = [f.entry for f in plan.rx if f.entry is not None]

@@ -13,6 +13,7 @@ from ecatsim.slave.al import AlState
 from ecatsim.slave.od import ObjectDictionary
 from ecatsim.slave.od_build import build_od
 from ecatsim.slave.pdo import CycleDevice, Field, PdoImage, Plan, codec, compile_plan
+from tests.support.pdo_mappings import every_mapping, set_mapping
 
 
 class Quiet:
@@ -105,35 +106,6 @@ def test_the_drive_is_a_cycle_device() -> None:
     assert not isinstance(Quiet(), CycleDevice)
 
 
-def _mappings(od: ObjectDictionary, rx: bool) -> list[list[int]]:
-    """Mapping values covering every entry the TMC8670 lets the direction map, at every
-    length it allows, with padding between them: chunks of at most 9 entries and 256 bits."""
-    values = []
-    for index in sorted(od.objects):
-        for e in od.objects[index].entries.values():
-            if not e.pdo or (rx and e.access == "ro"):
-                continue
-            for bits in (e.bits, *e.pdo_bits):
-                values.append(index << 16 | e.sub << 8 | bits)
-    values.insert(3, 0x0000_0008)  # padding: 8 and 16 bits
-    values.insert(7, 0x0000_0010)
-    chunks, chunk, size = [], [], 0
-    for v in values + values[::-1]:
-        if len(chunk) == 9 or size + (v & 0xFF) > 256:
-            chunks.append(chunk)
-            chunk, size = [], 0
-        chunk.append(v)
-        size += v & 0xFF
-    return [*chunks, chunk]
-
-
-def _map(od: ObjectDictionary, index: int, mapping: list[int]) -> None:
-    od.set(index, 0, 0)
-    for sub, value in enumerate(mapping, 1):
-        od.set(index, sub, value)
-    od.set(index, 0, len(mapping))
-
-
 def _edges(bits: int, signed: bool) -> list[object]:
     lo, hi = (-(1 << (bits - 1)), (1 << (bits - 1)) - 1) if signed else (0, (1 << bits) - 1)
     return [lo, hi, lo - 1, hi + 1, 0, -1, 1, 1 << 40, -(1 << 70), 1 << 64, True, 7]
@@ -148,8 +120,8 @@ def test_the_c_codec_is_the_struct_and_the_per_entry_path_for_every_mapping() ->
     od = build_od(default_description())
     img = PdoImage(od, Quiet())  # type: ignore[arg-type]
     for rx in (True, False):
-        for mapping in _mappings(od, rx):
-            _map(od, 0x1600 if rx else 0x1A00, mapping)
+        for mapping in every_mapping(od, rx):
+            set_mapping(od, 0x1600 if rx else 0x1A00, mapping)
             plan = compile_plan(od)
             codec_ = plan.rx_codec if rx else plan.tx_codec
             assert codec_ is not None and codec_.layout is not None
@@ -260,8 +232,8 @@ def test_every_published_value_in_any_mapping_is_the_entry_path() -> None:
     od = build_od(default_description())
     d, img = _enabled_drive(od)
     t = 4_000_000
-    for mapping in _mappings(od, False):
-        _map(od, 0x1A00, mapping)
+    for mapping in every_mapping(od, False):
+        set_mapping(od, 0x1A00, mapping)
         plan = compile_plan(od)
         assert plan.tx_codec is not None
         for _ in range(3):
