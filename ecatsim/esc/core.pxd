@@ -13,7 +13,6 @@ cimport cython
 # Cython 3.3 writes long long's value there as -1LLLL in pure-Python mode
 from libc.stdint cimport int64_t
 
-cdef long long _LRD, _LWR, _LRW
 # the registers, imported from regs.py: C constants here
 cdef long long AL_EVENT_MASK, AL_EVENT_REQUEST, AL_STATUS, DC_ECAT_EVENT_TIME
 cdef long long DC_PDI_CHANGE_EVENT_TIME, DC_PDI_START_EVENT_TIME, DC_SYSTEM_TIME, DL_CONTROL
@@ -75,7 +74,6 @@ cdef class Esc(SmHost):
     cdef public object on_reset
 
     @cython.locals(n="long long", lo="long long", hi="long long", wr=bint, rd=bint, f=FmmuMap)
-    cpdef int64_t ecat_logical(self, long long cmd, long long lad, unsigned char[:] data) except -1
     @cython.locals(n="long long", lo="long long", hi="long long", phys="long long",
                    sm=SyncManager, view="unsigned char[:]", b0="long long", b1="long long", nb="long long",
                    pb="long long", ps="long long", pe="long long", fb="long long")

@@ -1,12 +1,13 @@
 """The emulated TMC8460 EtherCAT Slave Controller: memory, access rules and side effects.
 
-ECAT face: ``ecat_read``/``ecat_read_or``/``ecat_write``/``ecat_logical`` patch a datagram's
-data in place and return the slave's working-counter increment. PDI face: see
-``ecatsim.esc.pdi``. Access rights, reset values and side effects come from the register
-table (``ecatsim/spec/registers.yaml``); a row's ``side_effect: <unit>.<name>`` names the
-hooks of one of the ESC's units (``Esc.units``: the ESC itself, its DC, MII, EEPROM and
-watchdog units and its SyncManagers), methods of that unit's class named ``_ew_<name>``,
-``_ec_<name>``, ``_er_<name>``, ``_pw_<name>``, ``_pr_<name>`` (ecatsim/esc/dispatch.py).
+ECAT face: ``ecat_read``/``ecat_read_or``/``ecat_write`` patch a datagram's data in place and return
+the slave's working-counter increment; logical datagrams go through ``ecatsim.esc.fmmu.logical_at``
+(the FMMUs, then ``_fmmu_xfer`` or the SM's own calls). PDI face: see ``ecatsim.esc.pdi``. Access
+rights, reset values and side effects come from the register table
+(``ecatsim/spec/registers.yaml``); a row's ``side_effect: <unit>.<name>`` names the hooks of one of
+the ESC's units (``Esc.units``: the ESC itself, its DC, MII, EEPROM and watchdog units and its
+SyncManagers), methods of that unit's class named ``_ew_<name>``, ``_ec_<name>``, ``_er_<name>``,
+``_pw_<name>``, ``_pr_<name>`` (ecatsim/esc/dispatch.py).
 
 Ref: TMC8460 §4, §5; ETG.1000.4 §6 (DL services and ESC memory).
 """
@@ -64,12 +65,6 @@ from ecatsim.esc.regs import (
 )
 from ecatsim.esc.sm import SmHost, SyncManager
 from ecatsim.esc.watchdog import Watchdog
-from ecatsim.wire.datagram import Cmd
-
-#: the logical commands as plain ints (compiled: C constants)
-_LRD = int(Cmd.LRD)
-_LWR = int(Cmd.LWR)
-_LRW = int(Cmd.LRW)
 
 
 def _get32(m: bytearray, a: int) -> int:
@@ -498,29 +493,6 @@ class Esc(SmHost):
             if ws < end and ado < we:
                 return self._ecat_write_sm(ado, data)
         return 1 if self._plain_write(ado, data) else 0
-
-    def ecat_logical(self, cmd: int, lad: int, data: memoryview) -> int:
-        """LRD/LWR/LRW through the FMMUs; returns the WKC increment.
-
-        Writes use the datagram data as received, then reads overlay it. WKC: +1 for a
-        read, +1 (LWR) or +2 (LRW) for a write, per slave. Ref: ETG.1000.4 §5.4.3 Table 12;
-        TMC8460 §5.48.
-        """
-        n = len(data)
-        lo = lad * 8
-        hi = lo + n * 8
-        wr = rd = False
-        if cmd != _LRD:
-            for f in self.fmmus:
-                if f.write and f.lbit < hi and lo < f.lend and self._fmmu_xfer(f, lad, data, True):
-                    wr = True
-        if cmd != _LWR:
-            for f in self.fmmus:
-                if f.read and f.lbit < hi and lo < f.lend and self._fmmu_xfer(f, lad, data, False):
-                    rd = True
-        if cmd == _LRW:
-            return (1 if rd else 0) + (2 if wr else 0)
-        return 1 if (rd or wr) else 0
 
     def _fmmu_xfer(self, f: FmmuMap, lad: int, data: memoryview, write: bool) -> bool:
         n = len(data)

@@ -99,11 +99,12 @@ def compile_fmmus(mem: bytearray) -> tuple[FmmuMap, ...]:
 def logical_at(
     esc: Esc, fmmus: tuple[FmmuMap, ...], cmd: int, lad: int, buf: bytearray, pos: int, n: int
 ) -> int:
-    """``esc.ecat_logical(cmd, lad, buf[pos:pos + n])`` (``fmmus``: ``esc.fmmus``, as
-    ``compile_fmmus`` made them): the same writes first, then reads, the same WKC
-    increment. An FMMU given an SM (``FmmuMap.sm``) is one C call to it with pointers into
-    the frame, the FMMUs followed through their links (the frame walk, decision P61); any
-    other FMMU is the ESC's ``_fmmu_xfer`` with a view of the data.
+    """An LRD/LWR/LRW of ``buf[pos:pos + n]`` at logical address ``lad`` through the ESC's FMMUs
+    (``fmmus``: ``esc.fmmus``, as ``compile_fmmus`` made them): writes use the datagram's data as
+    received, then reads overlay it; returns the WKC increment, +1 for a read, +1 (LWR) or +2 (LRW)
+    for a write. An FMMU given an SM (``FmmuMap.sm``) is one C call to it with pointers into the
+    frame, the FMMUs followed through their links (the frame walk, decision P61); any other FMMU is
+    the ESC's ``_fmmu_xfer`` with a view of the data.
     Ref: ETG.1000.4 §5.4.3 Table 12; TMC8460 §5.48."""
     if not fmmus:
         return 0

@@ -418,7 +418,7 @@ class Segment:
             if cmd in (LRW, LRD, LWR):
                 lad = adp | (ado << 16)
                 for esc in self.logical:
-                    # esc.ecat_logical(cmd, lad, data): C calls, pointers into buf (P61)
+                    # C calls, pointers into buf (P61)
                     inc += logical_at(esc, esc.fmmus, cmd, lad, buf, d0, dlen)
             elif cmd in (FPRD, FPWR, FPRW):
                 for i in self.addr_map.get(adp, ()):

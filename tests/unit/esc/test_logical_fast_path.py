@@ -1,9 +1,10 @@
 """The frame walk's logical path (``fmmu.logical_at`` with ``SyncManager.ecat_write_at`` /
-``ecat_read_at``, decisions P61, P62) does what ``Esc.ecat_logical`` does: the same bytes in
-the datagram and the memory, the same WKC, SM status, AL and ECAT event registers and
-interrupt line, for mailbox and 3-buffer SMs, read and write, the watchdog bit, a locked
-SM, an SM with the ECAT event time bit, an FMMU split over two SMs, a bit-wise FMMU and
-FMMUs into plain memory. Run against the compiled core and the pure-Python one alike.
+``ecat_read_at``, decisions P61, P62) does what the reference does (one ``_fmmu_xfer`` per FMMU,
+tests/support/logical_ref.py): the same bytes in the datagram and the memory, the same WKC, SM
+status, AL and ECAT event registers and interrupt line, for mailbox and 3-buffer SMs, read and
+write, the watchdog bit, a locked SM, an SM with the ECAT event time bit, an FMMU split over two
+SMs, a bit-wise FMMU and FMMUs into plain memory. Run against the compiled core and the pure-Python
+one alike.
 
 Ref: ETG.1000.4 §5.4.3 Table 12; TMC8460 §5.48, §5.49 Tables 86-91.
 """
@@ -18,6 +19,7 @@ from ecatsim.esc.core import Esc
 from ecatsim.esc.fmmu import logical_at
 from ecatsim.esc.regs import FMMU_BASE, N_FMMU, SM_CTRL_WATCHDOG
 from ecatsim.wire.datagram import LRD, LRW, LWR
+from tests.support.logical_ref import ecat_logical
 
 #: (start, length, control) of SMs 0-5: mailbox out/in, 3-buffer out/in with interrupts
 SMS = [
@@ -83,7 +85,7 @@ def test_logical_at_is_ecat_logical() -> None:
             data = bytes(rnd.randrange(256) for _ in range(n))
             a.ctx.t_ns = b.ctx.t_ns = 1_000_000 * (step + 1)
             view = bytearray(data)
-            wkc_a = a.ecat_logical(cmd, lad, memoryview(view))
+            wkc_a = ecat_logical(a, cmd, lad, memoryview(view))
             frame = bytearray(rnd.randrange(64)) + bytearray(data) + bytearray(3)
             pos = len(frame) - n - 3
             wkc_b = logical_at(b, b.fmmus, cmd, lad, frame, pos, n)
@@ -103,7 +105,7 @@ def test_a_read_of_the_written_buffer_has_no_side_effects() -> None:
     """An LRD of an output SM (written by the ECAT) reads the latest buffer back and
     changes no state, on both paths."""
     e = make(random.Random(1), FrameContext())
-    e.ecat_logical(LWR, 0, memoryview(bytearray(range(1, 13))))
+    ecat_logical(e, LWR, 0, memoryview(bytearray(range(1, 13))))
     before = state(e)
     sm = e.sm[2]
     out = bytearray(12)
