@@ -15,7 +15,7 @@ cdef long long SW_VOLTAGE, SW_WARNING, SW_REMOTE, SW_TARGET_REACHED, SW_INTERNAL
 cdef long long SW_OMS12, SW_OMS13, SW_MOTOR_ACTIVE, SW_DIRECTION
 # the modes as C constants (PP... stay Python ints for other modules)
 cdef long long _PP, _PV, _HM, _CSP, _CSV, _CST
-cdef int _STOP_FOLLOWING, _STOP_OVERCURRENT, _STOP_INDEX
+cdef int _STOP_NONE, _STOP_FOLLOWING, _STOP_OVERCURRENT, _STOP_INDEX
 cdef long long _NO_WINDOW
 cdef int _TORQUE, _VELOCITY, _POSITION
 # the enum members the cycle compares by identity, as C globals (no module dict lookup)
@@ -55,6 +55,7 @@ cdef class Drive(CycleDevice):
     cdef public long long[::1] _pub_lo, _pub_hi
     cdef public long long q_60ff, q_6083, q_6084, q_607a, q_60b0, q_60b1, q_6071, q_60b2
     cdef public long long q_6065, q_6085, q_605a
+    cdef bint _snap_all
     cdef int _d_kind
     cdef double _d_ref, _d_vff, _d_window
     cdef public object params
@@ -112,7 +113,9 @@ cdef class Drive(CycleDevice):
 
     cpdef double _trip(self)
     cpdef double _window(self)
+    @cython.locals(mode="long long")
     cpdef _snapshot(self)
+    cpdef _snapshot_all(self)
 
     @cython.locals(mode="long long", v=double, target=double)
     cpdef bint _steady_demand(self) except -1

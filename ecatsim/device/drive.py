@@ -20,6 +20,7 @@ from ecatsim.device.servo import (
     RPM,
     STOP_FOLLOWING,
     STOP_INDEX,
+    STOP_NONE,
     STOP_OVERCURRENT,
     TORQUE,
     VELOCITY,
@@ -41,7 +42,8 @@ MODES = (0, PP, PV, HM, CSP, CSV, CST)
 #: stay Python ints: a module global compared with a C integer converts it every time)
 _PP, _PV, _HM, _CSP, _CSV, _CST = PP, PV, HM, CSP, CSV, CST
 #: the servo's stop reasons and "no window" (6065h FFFFFFFFh) as C integers, likewise
-_STOP_FOLLOWING, _STOP_OVERCURRENT, _STOP_INDEX = STOP_FOLLOWING, STOP_OVERCURRENT, STOP_INDEX
+_STOP_NONE, _STOP_FOLLOWING = STOP_NONE, STOP_FOLLOWING
+_STOP_OVERCURRENT, _STOP_INDEX = STOP_OVERCURRENT, STOP_INDEX
 _NO_WINDOW = 0xFFFFFFFF
 #: the servo's demand kinds as C integers, likewise
 _TORQUE, _VELOCITY, _POSITION = TORQUE, VELOCITY, POSITION
@@ -207,6 +209,8 @@ class Drive(CycleDevice):
         self.q_60ff = self.q_6083 = self.q_6084 = self.q_607a = self.q_60b0 = 0
         self.q_60b1 = self.q_6071 = self.q_60b2 = self.q_6065 = self.q_6085 = 0
         self.q_605a = 0
+        #: whether _snapshot read all of them in this advance() (else the mode's own)
+        self._snap_all = False
         #: the steady demand _steady_demand() found (kind, reference, feed-forward, window)
         self._d_kind = 0
         self._d_ref = self._d_vff = self._d_window = 0.0
@@ -602,6 +606,10 @@ class Drive(CycleDevice):
             # Servo._run: the substeps done, why it stopped in s.stopped (no tuple, P51)
             done = s._run(steps, kind, ref, v_ff, window, self._trip(), index is not None)
             why = s.stopped
+            if why != _STOP_NONE and not self._snap_all:
+                # the rest before the fault's EMCY and log, the index pulse, and the ramp
+                # that follows a fault (the state leaves Operation enabled only here)
+                self._snapshot_all()
             if why == _STOP_FOLLOWING:
                 self._fault("following_error")  # this substep still runs on the demand
                 more = s._run(1, kind, ref, v_ff, 0.0, self._trip(), index is not None)
@@ -631,9 +639,33 @@ class Drive(CycleDevice):
 
     def _snapshot(self) -> None:
         """The OD values the substeps use. They only change between advance() calls (PDO
-        outputs and SDO writes are applied after advancing), so read them once."""
+        outputs and SDO writes are applied after advancing), so read them once. Enabled
+        in csp, csv or cst, only the mode's own: the steady demand reads no other while
+        the state stays; the rest (_snapshot_all) when the servo stops early, before the
+        fault, EMCY, log or index pulse, and the ramp after a fault (decision P82)."""
         if not self._bound:
             self._bind()
+        self._snap_all = False
+        if self.state is _OE:
+            mode = self.mode
+            if mode == _CSP:
+                self.q_607a = _int_of(self._s_607a)
+                self.q_60b0 = _int_of(self._s_60b0)
+                self.q_6065 = _int_of(self._s_6065)
+                return
+            if mode == _CSV:
+                self.q_60ff = _int_of(self._s_60ff)
+                self.q_60b1 = _int_of(self._s_60b1)
+                return
+            if mode == _CST:
+                self.q_6071 = _int_of(self._s_6071)
+                self.q_60b2 = _int_of(self._s_60b2)
+                return
+        self._snapshot_all()
+
+    def _snapshot_all(self) -> None:
+        """Every OD value the substeps use (see _snapshot)."""
+        self._snap_all = True
         self.q_60ff = _int_of(self._s_60ff)
         self.q_6083 = _int_of(self._s_6083)
         self.q_6084 = _int_of(self._s_6084)

@@ -2,6 +2,8 @@
 # state as typed fields and the substep loop's locals as C doubles. servo.py stays the one
 # source of the behaviour; this file only gives types. Decision P2.
 cimport cython
+# C's libm as _libm: servo.py's second name for math, for copysign in _same (a C call)
+cimport libc.math as _libm
 
 
 cdef double _TWO_PI, _RPM
@@ -31,6 +33,7 @@ cdef class Servo:
     cdef public double decay
     cdef public double i_limit_ma
     cdef public double vel_limit_rpm
+    cdef public bint fast_hold
 
     cpdef object read_counts(self)
     cpdef double floor_counts(self) except? -1.0
@@ -46,11 +49,15 @@ cdef class Servo:
         iq_ref=double, flux=bint, done=long, why=int, out=double, err_p=double, v_ref=double,
         err=double, emf=double, err_a=double, v=double, torque=double, drive=double,
         new=double, rev=double, rev_known=bint, now=double, q=double, rev_hi=double,
-        rev_cmp=bint, torque_kind=int, position_kind=int,
+        rev_cmp=bint, torque_kind=int, position_kind=int, id_ma=double, id_integ=double,
+        hold=bint,
         g=Gains,
     )
     cpdef long _run(self, long n, int kind, double ref, double v_ff_rpm, double window,
                     double i_trip_ma, bint index) except? -1
+
+
+cdef inline bint _same(double a, double b) noexcept
 
 
 @cython.locals(k="long long")

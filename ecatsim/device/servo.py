@@ -12,6 +12,10 @@ Ref: TMC8670 §5.1.7-5.1.10, §5.1.14; CiA 402-2 §10-§12.
 from __future__ import annotations
 
 import math
+
+# the same module under a second name: the compiled core takes this one from C's libm
+# (servo.pxd cimports libc.math as _libm), so _libm.copysign is a C call there
+import math as _libm
 from dataclasses import dataclass
 
 TWO_PI = 2.0 * math.pi
@@ -114,6 +118,7 @@ class Servo:
         "_vmax_v",
         "angle",
         "decay",
+        "fast_hold",
         "gains",
         "i_limit_ma",
         "id_integ",
@@ -158,6 +163,9 @@ class Servo:
         self.vel_limit_rpm = 1e9
         #: why the last _run() stopped early (STOP_NONE: it did every substep)
         self.stopped = STOP_NONE
+        #: _run() ends at the first substep that leaves the state as it found it, bit for
+        #: bit (a motor holding still): the substeps after it would repeat it (decision P81)
+        self.fast_hold = True
 
     @property
     def motor(self) -> tuple[float, ...]:
@@ -298,6 +306,11 @@ class Servo:
         integ = self.integ
         iq_ref = self.iq_ref_ma
         flux = bool(self.id_ref_ma or self.id_ma)
+        # the flux axis's state before the first substep (the loop updates it in self)
+        id_ma = self.id_ma
+        id_integ = self.id_integ
+        # whether to look for the fixed point after the first substep (decision P81)
+        hold = self.fast_hold and n > 1
         # the module's constants as locals (C constants in the compiled core)
         torque_kind = _TORQUE
         position_kind = _POSITION
@@ -378,6 +391,21 @@ class Servo:
                     if now != rev:
                         why = _STOP_INDEX
                         break
+            # the first substep did not stop and left every value the next one reads as
+            # it was, bit for bit (iq_ref, emf, ... are set anew before being read; nan is
+            # never the same): the others, with the same demand, would repeat it exactly,
+            # stops included (decision P81)
+            if (
+                done == 1
+                and hold
+                and _same(angle, self.angle)
+                and _same(omega, self.omega)
+                and _same(iq, self.iq_ma)
+                and _same(iq_integ, self.iq_integ)
+                and _same(integ, self.integ)
+                and (not flux or (_same(self.id_ma, id_ma) and _same(self.id_integ, id_integ)))
+            ):
+                done = n
         self.angle = angle
         self.omega = omega
         self.iq_ma = iq
@@ -386,6 +414,13 @@ class Servo:
         self.iq_ref_ma = iq_ref
         self.stopped = why
         return done
+
+
+def _same(a: float, b: float) -> bool:
+    """Whether ``a`` and ``b`` are the same double, bit for bit for the values arithmetic
+    makes: equal and of the same sign where zero (0.0 and -0.0 differ, nan is never the
+    same). IEEE 754 §5.5.1 (copySign), §5.11 (comparisons)."""
+    return a == b and (a != 0.0 or _libm.copysign(1.0, a) == _libm.copysign(1.0, b))
 
 
 def _floor(x: float) -> float:
