@@ -66,6 +66,8 @@ cdef class Drive(CycleDevice):
     cdef public object emcy
     cdef public object emcy_clear
     cdef public object state
+    cdef object _sw_state
+    cdef long long _sw_bits
     cdef long long _t, _ltn
     cdef double _lt
     cdef bint _t_set, _lt_set, _ltn_set
@@ -111,15 +113,18 @@ cdef class Drive(CycleDevice):
                    kind=int, ref=double, v_ff=double, window=double, s=Servo)
     cpdef advance(self, long long now_ns)
 
-    cpdef double _trip(self)
-    cpdef double _window(self)
+    # a C double with -1.0 as its error value: the thread's error state is read only
+    # after a -1.0, not after every call (decision P83)
+    cpdef double _trip(self) except? -1.0
+    cpdef double _window(self) except? -1.0
     @cython.locals(mode="long long")
     cpdef _snapshot(self)
     cpdef _snapshot_all(self)
 
     @cython.locals(mode="long long", v=double, target=double)
     cpdef bint _steady_demand(self) except -1
-    cdef bint _demand(self, int kind, double ref, double v_ff, double window)
+    # C fields set from C arguments, nothing that can raise (P83)
+    cdef bint _demand(self, int kind, double ref, double v_ff, double window) noexcept
 
     @cython.locals(cw="long long", mode="long long", prev="long long")
     cpdef _controlword(self)

@@ -224,6 +224,9 @@ class Drive(CycleDevice):
         self.emcy = emcy
         self.emcy_clear = emcy_clear
         self.state = _SOD  # transitions 0 and 1 at power-on
+        #: statusword bits 0-3, 5, 6 of ``_sw_state`` (None: none yet), see _publish
+        self._sw_state: PdsState | None = None
+        self._sw_bits = 0
         #: t_ns, last_target and last_t_ns as C numbers with a flag for None (decision
         #: P51: no int or float object made per cycle); the properties give the values
         self._t = 0
@@ -819,8 +822,11 @@ class Drive(CycleDevice):
         """Actual values and the statusword into the OD. Ref: TMC8670 Tables 80-83."""
         s = self.servo
         st = self.state
-        si = st  # the state's value: a C integer in the compiled core
-        sw = _STATUS_BITS[si]
+        if st is not self._sw_state:  # the bits of the state last seen, kept (P83)
+            si = st  # the state's value: a C integer in the compiled core
+            self._sw_bits = _STATUS_BITS[si]
+            self._sw_state = st
+        sw = self._sw_bits
         if not _no_voltage(st):
             sw |= SW_VOLTAGE
         if self._al_op:

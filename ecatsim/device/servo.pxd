@@ -37,7 +37,8 @@ cdef class Servo:
 
     cpdef object read_counts(self)
     cpdef double floor_counts(self) except? -1.0
-    cpdef double read_rpm(self)
+    # -1.0 as its error value (a test of the thread's error state only then; P83)
+    cpdef double read_rpm(self) except? -1.0
 
     cpdef tuple run(self, long n, int kind, double ref, double v_ff_rpm=*, double window=*,
                     double i_trip_ma=*, bint index=*)

@@ -152,3 +152,36 @@ def test_the_modes_own_snapshot_is_the_full_snapshot(seed: int) -> None:
     assert partial > 20, partial  # the mode's own snapshot ran
     kinds = {x[0] if isinstance(x, tuple) else x for x in seen_a}
     assert {"emcy", "index"} <= kinds, kinds  # stops with faults and index pulses ran
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_kept_state_bits_follow_every_state(seed: int) -> None:
+    """_publish keeps the statusword bits of the state it saw last (decision P83): after
+    every change of state, by controlword, fault, fault reset or AL change, bits 0-3, 5
+    and 6 are those of the new state. Ref: CiA 402-2 §8.1.3 (Table 30); TMC8670 Table 80."""
+    from ecatsim.device import cia402
+
+    rng = random.Random(seed)
+    d, _ = make(Drive)
+    t = 0
+    states = set()
+    for step in range(400):
+        t += MS
+        if rng.random() < 0.8:
+            cw = (0x80, 0x06, 0x07, 0x0F, 0x0F, 0x0F)[step % 6]  # fault reset, enable
+        else:
+            cw = rng.choice([0x00, 0x02, 0x06, 0x07, 0x0B])
+        d.od.set(0x6040, 0, cw)
+        r = rng.random()
+        if r < 0.02:
+            d.inject("overcurrent")
+        elif r < 0.2:
+            d.inject("overcurrent", False)
+        elif r < 0.23:
+            d.al_state_changed(rng.choice([AlState.OP, AlState.SAFEOP]), t)
+        d.outputs_applied(t)
+        d.update_inputs(t)
+        states.add(d.state)
+        mask = 0x6F
+        assert d.od.value(0x6041) & mask == cia402.STATUS_BITS[d.state] & mask, d.state
+    assert len(states) >= 5, states
