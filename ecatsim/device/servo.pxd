@@ -58,7 +58,8 @@ cdef class Servo:
                     double i_trip_ma, bint index) except? -1
 
 
-cdef inline bint _same(double a, double b) noexcept
+# cpdef: the tests call it in both cores (a static C function to _run, which gcc inlines)
+cpdef bint _same(double a, double b) noexcept
 
 
 @cython.locals(k="long long")

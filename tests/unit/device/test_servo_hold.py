@@ -147,9 +147,7 @@ def test_a_signed_zero_is_not_the_same_state() -> None:
     """-0.0 == 0.0, but a substep may treat them apart: no shortcut across a sign change."""
     from ecatsim.device import servo as servo_module
 
-    same = getattr(servo_module, "_same", None)
-    if same is None:
-        pytest.skip("compiled: _same is a C function (the twins above test it there)")
+    same = servo_module._same
     assert same(0.0, 0.0) and same(-0.0, -0.0) and same(1.5, 1.5)
     assert not same(0.0, -0.0) and not same(-0.0, 0.0)
     assert not same(math.nan, math.nan) and not same(1.0, 2.0)
