@@ -4,6 +4,7 @@ from the description's ``motor:`` section."""
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Any
 
 from ecatsim.device.description import DescriptionError, DeviceDescription
@@ -14,9 +15,14 @@ from ecatsim.slave.emcy import Emergency
 from ecatsim.slave.od import ObjectDictionary
 from ecatsim.slave.pdo import CoeDevice
 
+#: the motor constants the servo divides by (servo.py: the winding's time constant L / R,
+#: the current's R, the acceleration 1 / J, the substep): zero is no motor
+DIVISORS = frozenset({"inductance", "inertia", "resistance", "substep"})
+
 
 def motor_params(raw: Any, src: str) -> MotorParams:
-    """``motor:`` keys are MotorParams fields; one-line errors name the key."""
+    """``motor:`` keys are MotorParams fields; one-line errors name the key. Numbers are
+    finite and not negative, and the servo's divisors (``DIVISORS``) positive."""
     if raw is None:
         return MotorParams()
     if not isinstance(raw, dict):
@@ -33,7 +39,11 @@ def motor_params(raw: Any, src: str) -> MotorParams:
         elif isinstance(default, int) and not isinstance(default, bool):
             if not isinstance(v, int) or v <= 0:
                 raise DescriptionError(f"{src}: motor.{k}: expected a positive integer, got {v!r}")
-        elif not isinstance(v, int | float) or v < 0:
+        elif not isinstance(v, int | float) or isinstance(v, bool) or not math.isfinite(v):
+            raise DescriptionError(f"{src}: motor.{k}: expected a number, got {v!r}")
+        elif k in DIVISORS and v <= 0:
+            raise DescriptionError(f"{src}: motor.{k}: expected a number > 0, got {v!r}")
+        elif v < 0:
             raise DescriptionError(f"{src}: motor.{k}: expected a number >= 0, got {v!r}")
         kw[k] = v
     return MotorParams(**kw)
