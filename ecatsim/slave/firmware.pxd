@@ -14,6 +14,9 @@ cdef long long DC_ACTIVATION_STATUS, DC_SYNC0_STATUS, EV_AL_CONTROL, EV_SM0
 cdef long long EV_SM_ACTIVATION, EV_SYNC0, EV_WATCHDOG_PD, WD_STATUS_PD
 cdef long long SM_MBX_OUT, SM_MBX_IN, SM_PD_OUT, SM_PD_IN
 cdef long long EV_SM1, PD_EVENTS, EVENT_MASK, OP_WAIT_NS
+# the AL states the steady cycle compares with: C globals, each test a pointer comparison
+# without a lookup in the module's dict (P86)
+cdef object _INIT, _SAFEOP, _OP
 
 
 @cython.final

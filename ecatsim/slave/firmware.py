@@ -52,7 +52,8 @@ CTRL_MBX_IN = 0x02  # mailbox, ECAT reads
 CTRL_PD_OUT = 0x04  # buffered, ECAT writes
 CTRL_PD_IN = 0x00  # buffered, ECAT reads
 
-#: the AL states the steady cycle compares with, bound once (compiled: no enum lookups)
+#: the AL states the steady cycle compares with, bound once (compiled: C globals, no enum
+#: or module dict lookups; decision P86)
 _INIT = AlState.INIT
 _SAFEOP = AlState.SAFEOP
 _OP = AlState.OP
