@@ -26,16 +26,17 @@ cdef long long ESC_CONFIG, EV_DC_LATCH, EV_SYNC0, EV_SYNC1, SYNC_LATCH_CONFIG
 @cython.locals(k="long long")
 cdef inline long long _trunc(double x) noexcept
 cdef inline long long _signed64(unsigned long long x) noexcept
-# the register helpers inline (P46)
+# the register helpers inline (P46), on the unit's pointer to the memory: they cannot
+# raise, so no error test follows their calls (P85)
 @cython.locals(lo="unsigned long long", hi="unsigned long long", b3="unsigned long long",
                b7="unsigned long long", p="const unsigned char*")
-cdef inline unsigned long long _get64(bytearray m, long long a) except? 0
+cdef inline unsigned long long _get64(const unsigned char* m, long long a) noexcept
 @cython.locals(b3="unsigned long long", p="const unsigned char*")
-cdef inline unsigned long long _get32(bytearray m, long long a) except? 0
+cdef inline unsigned long long _get32(const unsigned char* m, long long a) noexcept
 @cython.locals(p="unsigned char*")
-cdef inline void _put64(bytearray m, long long a, unsigned long long v) except *
+cdef inline void _put64(unsigned char* m, long long a, unsigned long long v) noexcept
 @cython.locals(p="unsigned char*")
-cdef inline void _put32(bytearray m, long long a, unsigned long long v) except *
+cdef inline void _put32(unsigned char* m, long long a, unsigned long long v) noexcept
 
 
 @cython.final
@@ -44,6 +45,8 @@ cdef class DcUnit:
     # register hooks
     cdef public object esc
     cdef public bytearray mem
+    # the memory's bytes (mem, never resized: the ESC's view holds its buffer), P85
+    cdef unsigned char* mp
     cdef public long long position, hop_ns, turnaround_ns, sync1_countdown
     cdef public long long arrive_ns, latch_wait
     cdef public list port_ns
@@ -57,12 +60,12 @@ cdef class DcUnit:
 
     cpdef int64_t arrival_ns(self, long long frame_t_ns) except? -1
     cpdef unsigned long long local_time(self, long long t_ns) except? 0
-    cpdef void _set_rate(self, double rate_ppb) except *
+    cpdef void _set_rate(self, double rate_ppb) noexcept
     cpdef unsigned long long offset(self) except? 0
     cpdef unsigned long long system_time(self, long long t_ns) except? 0
     cpdef void refresh_system_time(self, long long frame_t_ns) except *
     cpdef void latch_system_time(self, long long t_ns) except *
-    @cython.locals(t="long long", m=bytearray, delay="unsigned long long",
+    @cython.locals(t="long long", delay="unsigned long long",
                    offset="unsigned long long", local_now="unsigned long long",
                    local="unsigned long long", diff="long long", start="long long",
                    gain=double, step="long long", mag="long long", p="unsigned char*")
@@ -71,7 +74,7 @@ cdef class DcUnit:
     @cython.locals(local="long long")
     cpdef int64_t _host_time(self, unsigned long long system_ns) except? -1
     cpdef object sync0_deadline(self)
-    @cython.locals(m=bytearray, n0="unsigned long long", cycle="long long",
+    @cython.locals(n0="unsigned long long", cycle="long long",
                    behind="long long", p="unsigned char*", local="unsigned long long",
                    now_sys="unsigned long long")
     cpdef bint sync0_pulse(self, long long now_ns) except -1
@@ -89,7 +92,7 @@ cdef class DcUnit:
     cpdef bint latch_edge(self, long long unit, bint rising, long long host_ns) except -1
     cpdef bint latch_pdi(self, long long unit) except -1
     @cython.locals(lim="long long", x="long long", p="unsigned char*")
-    cpdef void _speed_counter_diff(self, long long start) except *
+    cpdef void _speed_counter_diff(self, long long start) noexcept
     # the register hooks that the frames of every DC cycle run: C calls from the ESC
     cpdef void _er_system_time(self, long long ra, long long rs) except *
     cpdef void _pr_system_time(self, long long ra, long long rs) except *

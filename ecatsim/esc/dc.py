@@ -77,7 +77,9 @@ def _signed64(x: int) -> int:
 
 
 # The register helpers below take DC registers of the 64 KiB memory only: the compiled
-# core reaches their bytes through a C pointer, without index checks (decision P27).
+# core reaches their bytes through a C pointer, without index checks (decision P27); the
+# callers pass the unit's pointer ``mp``, so the helpers cannot raise and no error test
+# follows their calls (decision P85).
 
 
 def _get64(m: bytearray, a: int) -> int:
@@ -130,6 +132,7 @@ class DcUnit:
         "local_ref",
         "mem",
         "moved_ns",
+        "mp",
         "next_sync1",
         "port_ns",
         "position",
@@ -154,6 +157,9 @@ class DcUnit:
     ) -> None:
         self.esc = esc
         self.mem = esc.mem
+        #: compiled: a pointer to the memory's bytes (fixed: the ESC's view holds the
+        #: buffer, so the memory is never resized; decision P85)
+        self.mp = self.mem
         self.position = position
         self.drift_ppm = drift_ppm
         self.hop_ns = hop_ns
@@ -208,7 +214,7 @@ class DcUnit:
         self.spd = 1.0 + self.drift_ppm * 1e-6 + rate_ppb * 1e-9
 
     def offset(self) -> int:
-        return _get64(self.mem, DC_SYSTEM_TIME_OFFSET)
+        return _get64(self.mp, DC_SYSTEM_TIME_OFFSET)
 
     def system_time(self, t_ns: int) -> int:
         """Local copy of the system time = local time + offset 0x0920. Ref: Table 96."""
@@ -245,14 +251,14 @@ class DcUnit:
 
         Ref: TMC8460 §5.50.2 Table 95.
         """
-        _put64(self.mem, DC_SYSTEM_TIME, self.system_time(self.arrival_ns(frame_t_ns)))
+        _put64(self.mp, DC_SYSTEM_TIME, self.system_time(self.arrival_ns(frame_t_ns)))
 
     def latch_system_time(self, t_ns: int) -> None:
         """PDI read of 0x0910: the system time at host time ``t_ns``, latched into the
         register (the DC unit runs whether or not a master uses it).
         Ref: TMC8460 §5.50.2 Table 95.
         """
-        _put64(self.mem, DC_SYSTEM_TIME, self.system_time(t_ns))
+        _put64(self.mp, DC_SYSTEM_TIME, self.system_time(t_ns))
 
     def system_time_written(self, frame_t_ns: int, value: int, nbytes: int) -> bool:
         """Compare the written system time with the local copy and feed the control loop.
@@ -264,10 +270,9 @@ class DcUnit:
         Ref: TMC8460 §5.50.2 Tables 95, 98, 101.
         """
         t = frame_t_ns + self.arrive_ns  # arrival_ns(), local_time() written out (P76)
-        m = self.mem
-        p = m  # compiled: a pointer to the registers' bytes
-        delay = _get32(m, DC_SYSTEM_TIME_DELAY)
-        offset = _get64(m, DC_SYSTEM_TIME_OFFSET)
+        p = self.mp  # compiled: a pointer to the registers' bytes (P85)
+        delay = _get32(p, DC_SYSTEM_TIME_DELAY)
+        offset = _get64(p, DC_SYSTEM_TIME_OFFSET)
         local_now = (self.local_ref + _trunc((t - self.t_ref) * self.spd)) & MASK64
         local = (local_now + offset - delay) & MASK64
         if nbytes < 8:
@@ -286,10 +291,10 @@ class DcUnit:
             self._set_rate(max(-1e6, min(1e6, self.rate_ppb - diff * gain * 5.0)))
         self.local_ref = (local_now - step) & MASK64
         mag = min(abs(diff), 0x7FFFFFFF)
-        _put32(m, DC_SYSTEM_TIME_DIFF, mag | (HALF32 if diff < 0 else 0))  # compiled: C ints
+        _put32(p, DC_SYSTEM_TIME_DIFF, mag | (HALF32 if diff < 0 else 0))  # compiled: C ints
         self._speed_counter_diff(start)
         # 0x0910 reads back the corrected local copy (refresh_system_time at time t)
-        _put64(m, DC_SYSTEM_TIME, (self.local_ref + offset) & MASK64)
+        _put64(p, DC_SYSTEM_TIME, (self.local_ref + offset) & MASK64)
         self.moved_ns += abs(step)
         if self.moved_ns > MOVE_NS:
             self.moved_ns = 0
@@ -364,12 +369,11 @@ class DcUnit:
         or the host stalled) are skipped rather than fired in a burst.
         Ref: TMC8460 §5.50.4 Tables 106-112; §5.28.2 Table 42 (0x0151 bit 3).
         """
-        m = self.mem
         if not self.sync0_on:
             return False
-        p = m  # compiled: a pointer to the registers' bytes (P76)
+        p = self.mp  # compiled: a pointer to the registers' bytes (P76, P85)
         n0 = self.sync0_at
-        cycle = _get32(m, DC_SYNC0_CYCLE)
+        cycle = _get32(p, DC_SYNC0_CYCLE)
         if p[DC_ACTIVATION] & 0x04:
             self._schedule_sync1(n0, cycle)
         if not p[DC_ACTIVATION] & 0x02:
@@ -388,12 +392,12 @@ class DcUnit:
             n0 = (n0 + cycle) & MASK64
             # system_time(now_ns) written out: local_time's expression plus 0x0920 (P76)
             local = (self.local_ref + _trunc((now_ns - self.t_ref) * self.spd)) & MASK64
-            now_sys = (local + _get64(m, DC_SYSTEM_TIME_OFFSET)) & MASK64
+            now_sys = (local + _get64(p, DC_SYSTEM_TIME_OFFSET)) & MASK64
             behind = _signed64((now_sys - n0) & MASK64)
             if behind >= cycle:
                 n0 = (n0 + (behind // cycle) * cycle) & MASK64
             self.sync0_at = n0
-            _put64(m, DC_START_TIME, n0)
+            _put64(p, DC_START_TIME, n0)
         return bool(p[SYNC_LATCH_CONFIG] & 0x08)
 
     def reset_sync(self) -> None:
@@ -426,7 +430,7 @@ class DcUnit:
             return none
         # _host_time(sync0_at) written out (sync0_at is in [0, 2^64)): C arithmetic
         # without two method calls; the schedule asks several times per pulse (P76)
-        offset = _get64(self.mem, DC_SYSTEM_TIME_OFFSET)
+        offset = _get64(self.mp, DC_SYSTEM_TIME_OFFSET)
         local = _signed64((self.sync0_at - offset - self.local_ref) & MASK64)
         return self.t_ref + _trunc(local / self.spd)
 
@@ -481,7 +485,7 @@ class DcUnit:
         lim = max(0, start - 0x7F)
         x = _trunc(self.rate_ppb * 5e-9 * (start + 2) * (start + 2))
         x = max(-lim, min(lim, x))
-        p = self.mem  # compiled: a pointer to the registers' bytes (P76)
+        p = self.mp  # compiled: a pointer to the registers' bytes (P76)
         p[DC_SPEED_COUNTER_DIFF] = x & 0xFF
         p[DC_SPEED_COUNTER_DIFF + 1] = (x >> 8) & 0xFF
 
@@ -532,7 +536,7 @@ class DcUnit:
         memory, fed to the time control loop; True if the clock jumped (the ESC calls this
         directly for the writers of every DC cycle, decision P26). Ref: TMC8460 §5.50.2
         Table 95."""
-        value = _get64(self.mem, DC_SYSTEM_TIME)  # one load (P76)
+        value = _get64(self.mp, DC_SYSTEM_TIME)  # one load (P76)
         return self.system_time_written(frame_t_ns, value, nbytes)
 
     def _ec_system_time_offset(self, ra: int, rs: int, old: bytes) -> None:

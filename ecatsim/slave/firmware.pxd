@@ -14,6 +14,9 @@ cdef long long DC_ACTIVATION_STATUS, DC_SYNC0_STATUS, EV_AL_CONTROL, EV_SM0
 cdef long long EV_SM_ACTIVATION, EV_SYNC0, EV_WATCHDOG_PD, WD_STATUS_PD
 cdef long long SM_MBX_OUT, SM_MBX_IN, SM_PD_OUT, SM_PD_IN
 cdef long long EV_SM1, PD_EVENTS, EVENT_MASK, OP_WAIT_NS
+# the AL states the steady cycle compares with: C globals, each test a pointer comparison
+# without a lookup in the module's dict (P86)
+cdef object _INIT, _SAFEOP, _OP
 
 
 @cython.final
@@ -42,7 +45,9 @@ cdef class Firmware:
     cpdef void service(self, long long now_ns) except *
     @cython.locals(p=Pdi, ev="long long")
     cpdef bint sync0_latch(self, long long now_ns) except *
-    cdef void _latch(self, Pdi p, long long ev, long long now_ns) except *
+    # the per-pulse helpers only the firmware calls: an int (0, or -1 with an exception
+    # set), so no PyErr_Occurred() test follows each call (P87)
+    cdef int _latch(self, Pdi p, long long ev, long long now_ns) except -1
     # the pulse's time as a C integer down to the image's calls, which take one (an int
     # object only for an Application called through Python; decision P60)
     @cython.locals(pdo=PdoImage, now_ns="long long", has_out=bint)
@@ -50,9 +55,9 @@ cdef class Firmware:
     @cython.locals(now_ns="long long", mbx=MailboxEngine)
     cpdef void run_latched(self) except *
     @cython.locals(pdo=PdoImage)
-    cdef void _apply_outputs(self, object out, long long now_ns) except *
+    cdef int _apply_outputs(self, object out, long long now_ns) except -1
     @cython.locals(want="long long", pending=bint, mbx=MailboxEngine)
     cpdef void service_mailbox(self, long long ev, long long now_ns) except *
-    cpdef void _outputs_received(self, long long now_ns) except *
+    cdef int _outputs_received(self, long long now_ns) except -1
     @cython.locals(pdo=PdoImage, p=Pdi)
-    cpdef void _write_inputs(self, long long now_ns) except *
+    cdef int _write_inputs(self, long long now_ns) except -1

@@ -52,7 +52,8 @@ CTRL_MBX_IN = 0x02  # mailbox, ECAT reads
 CTRL_PD_OUT = 0x04  # buffered, ECAT writes
 CTRL_PD_IN = 0x00  # buffered, ECAT reads
 
-#: the AL states the steady cycle compares with, bound once (compiled: no enum lookups)
+#: the AL states the steady cycle compares with, bound once (compiled: C globals, no enum
+#: or module dict lookups; decision P86)
 _INIT = AlState.INIT
 _SAFEOP = AlState.SAFEOP
 _OP = AlState.OP
@@ -243,6 +244,9 @@ class Firmware:
         return True
 
     def _latch(self, p: Pdi, ev: int, now_ns: int) -> None:
+        """The pulse's acknowledge and the outputs taken from SM2 (compiled, this and the
+        other per-pulse helpers return a C int, so no error test follows their calls;
+        decision P87)."""
         p.u8(DC_SYNC0_STATUS)  # acknowledges the event
         if ev & (EV_SM0 << SM_PD_OUT) and p.sm_read_into(SM_PD_OUT, self.sync_out):
             self.sync_has_out = True  # sm_read's bytes, in the buffer (P70)
