@@ -206,6 +206,7 @@ def run_bringup(n: int, cycles_k: int, period_us: int, overlap: bool,
     import pysoem
 
     tmp = Path(tempfile.mkdtemp(prefix="ecatsim-bringup-"))
+    failure = ""
     with NetnsPair() as pair, daemons(pair, n, chain, extra, tmp) as ds:
         pids = daemon_pids(ds)
         if restart:
@@ -224,7 +225,15 @@ def run_bringup(n: int, cycles_k: int, period_us: int, overlap: bool,
                 master_scheduling(master_rt, master_cpu) as master,
             ):
                 t0 = time.perf_counter()
-                bring_up(m, cap, pair, n, period_us, overlap)
+                try:
+                    bring_up(m, cap, pair, n, period_us, overlap)
+                except master_errors(pysoem) as e:  # said below, with the host
+                    failure = (
+                        str(e.code) if isinstance(e, SystemExit) else f"{type(e).__name__} {e}"
+                    )
+                    cap.mark("end")
+                    time.sleep(0.05)
+                    raise _MasterGaveUp from e
                 bring_up_s = time.perf_counter() - t0
                 cap.mark("cycles")
                 cpu0, wall0 = [cpu_seconds(p) for p in pids], time.perf_counter()
@@ -238,9 +247,13 @@ def run_bringup(n: int, cycles_k: int, period_us: int, overlap: bool,
                 ]
                 cap.mark("end")
                 time.sleep(0.05)
+        except _MasterGaveUp:
+            pass
         finally:
             m.close()
     found = cap.frames()
+    if failure:
+        raise SystemExit(gave_up(failure, found, watch))
     frames = analyse(found, cap.marks)
     frames.get("phases", {}).pop("end", None)
     kept = {k: cyc[k] for k in ("cycles", "lost", "wkc_errors", "expected_wkc", "wkc_error_seen",
@@ -253,6 +266,27 @@ def run_bringup(n: int, cycles_k: int, period_us: int, overlap: bool,
             "bring_up_s": round(bring_up_s, 2), "frames": frames,
             "cycles": {**kept, "daemon_cpu_percent": each},
             **observed(watch, found, ds)}  # fmt: skip
+
+
+def master_errors(pysoem: Any) -> tuple[type[BaseException], ...]:
+    """The errors of a master that gives up on the segment: pysoem's, and the bring-up's
+    own (SystemExit: too few slaves, no SAFEOP, no OP)."""
+    names = ("ConfigMapError", "SdoError", "PacketError", "MailboxError", "WkcError",
+             "EepromError")  # fmt: skip
+    return (SystemExit, *(getattr(pysoem, k) for k in names))
+
+
+class _MasterGaveUp(Exception):
+    """The timed master's bring-up ended in one of its errors (``run_bringup``)."""
+
+
+def gave_up(failure: str, found: list[Frame], watch: StallWatch) -> str:
+    """One line for a bring-up the master gave up: its error, and the replies the capture
+    saw later than a stock master waits (2 ms) with the host's stalls during the run
+    (decision B8), the common cause on a host that stalls."""
+    late = late_replies(found, LATE_US)
+    return (f"bench: the master gave up during its bring-up: {failure}; "
+            + StallWatch.text(watch.report(late)))  # fmt: skip
 
 
 def chain_text(n: int, chain: int, extra: tuple[str, ...]) -> list[dict[str, Any]]:

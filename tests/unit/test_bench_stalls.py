@@ -10,6 +10,7 @@ import json
 import os
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 from ecatsim.bench.bringup import stopped_counts
 from ecatsim.bench.capture import Frame, late_replies
@@ -75,3 +76,26 @@ def test_the_daemon_s_stopped_line_is_read_from_its_log(tmp_path: Path) -> None:
     assert stopped_counts(d) == {"frames": 10, "sync0_merged": 3, "gc_max_us": 120, "failures": 0}
     log.write_text(f"--- start 1: x\n{earlier}\n--- start 2: x\n" + '{"event": "ready"}\n')
     assert stopped_counts(d) == {}  # killed: no stopped line in this start
+
+
+def test_a_master_that_gives_up_is_one_line_with_the_host_s_part() -> None:
+    """The bring-up's master failing (a pysoem error, or the bench's own SystemExit) ends the
+    run with its error and the host's stalls against the late replies seen until then."""
+    from ecatsim.bench.bringup import gave_up, master_errors
+
+    w = StallWatch()
+    w.stalls = [(10 * MS, 13 * MS)]
+    w.worst_s = 0.003
+    frames = [frame(9.5, False, 1), frame(13.5, True, 1), frame(20.0, False, 2),
+              frame(20.1, True, 2)]  # fmt: skip
+    line = gave_up("ConfigMapError [PacketError(48, 1)]", frames, w)
+    assert line == (
+        "bench: the master gave up during its bring-up: ConfigMapError [PacketError(48, 1)]; "
+        "host during the run: 1 stalls of 1 ms or more (longest 3.0 ms), 0 slow spots; "
+        "replies over 2 ms: 1, 1 during a stall, 1 during a stall or a slow spot"
+    )
+    assert "\n" not in line
+    names = ("ConfigMapError", "SdoError", "PacketError", "MailboxError", "WkcError",
+             "EepromError")  # fmt: skip
+    fake = SimpleNamespace(**{k: type(k, (Exception,), {}) for k in names})  # pysoem's names
+    assert master_errors(fake) == (SystemExit, *(getattr(fake, k) for k in names))
