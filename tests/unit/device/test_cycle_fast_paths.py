@@ -24,6 +24,7 @@ from ecatsim.device.drive import CSP, CST, CSV, HM, PP, PV, Drive
 from ecatsim.device.servo import POSITION, STOP_INDEX, STOP_NONE, VELOCITY, MotorParams, Servo
 from ecatsim.slave.al import AlState
 from ecatsim.slave.od_build import build_od
+from tests.support.drive_twins import Log, drive_state
 
 MS = 1_000_000
 SERVO = ("angle", "omega", "iq_ma", "iq_integ", "integ", "iq_ref_ma")
@@ -41,19 +42,6 @@ FIELDS = (
 )
 
 
-class Log:
-    """The drive's logger: every call recorded."""
-
-    def __init__(self, out: list[tuple[object, ...]]) -> None:
-        self.out = out
-
-    def info(self, event: str, **kw: object) -> None:
-        self.out.append(("info", event, tuple(sorted(kw.items()))))
-
-    def warning(self, event: str, **kw: object) -> None:
-        self.out.append(("warning", event, tuple(sorted(kw.items()))))
-
-
 def make() -> tuple[Drive, list[object], list[tuple[object, ...]]]:
     emcys: list[object] = []
     logs: list[tuple[object, ...]] = []
@@ -69,15 +57,7 @@ def make() -> tuple[Drive, list[object], list[tuple[object, ...]]]:
 
 
 def snapshot(d: Drive) -> tuple[object, ...]:
-    d.pub_flush()
-    values = [(o.index, s, e.value) for o in d.od.objects.values() for s, e in o.entries.items()]
-    return (
-        values,
-        [getattr(d, k) for k in FIELDS],
-        [getattr(d.servo, k) for k in SERVO],
-        [getattr(d.profile, k) for k in ("pos", "vel", "target", "vmax", "acc", "dec")],
-        sorted(d.active_faults),
-    )
+    return drive_state(d, FIELDS, SERVO)
 
 
 #: controlwords: the state machine's commands, with and without bit 4 (new set point),

@@ -22,6 +22,7 @@ from ecatsim.device.description import default_description
 from ecatsim.device.drive import CSP, CST, CSV, HM, PP, PV, Drive
 from ecatsim.slave.al import AlState
 from ecatsim.slave.od_build import build_od
+from tests.support.drive_twins import Log, drive_state
 
 MS = 1_000_000
 SERVO = ("angle", "omega", "iq_ma", "iq_integ", "integ", "iq_ref_ma", "id_ma", "id_integ")
@@ -49,17 +50,6 @@ class FullSnapshot(Drive):
         self._snapshot_all()
 
 
-class Log:
-    def __init__(self, out: list[tuple[object, ...]]) -> None:
-        self.out = out
-
-    def info(self, event: str, **kw: object) -> None:
-        self.out.append(("info", event, tuple(sorted(kw.items()))))
-
-    def warning(self, event: str, **kw: object) -> None:
-        self.out.append(("warning", event, tuple(sorted(kw.items()))))
-
-
 def make(cls: type[Drive]) -> tuple[Drive, list[object]]:
     seen: list[object] = []
     d = cls(
@@ -68,22 +58,14 @@ def make(cls: type[Drive]) -> tuple[Drive, list[object]]:
         lambda c, r, b: seen.append(("emcy", c, r, b)),
         lambda: seen.append("clear"),
     )
-    d.log = Log(seen)  # type: ignore[assignment]
+    d.log = Log(seen)
     d.index_output = lambda level, t: seen.append(("index", level, t))
     d.al_state_changed(AlState.OP, 0)
     return d, seen
 
 
 def state_of(d: Drive) -> tuple[object, ...]:
-    d.pub_flush()
-    values = [(o.index, s, e.value) for o in d.od.objects.values() for s, e in o.entries.items()]
-    return (
-        values,
-        [getattr(d, k) for k in FIELDS],
-        [getattr(d.servo, k) for k in SERVO],
-        [getattr(d.profile, k) for k in ("pos", "vel", "target", "vmax", "acc", "dec")],
-        sorted(d.active_faults),
-    )
+    return drive_state(d, FIELDS, SERVO)
 
 
 @pytest.mark.parametrize("seed", range(16))
@@ -183,5 +165,5 @@ def test_the_kept_state_bits_follow_every_state(seed: int) -> None:
         d.update_inputs(t)
         states.add(d.state)
         mask = 0x6F
-        assert d.od.value(0x6041) & mask == cia402.STATUS_BITS[d.state] & mask, d.state
+        assert int(d.od.value(0x6041)) & mask == cia402.STATUS_BITS[d.state] & mask, d.state
     assert len(states) >= 5, states
