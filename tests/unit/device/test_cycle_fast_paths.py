@@ -24,22 +24,9 @@ from ecatsim.device.drive import CSP, CST, CSV, HM, PP, PV, Drive
 from ecatsim.device.servo import POSITION, STOP_INDEX, STOP_NONE, VELOCITY, MotorParams, Servo
 from ecatsim.slave.al import AlState
 from ecatsim.slave.od_build import build_od
-from tests.support.drive_twins import Log, drive_state
+from tests.support.drive_twins import SERVO, Log, drive_state, perturb
 
 MS = 1_000_000
-SERVO = ("angle", "omega", "iq_ma", "iq_integ", "integ", "iq_ref_ma")
-FIELDS = (
-    "state",
-    "mode",
-    "prev_cw",
-    "p_demand",
-    "v_demand_rpm",
-    "set_point_ack",
-    "homing_done",
-    "homing_active",
-    "fault_code",
-    "last_target",
-)
 
 
 def make() -> tuple[Drive, list[object], list[tuple[object, ...]]]:
@@ -57,7 +44,7 @@ def make() -> tuple[Drive, list[object], list[tuple[object, ...]]]:
 
 
 def snapshot(d: Drive) -> tuple[object, ...]:
-    return drive_state(d, FIELDS, SERVO)
+    return drive_state(d)
 
 
 #: controlwords: the state machine's commands, with and without bit 4 (new set point),
@@ -95,18 +82,9 @@ def test_the_repeated_controlword_path_is_the_full_path(seed: int) -> None:
         sets[0x60FF] = rng.randint(-500, 500)
         fault = rng.random()
         al = rng.random()
+        sets[0x6040] = cw  # written last
         for d in (fast, full):
-            for index, value in sets.items():
-                d.od.set(index, 0, value)
-            d.od.set(0x6040, 0, cw)
-            if fault < 0.01:
-                d.inject("overcurrent")
-            elif fault < 0.02:
-                d.inject("overcurrent", False)
-            if al < 0.01:
-                d.al_state_changed(AlState.SAFEOP, t)
-            elif al < 0.03:
-                d.al_state_changed(AlState.OP, t)
+            perturb(d, sets, fault, al, t, release=0.02)
         if cw == fast.prev_cw and cw == fast._quiet_cw and fast.state is fast._quiet_state:
             hits += 1
             states.add((fast.state, fast.mode))

@@ -22,24 +22,9 @@ from ecatsim.device.description import default_description
 from ecatsim.device.drive import CSP, CST, CSV, HM, PP, PV, Drive
 from ecatsim.slave.al import AlState
 from ecatsim.slave.od_build import build_od
-from tests.support.drive_twins import Log, drive_state
+from tests.support.drive_twins import Log, drive_state, perturb
 
 MS = 1_000_000
-SERVO = ("angle", "omega", "iq_ma", "iq_integ", "integ", "iq_ref_ma", "id_ma", "id_integ")
-FIELDS = (
-    "state",
-    "mode",
-    "prev_cw",
-    "p_demand",
-    "v_demand_rpm",
-    "v_ff_rpm",
-    "set_point_ack",
-    "homing_done",
-    "homing_active",
-    "fault_code",
-    "last_target",
-    "t_ns",
-)
 
 
 class FullSnapshot(Drive):
@@ -65,7 +50,7 @@ def make(cls: type[Drive]) -> tuple[Drive, list[object]]:
 
 
 def state_of(d: Drive) -> tuple[object, ...]:
-    return drive_state(d, FIELDS, SERVO)
+    return drive_state(d)
 
 
 @pytest.mark.parametrize("seed", range(16))
@@ -112,16 +97,7 @@ def test_the_modes_own_snapshot_is_the_full_snapshot(seed: int) -> None:
         fault = rng.random()
         al = rng.random()
         for d in (lazy, full):
-            for index, value in sets.items():
-                d.od.set(index, 0, value)
-            if fault < 0.01:
-                d.inject("overcurrent")
-            elif fault < 0.1:
-                d.inject("overcurrent", False)
-            if al < 0.01:
-                d.al_state_changed(AlState.SAFEOP, t)
-            elif al < 0.03:
-                d.al_state_changed(AlState.OP, t)
+            perturb(d, sets, fault, al, t, release=0.1)
         if lazy.state.name == "OPERATION_ENABLED" and lazy.mode in (CSP, CSV, CST):
             partial += 1
         late = t + rng.choice([0, MS // 2])
