@@ -6,6 +6,7 @@ loopback link with a manual clock.
     .venv/bin/python tools/cycle_profile.py --drives 1 --cycles 2000          # us per cycle
     .venv/bin/python tools/cycle_profile.py --drives 16 --profile | head -40  # cProfile
     tools/icount.sh 1 --idle       # instructions per cycle (callgrind, two run lengths)
+    tools/icount.sh 64 --hold --responder  # drives holding still (decision P81)
     tools/icount.sh 1 --responder  # the frame through the compiled responder
     tools/icount.sh 1 --cold       # code and data lines a frame misses in a cold L2
 
@@ -33,6 +34,12 @@ def main() -> int:
     ap.add_argument("--cycles", type=int, default=2000)
     ap.add_argument("--device", default="tmc8670", help="tmc8670 | echo")
     ap.add_argument("--idle", action="store_true", help="drives in OP but not enabled")
+    ap.add_argument(
+        "--hold",
+        action="store_true",
+        help="drives enabled in csp holding their position (the target stays 0), as SOEM's "
+        "red_test leaves them",
+    )
     ap.add_argument("--profile", action="store_true", help="cProfile, sorted by own time")
     ap.add_argument(
         "--responder",
@@ -49,6 +56,8 @@ def main() -> int:
     )
     args = ap.parse_args()
     c = CspCycle(args.drives, args.device, enable=not args.idle, responder=args.responder)
+    if args.hold:
+        c.amplitude = 0
     if args.evict:
         evict = memoryview(bytearray(b"\1" * (args.evict << 20)))[::64]
         deliver = c.deliver
