@@ -99,3 +99,18 @@ def test_a_master_that_gives_up_is_one_line_with_the_host_s_part() -> None:
              "EepromError")  # fmt: skip
     fake = SimpleNamespace(**{k: type(k, (Exception,), {}) for k in names})  # pysoem's names
     assert master_errors(fake) == (SystemExit, *(getattr(fake, k) for k in names))
+
+
+def test_a_kickcat_run_is_spoiled_by_a_stall_over_each_late_reply_or_by_steal_time() -> None:
+    """A late reply is the host's when a stall overlapped it, or when the hypervisor took
+    CPU time during the run (steal time); a run with no late reply is never spoiled."""
+    from tests.support.kickcat import Trial
+
+    w = StallWatch()
+    w.stalls = [(10 * MS, 12 * MS)]
+    w.worst_s = 0.002
+    late = [(9 * MS, 12 * MS), (20 * MS, 23 * MS)]  # the second: no stall over it
+    assert Trial({}, {}, late[:1], w).spoiled_by_the_host()
+    assert not Trial({}, {}, late, w).spoiled_by_the_host()
+    assert Trial({}, {}, late, w, steal_s=0.01).spoiled_by_the_host()
+    assert not Trial({}, {}, [], w, steal_s=0.5).spoiled_by_the_host()
