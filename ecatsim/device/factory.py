@@ -37,7 +37,7 @@ def motor_params(raw: Any, src: str) -> MotorParams:
             if v not in ("pmsm", "stepper"):
                 raise DescriptionError(f"{src}: motor.{k}: use pmsm or stepper")
         elif isinstance(default, int) and not isinstance(default, bool):
-            if not isinstance(v, int) or v <= 0:
+            if not isinstance(v, int) or isinstance(v, bool) or v <= 0:
                 raise DescriptionError(f"{src}: motor.{k}: expected a positive integer, got {v!r}")
         elif not isinstance(v, int | float) or isinstance(v, bool) or not math.isfinite(v):
             raise DescriptionError(f"{src}: motor.{k}: expected a number, got {v!r}")

@@ -34,6 +34,7 @@ ROOT = Path(__file__).resolve().parents[3]
         ({"load": True}, "d.yaml: motor.load: expected a number, got True"),
         ({"kt": "0.05"}, "d.yaml: motor.kt: expected a number, got '0.05'"),
         ({"ppr": 0}, "d.yaml: motor.ppr: expected a positive integer, got 0"),
+        ({"pole_pairs": True}, "d.yaml: motor.pole_pairs: expected a positive integer, got True"),
         ({"volts": 24}, "d.yaml: motor.volts: unknown key (allowed: motor_type, pole_pairs, "),
     ],
 )
