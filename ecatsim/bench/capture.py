@@ -382,12 +382,8 @@ class Capture:
         size = FRAME_MAX if keep_wkc else snap
         master = self._socks[0]  # the master's end comes first
         raw, wkcs = self.raw, self.wkcs
-        while True:
+        while not self._stop.is_set():  # a busy link keeps select from ever timing out
             ready = select.select(self._socks, [], [], 0.05)[0]
-            if not ready:
-                if self._stop.is_set():
-                    return
-                continue
             for s in ready:
                 data, anc, _flags, addr = s.recvmsg(size, space)
                 sent = addr[2] == PACKET_OUTGOING

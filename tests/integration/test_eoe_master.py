@@ -4,7 +4,9 @@ directions, and an address set with EoE Set IP Parameter appears on the slave's 
 
 The master is tests/support/eoe_bridge.c on the SOEM that pysoem's sdist carries
 (ecx_EOEsend, ecx_EOEreadfragment, ecx_EOEsetIp, ecx_EOEgetIp), built once
-(tests/support/soem_build.py). Ref: ETG.1000.6 §5.7.
+(tests/support/soem_build.py) with a 50 ms frame timeout: these tests are about EoE, and
+the host's stalls past SOEM's default 2 ms are the bench's to measure (docs/performance.md).
+A wide guard still holds the daemon's reply times. Ref: ETG.1000.6 §5.7.
 """
 
 from __future__ import annotations
@@ -15,12 +17,15 @@ import subprocess
 import time
 from pathlib import Path
 
+from ecatsim.bench.capture import Capture, late_replies, reply_stats
 from ecatsim.ctl.server import request
 from tests.integration.conftest import DaemonFactory
 from tests.integration.netns import NetnsPair, in_netns, proc_status
 from tests.support.icmp import Pinger
 from tests.support.soem_build import eoe_bridge
 
+#: a reply this late would cost a stock SOEM (2 ms timeout) its frame
+LATE_US = 2000
 SLAVE_TAP = "eoeslave"
 MASTER_TAP = "eoemaster"
 SEGMENT = f"""
@@ -105,51 +110,56 @@ def test_soem_bridges_pings_to_the_second_drive_and_sets_its_ip(
         assert ready.startswith("ready ") and "slaves=2" in ready, ready
         expected = int(ready.split("expected=")[1].split()[0])
         assert expected == 6  # SOEM's rule for an LRW: 2 x two drives' outputs + inputs
-        run("ip", "-n", ns_m, "addr", "add", "10.77.0.1/24", "dev", MASTER_TAP)
-        run("ip", "-n", ns_m, "link", "set", MASTER_TAP, "up")
-        with in_netns(ns_m):
-            pinger = Pinger()
-        try:
-            answered = pinger.ping("10.77.0.2", 20, timeout=3.0)
-            answered_big = pinger.ping("10.77.0.2", 5, size=1400, timeout=3.0, interval=0.3)
-            st, eoe = b.stats(), request(ctl, {"cmd": "status"})["slaves"][1]["eoe"]
-            why = (answered, answered_big, st, eoe)
-            # the daemon loses no frame either way (a frame the master cut short, when its
-            # retry after a late answer starts the frame again, is the master's); every ping
-            # is answered, except one that SOEM's own 2 ms receive timeout cost: a process
-            # data cycle without a reply in time (noframe) shows its host was too busy
-            assert eoe["to_master_dropped"] == 0, why
-            assert eoe["to_slave_dropped"] <= st["send_failed"], why
-            assert st["rx_broken"] == 0, why
-            lost = 25 - answered - answered_big
-            assert lost == 0 or (lost == 1 and st["noframe"] + st["send_failed"] > 0), why
-
-            # EoE Set IP Parameter: the new address replaces the old one on the TAP
-            assert b.ask("setip 10.77.0.9/24") == "setip 1"
-            assert tap_addresses(ns_s, SLAVE_TAP) == ["10.77.0.9/24"]
-            assert b.ask("getip") == "getip 1 10.77.0.9 255.255.255.0"
-            assert pinger.ping("10.77.0.9", 3, timeout=3.0) == 3
-        finally:
-            pinger.close()
-
-        st = b.stats()
-        assert st["expected"] == expected and st["cycles"] > 200
-        assert st["mismatch"] == 0, st  # every reply had the expected working counter
-        assert st["noframe"] <= st["cycles"] // 100, st  # host load only, not the slaves
-        assert st["to_slave"] >= 28 and st["to_master"] >= 28
-
-        status = request(ctl, {"cmd": "status"})
-        eoe = status["slaves"][1]["eoe"]
-        assert "eoe" not in status["slaves"][0]
-        assert eoe["ip"] == "10.77.0.9"
-        assert eoe["to_slave_frames"] >= 28 and eoe["to_master_frames"] >= 28
+        ends = (ns_m, netns_pair.master_if), (ns_s, netns_pair.slave_if)
+        with Capture.both_ends(*ends) as cap:
+            answered, answered_big = _pings_and_set_ip(b, ns_m, ns_s)
+            st = b.stats()
+        replies = reply_stats(frames := cap.frames())
+        late = late_replies(frames, LATE_US)
+        eoe = request(ctl, {"cmd": "status"})["slaves"][1]["eoe"]
+        why = json.dumps({"pings": [answered, answered_big], "bridge": st, "eoe": eoe,
+                          "replies": replies, "late": len(late)})  # fmt: skip
+        # every ping is answered, every frame crosses whole (no fragment out of sequence,
+        # none dropped either way), every process data cycle has its reply with the
+        # expected working counter
+        assert (answered, answered_big) == (20, 5), why
+        assert st["expected"] == expected and st["cycles"] > 200, why
+        assert st["mismatch"] == 0 and st["noframe"] == 0, why
+        assert st["send_failed"] == 0 and st["rx_broken"] == 0, why
+        assert st["to_slave"] >= 28 and st["to_master"] >= 28, why
+        assert eoe["to_slave_dropped"] == 0 and eoe["to_master_dropped"] == 0, why
+        assert eoe["to_slave_frames"] >= 28 and eoe["to_master_frames"] >= 28, why
         # 1400-byte pings: 15 fragments of at most 96 bytes + the rest each way
-        assert eoe["to_master_fragments"] >= eoe["to_master_frames"] + 5 * 14
-        assert eoe["to_slave_fragments"] >= eoe["to_slave_frames"] + 5 * 14
-        assert eoe["to_slave_dropped"] <= st["send_failed"] and eoe["to_master_dropped"] == 0
-        assert eoe["requests"] == 2 and eoe["refused"] == 0
+        assert eoe["to_master_fragments"] >= eoe["to_master_frames"] + 5 * 14, why
+        assert eoe["to_slave_fragments"] >= eoe["to_slave_frames"] + 5 * 14, why
+        assert eoe["requests"] == 2 and eoe["refused"] == 0, why
+        assert eoe["ip"] == "10.77.0.9", why
+        assert "eoe" not in request(ctl, {"cmd": "status"})["slaves"][0]
+        # a wide guard on the daemon's reply times while EoE flows (the bench measures them)
+        assert replies["frames"] > 2 * st["cycles"] // 3, why
+        assert len(late) <= replies["frames"] // 100, why
     finally:
         b.close()
+
+
+def _pings_and_set_ip(b: Bridge, ns_m: str, ns_s: str) -> tuple[int, int]:
+    """Pings across the bridge (20 small, 5 of 1400 bytes), then EoE Set IP Parameter and
+    Get IP Parameter, and pings to the new address: the first two groups' pings answered."""
+    run("ip", "-n", ns_m, "addr", "add", "10.77.0.1/24", "dev", MASTER_TAP)
+    run("ip", "-n", ns_m, "link", "set", MASTER_TAP, "up")
+    with in_netns(ns_m):
+        pinger = Pinger()
+    try:
+        answered = pinger.ping("10.77.0.2", 20, timeout=3.0)
+        answered_big = pinger.ping("10.77.0.2", 5, size=1400, timeout=3.0, interval=0.3)
+        # EoE Set IP Parameter: the new address replaces the old one on the TAP
+        assert b.ask("setip 10.77.0.9/24") == "setip 1"
+        assert tap_addresses(ns_s, SLAVE_TAP) == ["10.77.0.9/24"]
+        assert b.ask("getip") == "getip 1 10.77.0.9 255.255.255.0"
+        assert pinger.ping("10.77.0.9", 3, timeout=3.0) == 3
+    finally:
+        pinger.close()
+    return answered, answered_big
 
 
 def test_eoe_daemon_keeps_cap_net_admin_and_sets_the_ip_as_another_user(

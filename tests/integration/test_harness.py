@@ -18,6 +18,7 @@ from typing import Any
 
 import pytest
 
+from ecatsim.bench.capture import Capture
 from tests.integration.netns import (
     Daemon,
     NetnsPair,
@@ -223,3 +224,35 @@ def test_daemon_that_dies_fails_with_its_log(netns_pair: NetnsPair, tmp_path: Pa
         d.start(timeout=20)
     assert not d.alive()
     assert d.stop() is None
+
+
+def test_a_capture_stops_at_once_on_a_busy_link(netns_pair: NetnsPair) -> None:
+    """A capture's thread ends when the block ends, though frames keep arriving (a busy
+    link never lets it wait out a select); its sockets are closed only after it ended."""
+    frame = bytes.fromhex("ffffffffffff02000000000088a4") + bytes(46)
+    stop = threading.Event()
+
+    def flood() -> None:
+        with in_netns(netns_pair.master_ns):
+            s = socket.socket(socket.AF_PACKET, socket.SOCK_RAW)
+        s.bind((netns_pair.master_if, 0))
+        while not stop.is_set():
+            s.send(frame)
+            time.sleep(0.0001)
+        s.close()
+
+    sender = threading.Thread(target=flood)
+    sender.start()
+    try:
+        ends = (netns_pair.master_ns, netns_pair.master_if), (netns_pair.slave_ns,
+                                                              netns_pair.slave_if)  # fmt: skip
+        with Capture.both_ends(*ends) as cap:
+            time.sleep(0.3)
+            assert cap._thread is not None
+            t0 = time.monotonic()
+        assert time.monotonic() - t0 < 0.5
+        assert not cap._thread.is_alive()
+        assert len(cap.raw) > 100  # the flood was seen at the slave's end
+    finally:
+        stop.set()
+        sender.join()

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -23,6 +24,10 @@ TOOL = Path(__file__).resolve().parents[2] / "tools" / "kickcat_master.py"
 
 #: KickCAT's default link timeout: a reply later than this is a lost frame to it
 KICKCAT_TIMEOUT_US = 2000
+#: KickCAT runs at most, while the host spoils each: a CI machine's stalls and steal time
+#: come in bursts of seconds, so a repeat waits :data:`PAUSE_S` after the run before it
+RUNS = 8
+PAUSE_S = 2.0
 #: a host stall that can cost KickCAT a frame: half its link timeout, with the daemon's own
 #: reply time (tens of microseconds for one slave) and KickCAT's polling naps on top
 HOST_STALL_S = 0.001
@@ -122,7 +127,7 @@ def kickcat_until_clean(
     pair: NetnsPair,
     restart: Callable[[], None],
     expected: dict[str, Any],
-    runs: int = 5,
+    runs: int = RUNS,
     **kwargs: Any,
 ) -> Trial:
     """Run KickCAT (``kickcat_trial(pair, **kwargs)``) until a run is :meth:`Trial.clean`.
@@ -130,7 +135,8 @@ def kickcat_until_clean(
     A run that is not clean fails the test at once unless the host spoiled it
     (:meth:`Trial.spoiled_by_the_host`: KickCAT gives up on the first frame late past 2 ms,
     and a descheduled virtual CPU stops the daemon and the master alike): only then it is
-    run again from power-up (``restart()``), at most ``runs`` runs in all."""
+    run again from power-up (``restart()``), :data:`PAUSE_S` after it, at most ``runs`` runs
+    in all."""
     spoiled: list[str] = []
     for _ in range(runs):
         trial = one_trial(pair, expected, **kwargs)
@@ -139,5 +145,6 @@ def kickcat_until_clean(
         if not trial.spoiled_by_the_host():
             pytest.fail(f"KickCAT's run failed, not for a host stall: {trial}; before: {spoiled}")
         spoiled.append(str(trial))
+        time.sleep(PAUSE_S)
         restart()
     pytest.fail(f"the host stalled in each of {runs} KickCAT runs: {spoiled}")
