@@ -24,7 +24,6 @@ cdef class PdoImage(SmImage):
     cdef object _rx_st, _tx_st
     cdef Py_ssize_t _rx_need
     cdef tuple _rx_entries, _tx_entries
-    cdef list _rx_kept
     cdef tuple _rx_layout, _tx_layout
     # the layouts' tables and pointers to their bytes, kept beside them (P89)
     cdef bytearray _rx_tab, _tx_tab
@@ -40,8 +39,7 @@ cdef class PdoImage(SmImage):
     # the outputs from a pointer to bytes or to the firmware's latched buffer (P33, P70)
     @cython.locals(entries=tuple, i="Py_ssize_t", e=Entry, spec="long long",
                    off="Py_ssize_t", n="long long", raw="long long", half="long long",
-                   byte="long long", t="const unsigned char*", j="Py_ssize_t",
-                   kept=list, last=object, obj=object)
+                   byte="long long", t="const unsigned char*", j="Py_ssize_t")
     cdef void _rx_decode(self, const unsigned char* q) except *
     cpdef bytes get_inputs(self, long long now_ns)
     @cython.locals(dev=CycleDevice)

@@ -410,8 +410,6 @@ class PdoImage(SmImage):
         #: the output struct's size (-1: no struct), a C integer for the per-cycle test
         self._rx_need = rx.st.size if rx is not None else -1
         self._rx_entries = rx.entries if rx is not None else ()
-        #: per RxPDO entry, the int object _rx_decode gave it last (None: none yet, P91)
-        self._rx_kept: list[int | None] = [None] * len(self._rx_entries)
         self._rx_layout = rx.layout if rx is not None else None
         self._tx_st = tx.st if tx is not None else None
         self._tx_entries = tx.entries if tx is not None else ()
@@ -480,7 +478,6 @@ class PdoImage(SmImage):
         checked that the struct fits."""
         entries: tuple[Entry, ...] = self._rx_entries
         t = self._rx_tp  # the layout's table (P89), one row per entry
-        kept = self._rx_kept
         for i in range(len(entries)):
             j = 4 * i
             off = t[j] | t[j + 1] << 8
@@ -503,14 +500,7 @@ class PdoImage(SmImage):
             if spec & 8 and raw >= half:
                 raw -= half << 1
             e = entries[i]
-            last = kept[i]
-            # the entry still holds the int this decoder gave it, of this value: assigning
-            # it anew would change nothing, not even the object (P91)
-            if last is not None and e.value is last and _c_int(last) == raw:
-                continue
-            obj = raw  # compiled: the int object, made once for the entry and the list
-            e.value = obj
-            kept[i] = obj
+            e.value = raw
 
     def get_inputs(self, now_ns: int) -> bytes:
         self.update_inputs(now_ns)
