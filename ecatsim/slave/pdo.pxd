@@ -32,6 +32,7 @@ cdef class PdoImage(SmImage):
     cdef bint _tx_slots_on
     cdef Py_ssize_t _tx_top
     cdef bytearray _tx_buf
+    cdef unsigned char* _tx_bp
 
     @cython.locals(entries=tuple, values=tuple, i="Py_ssize_t", e=Entry, dev=CycleDevice,
                    layout=tuple, buf=bytes, ba=bytearray)
@@ -54,7 +55,7 @@ cdef class PdoImage(SmImage):
     @cython.locals(k="long long")
     cdef void _copy_to(self, unsigned char* dst, long long d, const unsigned char* src,
                        long long n) noexcept
-    @cython.locals(entries=tuple, out=bytearray, p="unsigned char*", i="Py_ssize_t", e=Entry,
+    @cython.locals(entries=tuple, p="unsigned char*", i="Py_ssize_t", e=Entry,
                    c="long long",
                    spec="long long", off="Py_ssize_t", n="long long",
                    half="long long", dev=CycleDevice,

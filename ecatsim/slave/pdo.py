@@ -424,6 +424,7 @@ class PdoImage(SmImage):
         #: the input image the C encoder fills: its padding stays zero, its entries'
         #: bytes are all written by every fill (decision P33)
         self._tx_buf = bytearray(plan.tx_size)
+        self._tx_bp = self._tx_buf  # compiled: a pointer to its bytes, kept (P89)
         self._bind_slots()
 
     def prepare(self) -> int:
@@ -566,7 +567,7 @@ class PdoImage(SmImage):
         layout, another size, a value not an int in its field's range)."""
         if self._tx_layout is None or n != len(self._tx_buf) or not self._pack_buf():
             return False
-        self._copy_to(mem, base, self._tx_buf, n)  # compiled: pointers (range checked)
+        self._copy_to(mem, base, self._tx_bp, n)  # compiled: pointers (range checked)
         return True
 
     def _copy_to(self, dst: bytearray, d: int, src: bytearray, n: int) -> None:
@@ -587,8 +588,7 @@ class PdoImage(SmImage):
         in C where every value is an int within its field's type; False for any other
         (P33), the buffer then partly written and the struct path deciding."""
         entries: tuple[Entry, ...] = self._tx_entries
-        out = self._tx_buf
-        p = out  # compiled: a pointer to the buffer (every field lies inside it)
+        p = self._tx_bp  # the image buffer's bytes (every field lies inside it)
         dev = self._dev
         # the device's values where it keeps them (the field itself in the compiled core,
         # not a local view acquired and released per call: P51), every slot inside them
