@@ -52,7 +52,8 @@ cdef class Drive(CycleDevice):
     cdef Entry _s_60ff, _s_6083, _s_6084, _s_607a, _s_60b0, _s_60b1, _s_6071, _s_60b2
     cdef Entry _s_6065, _s_6085, _s_605a
     cdef public bint _pub_c
-    cdef public long long[::1] _pub_lo, _pub_hi
+    # the published entries' ranges as C arrays, one per PUBLISHED index (P90)
+    cdef long long[10] _pub_lo, _pub_hi
     cdef public long long q_60ff, q_6083, q_6084, q_607a, q_60b0, q_60b1, q_6071, q_60b2
     cdef public long long q_6065, q_6085, q_605a
     cdef bint _snap_all

@@ -198,9 +198,10 @@ class Drive(CycleDevice):
         self._s_6065: Entry | None = None
         self._s_6085: Entry | None = None
         self._s_605a: Entry | None = None
-        #: the published entries' ranges as C integers (decision P34); set with _published
+        #: the published entries' ranges as C integers (P34; C arrays: P90), set with _published
         self._pub_c = False
-        self._pub_lo = self._pub_hi = array("q")
+        self._pub_lo: list[int]  # one per PUBLISHED index (compiled: zero from the start)
+        self._pub_hi: list[int]
         #: the values _publish() computed last, in PUBLISHED order, and whether the OD
         #: entries still wait for them (P38: written when something reads the OD)
         self.pub_values = array("q")
@@ -961,8 +962,8 @@ class Drive(CycleDevice):
         ranges = [(h[1], h[2]) if h is not None else (0, 0) for h in hits]
         self._pub_c = all(lo >= -(1 << 63) and hi < 1 << 63 for lo, hi in ranges)
         if self._pub_c:
-            self._pub_lo = array("q", [lo for lo, _ in ranges])
-            self._pub_hi = array("q", [hi for _, hi in ranges])
+            self._pub_lo = [lo for lo, _ in ranges]
+            self._pub_hi = [hi for _, hi in ranges]
             self.pub_values = array("q", [0] * len(hits))
         return hits
 

@@ -25,9 +25,14 @@ cdef class PdoImage(SmImage):
     cdef Py_ssize_t _rx_need
     cdef tuple _rx_entries, _tx_entries
     cdef tuple _rx_layout, _tx_layout
-    cdef long long[::1] _rx_spec, _tx_spec
+    # the layouts' tables and pointers to their bytes, kept beside them (P89)
+    cdef bytearray _rx_tab, _tx_tab
+    cdef unsigned char* _rx_tp
+    cdef unsigned char* _tx_tp
+    cdef bint _tx_slots_on
+    cdef Py_ssize_t _tx_top
     cdef bytearray _tx_buf
-    cdef long long[::1] _tx_slot
+    cdef unsigned char* _tx_bp
 
     @cython.locals(entries=tuple, values=tuple, i="Py_ssize_t", e=Entry, dev=CycleDevice,
                    layout=tuple, buf=bytes, ba=bytearray)
@@ -35,7 +40,7 @@ cdef class PdoImage(SmImage):
     # the outputs from a pointer to bytes or to the firmware's latched buffer (P33, P70)
     @cython.locals(entries=tuple, i="Py_ssize_t", e=Entry, spec="long long",
                    off="Py_ssize_t", n="long long", raw="long long", half="long long",
-                   byte="long long")
+                   byte="long long", t="const unsigned char*", j="Py_ssize_t")
     cdef void _rx_decode(self, const unsigned char* q) except *
     cpdef bytes get_inputs(self, long long now_ns)
     @cython.locals(dev=CycleDevice)
@@ -50,11 +55,12 @@ cdef class PdoImage(SmImage):
     @cython.locals(k="long long")
     cdef void _copy_to(self, unsigned char* dst, long long d, const unsigned char* src,
                        long long n) noexcept
-    @cython.locals(entries=tuple, out=bytearray, p="unsigned char*", i="Py_ssize_t", e=Entry,
+    @cython.locals(entries=tuple, p="unsigned char*", i="Py_ssize_t", e=Entry,
                    c="long long",
                    spec="long long", off="Py_ssize_t", n="long long",
                    half="long long", dev=CycleDevice,
-                   pending=bint, slot="Py_ssize_t")
+                   pending=bint, slot="size_t", t="const unsigned char*",
+                   j="Py_ssize_t")
     cdef bint _pack_buf(self) except -1
 
 

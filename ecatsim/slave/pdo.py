@@ -145,8 +145,20 @@ def codec(fields: tuple[Field, ...], size: int) -> Codec | None:
         pos = f.offset + f.size
     if size > pos:
         fmt.append(f"{size - pos}x")
-    small = all((spec >> 1) & 7 <= 4 for spec in layout)
+    # the compiled core's tables hold an offset in two bytes (an SM is at most 64 KiB long)
+    small = all((spec >> 1) & 7 <= 4 and spec >> 4 < 1 << 16 for spec in layout)
     return Codec(struct.Struct("".join(fmt)), tuple(entries), tuple(layout) if small else None)
+
+
+def _table(layout: tuple[int, ...] | None) -> bytearray:
+    """A layout as the compiled core reads it through a kept pointer (decision P89): per
+    entry four bytes, the offset's low and high byte, ``bytes | signed << 3`` and the
+    device's slot + 1 for the value (0: the entry's own value; set by ``_bind_slots``)."""
+    out = bytearray()
+    for spec in layout or ():
+        off = spec >> 4
+        out += bytes((off & 0xFF, off >> 8, (spec >> 1) & 7 | (spec & 1) << 3, 0))
+    return out
 
 
 def _c_int(v: int) -> int:
@@ -343,8 +355,11 @@ class PdoImage(SmImage):
         self._device: CoeDevice
         self._dev: CycleDevice | None = None
         self._tx_entries: tuple[Entry, ...] = ()
-        #: per TxPDO entry, where the device keeps its value (-1: the entry), or None (P38)
-        self._tx_slot: array[int] | None = None
+        self._tx_tab = self._tx_tp = bytearray()
+        #: whether the device keeps values for TxPDO entries (P38), and how many it must
+        #: keep for the slots of _tx_tab (checked against ``pub_values`` per fill, P89)
+        self._tx_slots_on = False
+        self._tx_top = 0
         self.device = device
         self.rules = rules
         self.plan = compile_plan(od, rules)
@@ -363,10 +378,23 @@ class PdoImage(SmImage):
         self._bind_slots()
 
     def _bind_slots(self) -> None:
-        """Where the device keeps the TxPDO entries' values (decision P38)."""
+        """Where the device keeps the TxPDO entries' values (decision P38), written into
+        _tx_tab (P89): one slot per entry, each -1 (the entry) or an index below 255."""
         dev = self._dev
-        slots = dev.tx_slots(self._tx_entries) if dev is not None else None
-        self._tx_slot = array("q", slots) if slots is not None else None
+        entries = self._tx_entries
+        slots = dev.tx_slots(entries) if dev is not None else None
+        if slots is not None and (
+            len(slots) != len(entries) or not all(-1 <= k < 255 for k in slots)
+        ):
+            raise ValueError(f"tx_slots: {slots!r} for {len(entries)} entries")
+        tab = self._tx_tab
+        top = 0
+        for i in range(len(tab) // 4):
+            k = slots[i] if slots is not None else -1
+            tab[4 * i + 3] = k + 1
+            top = max(top, k + 1)
+        self._tx_slots_on = slots is not None
+        self._tx_top = top
 
     @property
     def plan(self) -> Plan:
@@ -386,13 +414,17 @@ class PdoImage(SmImage):
         self._tx_st = tx.st if tx is not None else None
         self._tx_entries = tx.entries if tx is not None else ()
         self._tx_layout = tx.layout if tx is not None else None
-        #: the layouts as C integers (decision P51: no int object converted per entry and
-        #: cycle); empty where there is no layout
-        self._rx_spec = array("q", self._rx_layout or ())
-        self._tx_spec = array("q", self._tx_layout or ())
+        #: the layouts as bytes read through pointers kept beside them (decisions P51,
+        #: P89: no int object converted, no view's checks per entry and cycle); empty where
+        #: there is no layout. A table is never resized: a new plan makes new ones.
+        self._rx_tab = _table(self._rx_layout)
+        self._rx_tp = self._rx_tab  # compiled: a pointer to the table's bytes
+        self._tx_tab = _table(self._tx_layout)
+        self._tx_tp = self._tx_tab  # compiled: a pointer to the table's bytes
         #: the input image the C encoder fills: its padding stays zero, its entries'
         #: bytes are all written by every fill (decision P33)
         self._tx_buf = bytearray(plan.tx_size)
+        self._tx_bp = self._tx_buf  # compiled: a pointer to its bytes, kept (P89)
         self._bind_slots()
 
     def prepare(self) -> int:
@@ -446,10 +478,12 @@ class PdoImage(SmImage):
         """The struct's values, decoded in C from the bytes (decision P33); the caller
         checked that the struct fits."""
         entries: tuple[Entry, ...] = self._rx_entries
+        t = self._rx_tp  # the layout's table (P89), one row per entry
         for i in range(len(entries)):
-            spec = self._rx_spec[i]
-            off = spec >> 4
-            n = (spec >> 1) & 7
+            j = 4 * i
+            off = t[j] | t[j + 1] << 8
+            spec = t[j + 2]
+            n = spec & 7
             # 1, 2 or 4 bytes (the layout holds no more), each as a C long long before its
             # shift (an unsigned char shifted is a C int, whose bit 31 made a sign; P51)
             raw = q[off]
@@ -464,7 +498,7 @@ class PdoImage(SmImage):
                         raw |= byte << 24
             half = 1  # the sign bit's value: a C long long shifted in the core
             half <<= 8 * n - 1
-            if spec & 1 and raw >= half:
+            if spec & 8 and raw >= half:
                 raw -= half << 1
             e = entries[i]
             e.value = raw
@@ -533,7 +567,7 @@ class PdoImage(SmImage):
         layout, another size, a value not an int in its field's range)."""
         if self._tx_layout is None or n != len(self._tx_buf) or not self._pack_buf():
             return False
-        self._copy_to(mem, base, self._tx_buf, n)  # compiled: pointers (range checked)
+        self._copy_to(mem, base, self._tx_bp, n)  # compiled: pointers (range checked)
         return True
 
     def _copy_to(self, dst: bytearray, d: int, src: bytearray, n: int) -> None:
@@ -554,18 +588,19 @@ class PdoImage(SmImage):
         in C where every value is an int within its field's type; False for any other
         (P33), the buffer then partly written and the struct path deciding."""
         entries: tuple[Entry, ...] = self._tx_entries
-        out = self._tx_buf
-        p = out  # compiled: a pointer to the buffer (every field lies inside it)
+        p = self._tx_bp  # the image buffer's bytes (every field lies inside it)
         dev = self._dev
-        # the device's values where it keeps them (the fields themselves in the compiled
-        # core, not local views acquired and released per call: P51)
-        pending = self._tx_slot is not None and dev is not None and dev.pub_pending
+        # the device's values where it keeps them (the field itself in the compiled core,
+        # not a local view acquired and released per call: P51), every slot inside them
+        pending = self._tx_slots_on and dev is not None and dev.pub_pending
+        if pending and len(dev.pub_values) < self._tx_top:  # type: ignore[union-attr]
+            raise IndexError("the device keeps fewer values than its tx_slots")
+        t = self._tx_tp  # the layout's table with the slots (P89), one row per entry
         for i in range(len(entries)):
-            slot = -1
-            if pending:
-                slot = self._tx_slot[i]  # type: ignore[index]  # not None: pending
-            if slot >= 0:
-                c = dev.pub_values[slot]  # type: ignore[union-attr]  # not None: pending
+            j = 4 * i
+            slot = t[j + 3]  # the slot + 1 (0: the entry)
+            if pending and slot:
+                c = dev.pub_values[slot - 1]  # type: ignore[union-attr]  # not None: pending
             else:
                 e = entries[i]
                 v = e.value
@@ -575,12 +610,12 @@ class PdoImage(SmImage):
                     c = _c_int(v)
                 except OverflowError:
                     return False
-            spec = self._tx_spec[i]
-            off = spec >> 4
-            n = (spec >> 1) & 7
+            off = t[j] | t[j + 1] << 8
+            spec = t[j + 2]
+            n = spec & 7
             half = 1  # the sign bit's value: a C long long shifted in the core
             half <<= 8 * n - 1
-            if spec & 1:
+            if spec & 8:
                 if c < -half or c >= half:
                     return False
             elif c < 0 or c >= half << 1:
