@@ -468,8 +468,14 @@ class Esc(SmHost):
         if n == 4 or n == 8:  # the masked bytes a 32-bit word at a time (decision P93)
             for k in range(0, n, 4):
                 m = _get32(wmask, DC_SYSTEM_TIME + k)
-                v = _get32(mem, DC_SYSTEM_TIME + k)
-                _put32(mem, DC_SYSTEM_TIME + k, (v & ~m) | (_get32(d, k) & m))
+                if (m >> 16) == 0xFFFF and (m & 0xFFFF) == 0xFFFF:  # writable: as written
+                    mem[DC_SYSTEM_TIME + k] = d[k]
+                    mem[DC_SYSTEM_TIME + k + 1] = d[k + 1]
+                    mem[DC_SYSTEM_TIME + k + 2] = d[k + 2]
+                    mem[DC_SYSTEM_TIME + k + 3] = d[k + 3]
+                else:
+                    v = _get32(mem, DC_SYSTEM_TIME + k)
+                    _put32(mem, DC_SYSTEM_TIME + k, (v & ~m) | (_get32(d, k) & m))
         else:
             for k in range(n):
                 m = wmask[DC_SYSTEM_TIME + k]
