@@ -67,7 +67,7 @@ from ecatsim.esc.sm import SmHost, SyncManager
 from ecatsim.esc.watchdog import Watchdog
 
 
-def _get32(m: bytearray, a: int) -> int:
+def _get32(m: bytes | bytearray, a: int) -> int:
     """The little-endian 32-bit register at ``a`` (registers only: decision P27)."""
     p = m  # compiled: a C pointer to the bytes, no index checks
     b3 = p[a + 3]  # compiled: a 64-bit integer, so bit 31 does not sign-extend
