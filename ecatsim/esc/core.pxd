@@ -102,8 +102,9 @@ cdef class Esc(SmHost):
     cpdef void latch_input(self, long long unit, bint level, long long host_ns) except *
     @cython.locals(end="long long", ws="long long", we="long long")
     cpdef int64_t ecat_read(self, long long ado, unsigned char[:] out) except -1
-    @cython.locals(n="long long", k="long long", m="long long", wmask="const unsigned char*",
-                   mem="unsigned char*", d="const unsigned char*", ctx=FrameContext)
+    @cython.locals(n="long long", k="long long", m="long long", v="long long",
+                   wmask="const unsigned char*", mem="unsigned char*", d="const unsigned char*",
+                   ctx=FrameContext)
     cpdef int64_t ecat_write_system_time(self, bytes data) except -1
     @cython.locals(n="long long", k="long long", tmp="unsigned char[:]")
     cpdef int64_t ecat_read_or(self, long long ado, unsigned char[:] data) except -1

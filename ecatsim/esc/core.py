@@ -67,7 +67,7 @@ from ecatsim.esc.sm import SmHost, SyncManager
 from ecatsim.esc.watchdog import Watchdog
 
 
-def _get32(m: bytearray, a: int) -> int:
+def _get32(m: bytes | bytearray, a: int) -> int:
     """The little-endian 32-bit register at ``a`` (registers only: decision P27)."""
     p = m  # compiled: a C pointer to the bytes, no index checks
     b3 = p[a + 3]  # compiled: a 64-bit integer, so bit 31 does not sign-extend
@@ -465,10 +465,22 @@ class Esc(SmHost):
         wmask = self.ecat_wmask  # compiled: C pointers to the bytes (a register, P27)
         mem = self.mp  # compiled: the pointer kept (P62), no conversion per call (P76)
         d = data
-        for k in range(n):
-            m = wmask[DC_SYSTEM_TIME + k]
-            if m:
-                mem[DC_SYSTEM_TIME + k] = (mem[DC_SYSTEM_TIME + k] & ~m) | (d[k] & m)
+        if n == 4 or n == 8:  # the masked bytes a 32-bit word at a time (decision P93)
+            for k in range(0, n, 4):
+                m = _get32(wmask, DC_SYSTEM_TIME + k)
+                if (m >> 16) == 0xFFFF and (m & 0xFFFF) == 0xFFFF:  # writable: as written
+                    mem[DC_SYSTEM_TIME + k] = d[k]
+                    mem[DC_SYSTEM_TIME + k + 1] = d[k + 1]
+                    mem[DC_SYSTEM_TIME + k + 2] = d[k + 2]
+                    mem[DC_SYSTEM_TIME + k + 3] = d[k + 3]
+                else:
+                    v = _get32(mem, DC_SYSTEM_TIME + k)
+                    _put32(mem, DC_SYSTEM_TIME + k, (v & ~m) | (_get32(d, k) & m))
+        else:
+            for k in range(n):
+                m = wmask[DC_SYSTEM_TIME + k]
+                if m:
+                    mem[DC_SYSTEM_TIME + k] = (mem[DC_SYSTEM_TIME + k] & ~m) | (d[k] & m)
         self.wr_s = DC_SYSTEM_TIME
         self.wr_e = DC_SYSTEM_TIME + n
         ctx = self.ctx
