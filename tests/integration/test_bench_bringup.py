@@ -9,12 +9,43 @@ Ref: docs/performance.md "How to measure"; CiA 402-2 Figure 5 (the enable sequen
 from __future__ import annotations
 
 import os
+import time
+from typing import Any
 
 import pytest
 
-from ecatsim.bench.bringup import run_bringup
+from ecatsim.bench import bringup
 
 DRIVES = 4
+#: runs at most, while the host spoils each (K7: its stalls and steal come in bursts)
+RUNS = 3
+PAUSE_S = 2.0
+
+
+def _clean(r: dict[str, Any]) -> bool:
+    cyc, frames = r["cycles"], r["frames"]
+    return (cyc["lost"], cyc["wkc_errors"], frames["resends"], frames["unanswered"]) == (0,) * 4
+
+
+def _spoiled(r: dict[str, Any]) -> bool:
+    """The host took CPU time from the VM (steal) or stalled or slowed a CPU during each
+    reply later than 2 ms (ecatsim/bench/stallwatch.py, decision K7)."""
+    host = r.get("host_stalls", {})
+    late = host.get("late_replies", 0)
+    steal = r["cycles"].get("steal_s", 0.0) or 0.0
+    return steal > 0 or (late > 0 and host.get("late_when_slowed", 0) == late)
+
+
+def run_bringup(*args: Any, **kwargs: Any) -> dict[str, Any]:
+    """:func:`ecatsim.bench.bringup.run_bringup`, run again (at most :data:`RUNS` runs,
+    :data:`PAUSE_S` apart) only while a run that lost a frame was spoiled by the host;
+    the last run is returned, so the test's assertions still need a clean one."""
+    for _ in range(RUNS - 1):
+        r = bringup.run_bringup(*args, **kwargs)
+        if _clean(r) or not _spoiled(r):
+            return r
+        time.sleep(PAUSE_S)
+    return bringup.run_bringup(*args, **kwargs)
 
 
 @pytest.mark.parametrize("overlap", [False, True], ids=["map", "overlap"])
