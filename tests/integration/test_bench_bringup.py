@@ -15,11 +15,12 @@ from typing import Any
 import pytest
 
 from ecatsim.bench import bringup
+from tests.support.stall import REPEAT_PAUSE_S
 
 DRIVES = 4
 #: runs at most, while the host spoils each (K7: its stalls and steal come in bursts)
 RUNS = 3
-PAUSE_S = 2.0
+PAUSE_S = REPEAT_PAUSE_S
 
 
 def _clean(r: dict[str, Any]) -> bool:

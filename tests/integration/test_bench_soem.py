@@ -19,6 +19,7 @@ from ecatsim.bench.stallwatch import StallWatch
 from tests.integration.conftest import DaemonFactory
 from tests.integration.netns import NetnsPair
 from tests.support.soem_build import red_test
+from tests.support.stall import REPEAT_PAUSE_S
 
 DRIVES = 4
 CYCLES = 300
@@ -29,7 +30,7 @@ FPWR, BWR, LRW = 5, 8, 12
 #: red_test runs at most this often, again only for a host stall (decision K7), each
 #: repeat after a pause: this host's stalls come in bursts of up to a few seconds
 RUNS = 5
-PAUSE_S = 2.0
+PAUSE_S = REPEAT_PAUSE_S
 
 
 def _missed_cycles(cap: Capture, timeout_ns: int) -> list[tuple[int, int]]:

@@ -18,7 +18,7 @@ import pytest
 from ecatsim.bench.capture import Capture, late_replies, reply_stats
 from ecatsim.bench.master import steal_seconds
 from tests.integration.netns import NetnsPair
-from tests.support.stall import StallWatch
+from tests.support.stall import REPEAT_PAUSE_S, StallWatch
 
 TOOL = Path(__file__).resolve().parents[2] / "tools" / "kickcat_master.py"
 
@@ -27,7 +27,7 @@ KICKCAT_TIMEOUT_US = 2000
 #: KickCAT runs at most, while the host spoils each: a CI machine's stalls and steal time
 #: come in bursts of seconds, so a repeat waits :data:`PAUSE_S` after the run before it
 RUNS = 8
-PAUSE_S = 2.0
+PAUSE_S = REPEAT_PAUSE_S
 #: a host stall that can cost KickCAT a frame: half its link timeout, with the daemon's own
 #: reply time (tens of microseconds for one slave) and KickCAT's polling naps on top
 HOST_STALL_S = 0.001
