@@ -31,7 +31,7 @@ from pathlib import Path
 from ecatsim.bench.capture import Capture
 from ecatsim.bench.master import cpu_seconds
 from ecatsim.bench.netns import NetnsPair
-from ecatsim.bench.soem import RED_IOMAP, RED_MAXSLAVE, pysoem_version
+from ecatsim.bench.soem import RED_IOMAP, RED_MAXSLAVE, STOCK_TIMEOUT_US, pysoem_version
 
 #: what the bench records of this master (``master_name`` and ``master_limits``)
 NAME = "SOEM red_test"
@@ -45,10 +45,11 @@ def limits(sync0: bool) -> dict[str, object]:
             "drives_enabled": True}  # fmt: skip
 
 
-def timeout_ns(period_us: int) -> int:
+def timeout_ns(period_us: int, frame_timeout_us: int = STOCK_TIMEOUT_US) -> int:
     """How long after sending a frame red_test still takes its reply: its cycle thread
-    receives a cycle's frames at the next cycle, waiting up to SOEM's EC_TIMEOUTRET (2 ms)."""
-    return (period_us + 2000) * 1000
+    receives a cycle's frames at the next cycle, waiting up to SOEM's EC_TIMEOUTRET
+    (``frame_timeout_us``, 2 ms as shipped)."""
+    return (period_us + frame_timeout_us) * 1000
 
 
 def run_timeout(cycles: int, period_us: int) -> float:

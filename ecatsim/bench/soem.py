@@ -40,6 +40,9 @@ BUILD_TIMEOUT = 300
 #: (file name, text found, text put in its place) applied to the build copy
 Patch = tuple[str, str, str]
 
+#: SOEM's frame timeout as shipped (``EC_TIMEOUTRET`` in ethercattype.h), in microseconds
+STOCK_TIMEOUT_US = 2000
+
 #: red_test sized for large segments: SOEM's slave table (entry 0 is the master's, so one
 #: fewer slaves), the sample's IO map, and the frames SOEM keeps in flight (one per
 #: process-data frame of a cycle plus the acyclic ones: 1023 drives of 29 bytes are 21 LRWs)
@@ -269,10 +272,21 @@ def drive_patches() -> list[Patch]:
     ]  # fmt: skip
 
 
-def red_test(cycles: int, period_us: int, overlap: bool, sync0: bool = False) -> Path:
+def frame_timeout_patch(timeout_us: int) -> Patch:
+    """SOEM's frame timeout (``EC_TIMEOUTRET``, :data:`STOCK_TIMEOUT_US` as shipped) set
+    to ``timeout_us``: a master's own setting."""
+    return ("ethercattype.h", f"#define EC_TIMEOUTRET      {STOCK_TIMEOUT_US}",
+            f"#define EC_TIMEOUTRET      {timeout_us}")  # fmt: skip
+
+
+def red_test(cycles: int, period_us: int, overlap: bool, sync0: bool = False,
+             timeout_us: int = 0) -> Path:  # fmt: skip
     """SOEM's red_test built for a large segment (:func:`red_test_patches`), its main
     loop long enough for ``cycles`` cycles of ``period_us``; with ``sync0`` SYNC0 runs at
-    the period."""
+    the period; with ``timeout_us`` SOEM waits that long for a frame instead of its stock
+    2 ms (:func:`frame_timeout_patch`)."""
     loops = max(1, -(-cycles * period_us // RED_LOOP_US))
     patches = red_test_patches(loops, overlap, period_us * 1000 if sync0 else 0)
+    if timeout_us:
+        patches.append(frame_timeout_patch(timeout_us))
     return build_sample("red_test", patches, libs=("-lm",))

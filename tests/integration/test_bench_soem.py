@@ -18,7 +18,7 @@ from ecatsim.bench.capture import Capture, process_cycles
 from ecatsim.bench.stallwatch import StallWatch
 from tests.integration.conftest import DaemonFactory
 from tests.integration.netns import NetnsPair
-from tests.support.soem_build import red_test
+from tests.support.soem_build import FUNCTIONAL_TIMEOUT_US, red_test
 from tests.support.stall import REPEAT_PAUSE_S
 
 DRIVES = 4
@@ -27,13 +27,17 @@ PERIOD_US = 1000
 #: a TMC8670 maps outputs and inputs: an LRW counts 1 for the read and 2 for the write
 EXPECTED_WKC = 3 * DRIVES
 FPWR, BWR, LRW = 5, 8, 12
-#: red_test runs at most this often, again only for a host stall (decision K7), each
-#: repeat after a pause: this host's stalls come in bursts of up to a few seconds
+#: the wide guard on the daemon's reply times (decision K10): at most this share of the
+#: cyclic LRWs answered later than 2 ms (or never)
+LATE_SHARE = 0.05
+LATE_NS = 2_000_000
+#: red_test runs at most this often, again only when the guard failed in a host stall
+#: (decision K7), each repeat after a pause: this host's stalls come in bursts of seconds
 RUNS = 5
 PAUSE_S = REPEAT_PAUSE_S
 
 
-def _missed_cycles(cap: Capture, timeout_ns: int) -> list[tuple[int, int]]:
+def _late_cycles(cap: Capture, timeout_ns: int) -> list[tuple[int, int]]:
     """(request, deadline) of each cyclic LRW not answered within ``timeout_ns``."""
     marks = {name: t for t, name in cap.marks}
     if "cycles" not in marks or "end" not in marks:
@@ -57,23 +61,27 @@ def test_red_test_takes_four_drives_to_op_and_cycles_with_every_wkc(
     written 3), OP; then about 300 cycles at 1 ms, each one LRW whose reply carries the
     full WKC, none lost, every drive enabled in csp; red_test's check thread reports
     nothing."""
-    exe = red_test(CYCLES, PERIOD_US, overlap=False, sync0=sync0)
+    # this test is about the bring-up and every cycle's WKC, so red_test waits 50 ms for a
+    # frame (decision K10); the reply times are the bench's, here only the wide guard's
+    exe = red_test(CYCLES, PERIOD_US, overlap=False, sync0=sync0, timeout_us=FUNCTIONAL_TIMEOUT_US)
     d = daemon_factory("--slaves", str(DRIVES))
     assert d.pid is not None
-    timeout_ns = redtest.timeout_ns(PERIOD_US)
+    timeout_ns = redtest.timeout_ns(PERIOD_US, FUNCTIONAL_TIMEOUT_US)
     for attempt in range(RUNS):
         with (
             StallWatch() as watch,
             Capture.master_end(netns_pair.master_ns, netns_pair.master_if, keep_wkc=True) as cap,
         ):
             rt = redtest.run(exe, netns_pair, cap, PERIOD_US, [d.pid], timeout=60)
-        missed = _missed_cycles(cap, timeout_ns)
-        # red_test again (it configures the running segment anew) only if the host
-        # stalled or slowed a CPU while each missed reply was due (decision K7)
-        if not missed or not all(watch.explains(a, b, 0.001) for a, b in missed):
+        late = _late_cycles(cap, LATE_NS)
+        # red_test again (it configures the running segment anew) only if the guard failed
+        # and the host stalled or slowed a CPU while each late reply was due (decision K7)
+        explained = all(watch.explains(a, b, 0.001) for a, b in late)
+        if len(late) <= LATE_SHARE * CYCLES or not explained:
             break
-        assert attempt < RUNS - 1, f"the host stalled in each of {RUNS} runs: {missed}"
+        assert attempt < RUNS - 1, f"the host stalled in each of {RUNS} runs: {late}"
         time.sleep(PAUSE_S)
+    assert len(late) <= LATE_SHARE * CYCLES, late
     assert rt.returncode == 0, rt.tail
     assert (rt.slaves, rt.expected_wkc, rt.all_op, rt.trouble) == (
         DRIVES, EXPECTED_WKC, True, []
