@@ -18,7 +18,7 @@ import pytest
 from ecatsim.bench.capture import Capture, late_replies, reply_stats
 from ecatsim.bench.master import steal_seconds
 from tests.integration.netns import NetnsPair
-from tests.support.stall import REPEAT_PAUSE_S, StallWatch
+from tests.support.stall import REPEAT_PAUSE_S, StallWatch, spoiled
 
 TOOL = Path(__file__).resolve().parents[2] / "tools" / "kickcat_master.py"
 
@@ -94,10 +94,9 @@ class Trial:
         within its timeout of the last request (ecatsim/bench/stallwatch.py); or the
         hypervisor reported taking CPU time from this VM during the run (steal time: too
         coarse to place against a reply, so the run is spoiled as a whole). Either way a
-        run is only repeated: the test still needs a clean one."""
-        if not self.late:
-            return False
-        return self.steal_s > 0.0 or all(self.watch.explains(*t, HOST_STALL_S) for t in self.late)
+        run is only repeated: the test still needs a clean one (:func:`spoiled`)."""
+        explained = sum(self.watch.explains(*t, HOST_STALL_S) for t in self.late)
+        return spoiled(self.steal_s, len(self.late), explained)
 
     def __str__(self) -> str:
         return (f"{self.result} replies {self.replies}, {len(self.late)} late or last, longest "

@@ -32,7 +32,7 @@ class Reply:
     flags: int
 
 
-def decode(frame: bytes, off: int) -> list[Reply]:
+def decode(frame: bytes | bytearray, off: int) -> list[Reply]:
     """Decode the datagrams of an EtherCAT frame starting at the EtherCAT header."""
     out = []
     p = off + 2

@@ -59,7 +59,8 @@ class Served:
 
     @property
     def port(self) -> int:
-        return self.door.listeners[0].port
+        port: int = self.door.listeners[0].port
+        return port
 
     @property
     def url(self) -> str:

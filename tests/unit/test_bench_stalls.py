@@ -114,3 +114,15 @@ def test_a_kickcat_run_is_spoiled_by_a_stall_over_each_late_reply_or_by_steal_ti
     assert not Trial({}, {}, late, w).spoiled_by_the_host()
     assert Trial({}, {}, late, w, steal_s=0.01).spoiled_by_the_host()
     assert not Trial({}, {}, [], w, steal_s=0.5).spoiled_by_the_host()
+
+
+def test_the_one_rule_of_a_spoiled_run() -> None:
+    """Late replies (or requests never answered) are the host's when the watch explains
+    each of them or the run had steal time; a run with none is not spoiled whatever the
+    steal time, and one unexplained late reply without steal time is the daemon's."""
+    from tests.support.stall import spoiled
+
+    assert spoiled(0.0, 2, 2)
+    assert not spoiled(0.0, 2, 1)
+    assert spoiled(0.01, 2, 0)
+    assert not spoiled(0.5, 0, 0)
