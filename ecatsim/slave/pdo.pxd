@@ -35,13 +35,13 @@ cdef class PdoImage(SmImage):
     cdef unsigned char* _tx_bp
 
     @cython.locals(entries=tuple, values=tuple, i="Py_ssize_t", e=Entry, dev=CycleDevice,
-                   layout=tuple, buf=bytes, ba=bytearray)
+                   layout=tuple, buf=bytes, ba=bytearray, fits=bint)
     cpdef void set_outputs(self, object data, long long now_ns) except *
     # the outputs from a pointer to bytes or to the firmware's latched buffer (P33, P70)
     @cython.locals(entries=tuple, i="Py_ssize_t", e=Entry, spec="long long",
                    off="Py_ssize_t", n="long long", raw="long long",
                    byte="long long", t="const unsigned char*", j="Py_ssize_t")
-    cdef void _rx_decode(self, const unsigned char* q) except *
+    cdef int _rx_decode(self, const unsigned char* q) except -1
     cpdef bytes get_inputs(self, long long now_ns)
     @cython.locals(dev=CycleDevice)
     cpdef void update_inputs(self, long long now_ns) except *

@@ -468,17 +468,25 @@ class PdoImage(SmImage):
 
     def set_outputs(self, data: bytes | bytearray, now_ns: int) -> None:
         st = self._rx_st
-        if st is not None and len(data) >= self._rx_need:
+        if type(data) is bytearray:
+            # the firmware's latched outputs (P70): the size of a typed bytearray, no
+            # generic length call (decision P96)
+            ba: bytearray = data
+            fits = st is not None and len(ba) >= self._rx_need
+        else:
+            fits = st is not None and len(data) >= self._rx_need
+        if fits:
             entries: tuple[Entry, ...] = self._rx_entries
             layout = self._rx_layout
             if layout is not None and type(data) is bytearray:
                 # the outputs the firmware latched into its buffer (decision P70)
-                ba: bytearray = data
+                ba = data
                 self._rx_decode(ba)  # compiled: a pointer to the buffer's bytes
             elif layout is not None and type(data) is bytes:
                 buf: bytes = data
                 self._rx_decode(buf)  # compiled: a pointer to the bytes
             else:
+                assert st is not None  # fits: a struct
                 values: tuple[int, ...] = st.unpack_from(data)
                 for i in range(len(entries)):
                     e = entries[i]
@@ -496,9 +504,10 @@ class PdoImage(SmImage):
         else:
             self._device.outputs_applied(now_ns)
 
-    def _rx_decode(self, q: bytes | bytearray) -> None:
+    def _rx_decode(self, q: bytes | bytearray) -> int:
         """The struct's values, decoded in C from the bytes (decision P33); the caller
-        checked that the struct fits."""
+        checked that the struct fits. 0 (compiled: a C int whose value shows an error, so
+        no test of the thread's error state follows the call, P96)."""
         entries: tuple[Entry, ...] = self._rx_entries
         t = self._rx_tp  # the layout's table (P89), one row per entry
         for i in range(len(entries)):
@@ -522,6 +531,7 @@ class PdoImage(SmImage):
                 raw -= _SPEC_HI[spec] - _SPEC_LO[spec] + 1
             e = entries[i]
             e.value = raw
+        return 0
 
     def get_inputs(self, now_ns: int) -> bytes:
         self.update_inputs(now_ns)

@@ -3,7 +3,8 @@ accepts exactly the values its field's struct code packs, and the C decoder give
 values the struct unpacks, at each field's edges (lowest, highest, one beyond each, zero,
 minus one and the sign bit's byte patterns), for every TxPDO and RxPDO mapping of the
 TMC8670: twin images, one with the layout and one without (the struct and per-entry
-paths). Run against the compiled core and the pure-Python one alike.
+paths); and the latched outputs as a bytearray of any length decode as their bytes do
+(decision P96). Run against the compiled core and the pure-Python one alike.
 
 Ref: ETG.1000.6 §5.6.7.4 (PDO mapping), Table 64 (data types).
 """
@@ -118,3 +119,30 @@ def test_outputs_at_the_fields_edges_are_the_struct_path() -> None:
                 full.set_outputs(bytes(data), 0)
                 for a, b in zip(ea, eb, strict=True):
                     assert type(a.value) is type(b.value) and a.value == b.value, (mapping, raw)
+
+
+def test_outputs_of_any_length_as_bytearray_are_those_as_bytes() -> None:
+    """The latched outputs' length read from the typed bytearray (decision P96): over a
+    random walk of output images shorter than the struct (the per-entry path decodes what
+    is there), as long and longer, a bytearray gives the values its bytes give, on the
+    image with a layout and on its twin without one."""
+    rnd = random.Random(97)
+    ods = [build_od(default_description()) for _ in range(3)]
+    imgs = [PdoImage(od, Quiet()) for od in ods]  # type: ignore[arg-type]
+    for mapping in every_mapping(ods[0], True)[:6]:
+        for od in ods:
+            set_mapping(od, 0x1600, mapping)
+        plans = [compile_plan(od) for od in ods]
+        imgs[0].plan, imgs[1].plan = plans[0], plans[1]
+        imgs[2].plan = _without_layout(plans[2])
+        entries = [[f.entry for f in p.rx if f.entry is not None] for p in plans]
+        size = plans[0].rx_size
+        for _ in range(30):
+            n = rnd.choice([size, size, size + rnd.randrange(1, 5), rnd.randrange(size)])
+            data = rnd.randbytes(n)
+            imgs[0].set_outputs(bytearray(data), 0)
+            imgs[1].set_outputs(data, 0)
+            imgs[2].set_outputs(bytearray(data), 0)
+            for a, b, c in zip(*entries, strict=True):
+                assert type(a.value) is type(b.value) is type(c.value), mapping
+                assert a.value == b.value == c.value, (mapping, n)
