@@ -35,7 +35,7 @@ cdef class PdoImage(SmImage):
     cdef unsigned char* _tx_bp
 
     @cython.locals(entries=tuple, values=tuple, i="Py_ssize_t", e=Entry, dev=CycleDevice,
-                   layout=tuple, buf=bytes, ba=bytearray, fits=bint)
+                   layout=tuple, buf=bytes, ba=bytearray)
     cpdef void set_outputs(self, object data, long long now_ns) except *
     # the outputs from a pointer to bytes or to the firmware's latched buffer (P33, P70)
     @cython.locals(entries=tuple, i="Py_ssize_t", e=Entry, spec="long long",

@@ -468,25 +468,17 @@ class PdoImage(SmImage):
 
     def set_outputs(self, data: bytes | bytearray, now_ns: int) -> None:
         st = self._rx_st
-        if type(data) is bytearray:
-            # the firmware's latched outputs (P70): the size of a typed bytearray, no
-            # generic length call (decision P96)
-            ba: bytearray = data
-            fits = st is not None and len(ba) >= self._rx_need
-        else:
-            fits = st is not None and len(data) >= self._rx_need
-        if fits:
+        if st is not None and len(data) >= self._rx_need:
             entries: tuple[Entry, ...] = self._rx_entries
             layout = self._rx_layout
             if layout is not None and type(data) is bytearray:
                 # the outputs the firmware latched into its buffer (decision P70)
-                ba = data
+                ba: bytearray = data
                 self._rx_decode(ba)  # compiled: a pointer to the buffer's bytes
             elif layout is not None and type(data) is bytes:
                 buf: bytes = data
                 self._rx_decode(buf)  # compiled: a pointer to the bytes
             else:
-                assert st is not None  # fits: a struct
                 values: tuple[int, ...] = st.unpack_from(data)
                 for i in range(len(entries)):
                     e = entries[i]

@@ -3,8 +3,9 @@ accepts exactly the values its field's struct code packs, and the C decoder give
 values the struct unpacks, at each field's edges (lowest, highest, one beyond each, zero,
 minus one and the sign bit's byte patterns), for every TxPDO and RxPDO mapping of the
 TMC8670: twin images, one with the layout and one without (the struct and per-entry
-paths); and the latched outputs as a bytearray of any length decode as their bytes do
-(decision P96). Run against the compiled core and the pure-Python one alike.
+paths); and the latched outputs as a bytearray of any length (P70) decode as their
+bytes do, through the decoder that returns a C int (decision P96). Run against the
+compiled core and the pure-Python one alike.
 
 Ref: ETG.1000.6 §5.6.7.4 (PDO mapping), Table 64 (data types).
 """
@@ -122,10 +123,10 @@ def test_outputs_at_the_fields_edges_are_the_struct_path() -> None:
 
 
 def test_outputs_of_any_length_as_bytearray_are_those_as_bytes() -> None:
-    """The latched outputs' length read from the typed bytearray (decision P96): over a
-    random walk of output images shorter than the struct (the per-entry path decodes what
-    is there), as long and longer, a bytearray gives the values its bytes give, on the
-    image with a layout and on its twin without one."""
+    """The latched outputs as a bytearray (P70), decoded by ``_rx_decode`` returning a C
+    int (decision P96): over a random walk of output images shorter than the struct (the
+    per-entry path decodes what is there), as long and longer, a bytearray gives the
+    values its bytes give, on the image with a layout and on its twin without one."""
     rnd = random.Random(97)
     ods = [build_od(default_description()) for _ in range(3)]
     imgs = [PdoImage(od, Quiet()) for od in ods]  # type: ignore[arg-type]
