@@ -39,9 +39,9 @@ cdef class PdoImage(SmImage):
     cpdef void set_outputs(self, object data, long long now_ns) except *
     # the outputs from a pointer to bytes or to the firmware's latched buffer (P33, P70)
     @cython.locals(entries=tuple, i="Py_ssize_t", e=Entry, spec="long long",
-                   off="Py_ssize_t", n="long long", raw="long long", half="long long",
+                   off="Py_ssize_t", n="long long", raw="long long",
                    byte="long long", t="const unsigned char*", j="Py_ssize_t")
-    cdef void _rx_decode(self, const unsigned char* q) except *
+    cdef int _rx_decode(self, const unsigned char* q) except -1
     cpdef bytes get_inputs(self, long long now_ns)
     @cython.locals(dev=CycleDevice)
     cpdef void update_inputs(self, long long now_ns) except *
@@ -58,10 +58,14 @@ cdef class PdoImage(SmImage):
     @cython.locals(entries=tuple, p="unsigned char*", i="Py_ssize_t", e=Entry,
                    c="long long",
                    spec="long long", off="Py_ssize_t", n="long long",
-                   half="long long", dev=CycleDevice,
+                   dev=CycleDevice,
                    pending=bint, slot="size_t", t="const unsigned char*",
                    j="Py_ssize_t")
     cdef bint _pack_buf(self) except -1
+
+
+# a layout row's field range by its spec, 0-15 (P95): C arrays, read with no bounds test
+cdef long long[16] _SPEC_LO, _SPEC_HI
 
 
 cpdef long long _c_int(object v) except? -1

@@ -161,6 +161,28 @@ def _table(layout: tuple[int, ...] | None) -> bytearray:
     return out
 
 
+def _spec_bounds(high: bool) -> list[int]:
+    """Per row spec of a layout table (``bytes | signed << 3``, 0-15), the lowest (False)
+    or highest (True) value its field codes: the field's range as two loads, not a shift
+    and a test of the sign per entry and cycle (decision P95). No layout row holds 0 bytes
+    (``codec``): those specs get an empty range, lowest 0 above highest -1."""
+    out = []
+    for spec in range(16):
+        bits = 8 * (spec & 7)
+        if not bits:
+            out.append(-1 if high else 0)
+        elif spec & 8:
+            out.append((1 << (bits - 1)) - 1 if high else -(1 << (bits - 1)))
+        else:
+            out.append((1 << bits) - 1 if high else 0)
+    return out
+
+
+#: a layout row's field range by its spec (decision P95), C arrays in the compiled core
+_SPEC_LO = _spec_bounds(False)
+_SPEC_HI = _spec_bounds(True)
+
+
 def _c_int(v: int) -> int:
     """``v`` itself; compiled, a C ``long long`` (OverflowError beyond its range)."""
     return v
@@ -474,9 +496,10 @@ class PdoImage(SmImage):
         else:
             self._device.outputs_applied(now_ns)
 
-    def _rx_decode(self, q: bytes | bytearray) -> None:
+    def _rx_decode(self, q: bytes | bytearray) -> int:
         """The struct's values, decoded in C from the bytes (decision P33); the caller
-        checked that the struct fits."""
+        checked that the struct fits. 0 (compiled: a C int whose value shows an error, so
+        no test of the thread's error state follows the call, P96)."""
         entries: tuple[Entry, ...] = self._rx_entries
         t = self._rx_tp  # the layout's table (P89), one row per entry
         for i in range(len(entries)):
@@ -496,12 +519,11 @@ class PdoImage(SmImage):
                     if n > 3:
                         byte = q[off + 3]
                         raw |= byte << 24
-            half = 1  # the sign bit's value: a C long long shifted in the core
-            half <<= 8 * n - 1
-            if spec & 8 and raw >= half:
-                raw -= half << 1
+            if spec & 8 and raw > _SPEC_HI[spec]:  # a signed field's negative value
+                raw -= _SPEC_HI[spec] - _SPEC_LO[spec] + 1
             e = entries[i]
             e.value = raw
+        return 0
 
     def get_inputs(self, now_ns: int) -> bytes:
         self.update_inputs(now_ns)
@@ -613,12 +635,7 @@ class PdoImage(SmImage):
             off = t[j] | t[j + 1] << 8
             spec = t[j + 2]
             n = spec & 7
-            half = 1  # the sign bit's value: a C long long shifted in the core
-            half <<= 8 * n - 1
-            if spec & 8:
-                if c < -half or c >= half:
-                    return False
-            elif c < 0 or c >= half << 1:
+            if c < _SPEC_LO[spec] or c > _SPEC_HI[spec]:  # not in its field's range
                 return False
             p[off] = c & 0xFF  # 1, 2 or 4 bytes (the layout holds no more), unrolled
             if n > 1:
