@@ -20,7 +20,8 @@ from ecatsim.slave import pdo
 from ecatsim.slave.od_build import build_od
 from ecatsim.slave.pdo import PdoImage, compile_plan
 from tests.support.pdo_mappings import every_mapping, set_mapping
-from tests.unit.slave.test_pdo_tables import Quiet, _range, _without_layout
+from tests.support.pdo_twins import Quiet, rx_twins, value_range, without_layout
+from tests.support.pdo_twins import fits as pdo_fits
 
 _CODE = {(1, False): "B", (1, True): "b", (2, False): "H", (2, True): "h",
          (4, False): "I", (4, True): "i"}  # fmt: skip
@@ -67,22 +68,18 @@ def test_inputs_at_the_fields_edges_are_the_struct_path() -> None:
         fields = [f for f in plan.tx if f.entry is not None]
         for f in fields:
             assert f.entry is not None
-            for v in _edges(*_range(f.entry, f.size)):
+            for v in _edges(*value_range(f.entry, f.size)):
                 for g in fields:
                     assert g.entry is not None
-                    g.entry.value = rnd.randint(*_range(g.entry, g.size))
+                    g.entry.value = rnd.randint(*value_range(g.entry, g.size))
                 f.entry.value = v
                 img.plan = plan
                 mem = bytearray(rnd.randbytes(plan.tx_size + 8))
                 before = bytes(mem)
                 filled = img.fill(mem, 4, plan.tx_size)
-                img.plan = _without_layout(plan)
+                img.plan = without_layout(plan)
                 full = img.pack_inputs()
-                fits = all(
-                    _range(g.entry, g.size)[0] <= g.entry.value <= _range(g.entry, g.size)[1]
-                    for g in fields
-                    if g.entry is not None
-                )
+                fits = pdo_fits(fields)
                 assert filled == fits, (mapping, f.offset, v)
                 if filled:
                     fills += 1
@@ -99,16 +96,9 @@ def test_outputs_at_the_fields_edges_are_the_struct_path() -> None:
     zero, the highest positive, one), the other bytes random: the C decoder and its twin
     without a layout hold the same values, of the same type."""
     rnd = random.Random(96)
-    od_a, od_b = build_od(default_description()), build_od(default_description())
-    fast, full = PdoImage(od_a, Quiet()), PdoImage(od_b, Quiet())  # type: ignore[arg-type]
-    for mapping in every_mapping(od_a, True):
-        set_mapping(od_a, 0x1600, mapping)
-        set_mapping(od_b, 0x1600, mapping)
-        plan = compile_plan(od_a)
-        assert plan.rx_codec is not None and plan.rx_codec.layout is not None
-        fast.plan, full.plan = plan, _without_layout(compile_plan(od_b))
-        ea = [f.entry for f in plan.rx if f.entry is not None]
-        eb = [f.entry for f in full.plan.rx if f.entry is not None]
+    for t in rx_twins():
+        mapping, plan, fast, full = t.mapping, t.plan, t.fast, t.full
+        ea, eb = t.fast_entries, t.full_entries
         for f in plan.rx:
             if f.entry is None:
                 continue
@@ -135,7 +125,7 @@ def test_outputs_of_any_length_as_bytearray_are_those_as_bytes() -> None:
             set_mapping(od, 0x1600, mapping)
         plans = [compile_plan(od) for od in ods]
         imgs[0].plan, imgs[1].plan = plans[0], plans[1]
-        imgs[2].plan = _without_layout(plans[2])
+        imgs[2].plan = without_layout(plans[2])
         entries = [[f.entry for f in p.rx if f.entry is not None] for p in plans]
         size = plans[0].rx_size
         for _ in range(30):

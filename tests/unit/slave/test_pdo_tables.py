@@ -12,23 +12,16 @@ from __future__ import annotations
 
 import random
 from array import array
-from dataclasses import replace
 
 import pytest
 
 from ecatsim.device.description import default_description
 from ecatsim.slave.od import Entry
 from ecatsim.slave.od_build import build_od
-from ecatsim.slave.pdo import CycleDevice, PdoImage, Plan, compile_plan
+from ecatsim.slave.pdo import CycleDevice, PdoImage, compile_plan
 from tests.support.pdo_mappings import every_mapping, set_mapping
-
-
-class Quiet:
-    def outputs_applied(self, now_ns: int) -> None: ...
-
-    def update_inputs(self, now_ns: int) -> None: ...
-
-    def al_state_changed(self, state: object, now_ns: int) -> None: ...
+from tests.support.pdo_twins import Quiet, rx_twins, value_range, without_layout
+from tests.support.pdo_twins import fits as pdo_fits
 
 
 class Keeper(CycleDevice):
@@ -50,22 +43,6 @@ class Keeper(CycleDevice):
         return tuple([self.slots.get(id(e), -1) for e in entries])
 
 
-def _without_layout(plan: Plan) -> Plan:
-    assert plan.rx_codec is not None and plan.tx_codec is not None
-    return replace(
-        plan,
-        rx_codec=replace(plan.rx_codec, layout=None),
-        tx_codec=replace(plan.tx_codec, layout=None),
-    )
-
-
-def _range(e: Entry, size: int) -> tuple[int, int]:
-    bits = 8 * size
-    if e.dtype.startswith("INTEGER"):
-        return -(1 << (bits - 1)), (1 << (bits - 1)) - 1
-    return 0, (1 << bits) - 1
-
-
 def test_repeated_outputs_leave_the_values_of_the_full_decoder() -> None:
     """Every RxPDO mapping the TMC8670 allows, a random walk of output images that repeat
     (as a master's cyclic outputs do) while the entries are also written between cycles
@@ -73,16 +50,9 @@ def test_repeated_outputs_leave_the_values_of_the_full_decoder() -> None:
     image with the C decoder (its layout table: P89) and its twin without a layout hold
     the same values, of the same type."""
     rnd = random.Random(91)
-    od_a, od_b = build_od(default_description()), build_od(default_description())
-    fast, full = PdoImage(od_a, Quiet()), PdoImage(od_b, Quiet())  # type: ignore[arg-type]
-    for mapping in every_mapping(od_a, True):
-        set_mapping(od_a, 0x1600, mapping)
-        set_mapping(od_b, 0x1600, mapping)
-        plan = compile_plan(od_a)
-        assert plan.rx_codec is not None and plan.rx_codec.layout is not None
-        fast.plan, full.plan = plan, _without_layout(compile_plan(od_b))
-        ea = [f.entry for f in plan.rx if f.entry is not None]
-        eb = [f.entry for f in full.plan.rx if f.entry is not None]
+    for t in rx_twins():
+        mapping, plan, fast, full = t.mapping, t.plan, t.fast, t.full
+        ea, eb = t.fast_entries, t.full_entries
         data = bytearray(rnd.randbytes(plan.rx_size))
         for step in range(40):
             roll = rnd.random()
@@ -152,14 +122,14 @@ def test_inputs_from_the_device_slots_are_the_entry_path() -> None:
         for step in range(80):
             for f in fields:
                 assert f.entry is not None
-                lo, hi = _range(f.entry, f.size)
+                lo, hi = value_range(f.entry, f.size)
                 f.entry.value = rnd.randint(lo, hi)
             wild = step % 5 == 4
             for f in fields:
                 assert f.entry is not None
                 k = slots.get(id(f.entry), -1)
                 if k >= 0:
-                    lo, hi = _range(f.entry, f.size)
+                    lo, hi = value_range(f.entry, f.size)
                     dev.pub_values[k] = (
                         rnd.choice([lo - 1, hi + 1]) if wild else rnd.randint(lo, hi)
                     )
@@ -177,13 +147,9 @@ def test_inputs_from_the_device_slots_are_the_entry_path() -> None:
                         f.entry.value = dev.pub_values[k]
                 dev.pub_pending = False
             # an entry mapped twice holds one value, which may not fit its shorter field
-            fits = all(
-                _range(f.entry, f.size)[0] <= f.entry.value <= _range(f.entry, f.size)[1]
-                for f in fields
-                if f.entry is not None
-            )
+            fits = pdo_fits(fields)
             assert filled == fits, (mapping, step)
-            img.plan = _without_layout(plan)
+            img.plan = without_layout(plan)
             full = img.pack_inputs()
             img.plan = plan
             if filled:
