@@ -12,6 +12,7 @@ watch costs each CPU about 1 %.
         ...  # the run
     w.stalls, w.slow          # [(from, to)] CLOCK_REALTIME ns, the capture's clock
     w.overlaps(a, b, 0.001)
+    w.steal_s                 # the hypervisor's steal time meanwhile, all CPUs (s)
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from pathlib import Path
 from types import TracebackType
 
 from ecatsim.bench.floor import build_c
+from ecatsim.bench.master import steal_seconds
 
 SOURCE = "stallwatch.c"
 #: the watch's priority: above the daemon's (20, or --rt-priority up to 40) and a master's
@@ -35,12 +37,16 @@ class StallWatch:
     """``with StallWatch() as w: ...`` then ``w.stalls``: when (CLOCK_REALTIME ns, from
     when a watch was due to wake to when it woke) the host kept a watch from running for
     :data:`RECORDED_NS` or more while the block ran, ``w.slow``: when it ran a watch's
-    computation below 30 % of its speed, and ``w.worst_s``: the longest stall (seconds;
-    0.0 when none was recorded). Needs a C compiler, and CAP_SYS_NICE for SCHED_FIFO."""
+    computation below 30 % of its speed, ``w.worst_s``: the longest stall (seconds;
+    0.0 when none was recorded), and ``w.steal_s``: the steal time of all CPUs while the
+    block ran (seconds; the kernel counts it in ticks, too coarse to place against one
+    reply). Needs a C compiler, and CAP_SYS_NICE for SCHED_FIFO."""
 
     def __init__(self, priority: int = WATCH_PRIORITY) -> None:
         self.priority = priority
         self.worst_s = 0.0
+        self.steal_s = 0.0
+        self._steal0: list[float] = []
         self.stalls: list[tuple[int, int]] = []
         self.slow: list[tuple[int, int]] = []
         self._procs: list[subprocess.Popen[str]] = []
@@ -48,6 +54,7 @@ class StallWatch:
 
     def __enter__(self) -> StallWatch:
         self._tmp = tempfile.TemporaryDirectory(prefix="ecatsim-stallwatch-")
+        self._steal0 = steal_seconds()
         try:
             exe = build_c(SOURCE, Path(self._tmp.name) / "stallwatch")
             for cpu in sorted(os.sched_getaffinity(0)):
@@ -81,6 +88,9 @@ class StallWatch:
         self.stalls.sort()
         self.slow.sort()
         self.worst_s = max(((e - s) / 1e9 for s, e in self.stalls), default=0.0)
+        if self._steal0:
+            self.steal_s = round(sum(steal_seconds()) - sum(self._steal0), 2)
+            self._steal0 = []
 
     def overlaps(self, start_ns: int, end_ns: int, least_s: float) -> bool:
         """A stall of ``least_s`` or more overlapped the interval (CLOCK_REALTIME ns)."""

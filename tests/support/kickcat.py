@@ -16,7 +16,6 @@ from typing import Any
 import pytest
 
 from ecatsim.bench.capture import Capture, late_replies, reply_stats
-from ecatsim.bench.master import steal_seconds
 from tests.integration.netns import NetnsPair
 from tests.support.stall import REPEAT_PAUSE_S, StallWatch, spoiled
 
@@ -107,19 +106,17 @@ class Trial:
 def one_trial(pair: NetnsPair, expected: dict[str, Any] | None = None, **kwargs: Any) -> Trial:
     """A :func:`kickcat_trial` under a stall watch, captured at both ends; a result other
     than ``expected`` makes its last request one to explain."""
-    steal0 = steal_seconds()
     with StallWatch() as watch:
         ends = (pair.master_ns, pair.master_if), (pair.slave_ns, pair.slave_if)
         with Capture.both_ends(*ends) as rt:
             result = kickcat_trial(pair, **kwargs)
-    steal = sum(b - a for a, b in zip(steal0, steal_seconds(), strict=True))
     frames = rt.frames()
     timeout_ns = KICKCAT_TIMEOUT_US * 1000
     late = late_replies(frames, KICKCAT_TIMEOUT_US)
     requests = [f.t_ns for f in frames if not f.reply]
     if expected is not None and result != expected and requests:
         late.append((requests[-1], requests[-1] + timeout_ns))
-    return Trial(result, reply_stats(frames), late, watch, round(steal, 2))
+    return Trial(result, reply_stats(frames), late, watch, watch.steal_s)
 
 
 def kickcat_until_clean(

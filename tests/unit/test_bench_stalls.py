@@ -12,6 +12,8 @@ import time
 from pathlib import Path
 from types import SimpleNamespace
 
+import pytest
+
 from ecatsim.bench.bringup import stopped_counts
 from ecatsim.bench.capture import Frame, late_replies
 from ecatsim.bench.netns import Daemon, Port
@@ -126,3 +128,17 @@ def test_the_one_rule_of_a_spoiled_run() -> None:
     assert not spoiled(0.0, 2, 1)
     assert spoiled(0.01, 2, 0)
     assert not spoiled(0.5, 0, 0)
+
+
+def test_the_watch_counts_the_steal_time_of_its_run(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``StallWatch.steal_s``: the steal time all CPUs gained between entering and leaving
+    the watch, in seconds to 10 ms (the kernel's tick)."""
+    from ecatsim.bench import stallwatch
+
+    readings = iter([[1.0, 2.0], [1.25, 2.5]])
+    monkeypatch.setattr(stallwatch, "steal_seconds", lambda: next(readings))
+    monkeypatch.setattr(stallwatch, "build_c", lambda src, out: out)
+    monkeypatch.setattr(stallwatch.os, "sched_getaffinity", lambda pid: set())
+    with stallwatch.StallWatch() as w:
+        assert w.steal_s == 0.0
+    assert w.steal_s == 0.75
