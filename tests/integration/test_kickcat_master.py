@@ -38,11 +38,11 @@ def timed_trial(pair: NetnsPair) -> tuple[dict[str, Any], dict[str, Any]]:
 
 
 def test_kickcat_reaches_op_and_runs_500_cycles(netns_pair: NetnsPair, daemon_factory: Any) -> None:
-    """Every request gets its reply within KickCAT's 2 ms. A run that KickCAT does not
-    complete, or with a reply later than 2 ms, is run again from power-up only when the host
-    stalled or slowed a CPU (ecatsim/bench/stallwatch.py) during each late reply and within
-    2 ms of the request KickCAT gave up on; otherwise it fails the test
-    (tests/support/kickcat.py)."""
+    """KickCAT, with its stock 2 ms timeout, reaches OP and runs every cycle; every request
+    gets its reply, at most one in 200 later than 2 ms (a wide guard: K7). A run that fails
+    either is run again from power-up only when the host stalled or slowed a CPU
+    (ecatsim/bench/stallwatch.py) during each late reply and within 2 ms of the request
+    KickCAT gave up on; otherwise it fails the test (tests/support/kickcat.py)."""
     d = daemon_factory()
     expected = {"ok": True, "stage": "done", "slaves": 1, "cycles": 500}
     cpu = max(os.sched_getaffinity(0))

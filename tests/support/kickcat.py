@@ -27,6 +27,9 @@ KICKCAT_TIMEOUT_US = 2000
 #: come in bursts of seconds, so a repeat waits :data:`PAUSE_S` after the run before it
 RUNS = 8
 PAUSE_S = REPEAT_PAUSE_S
+#: the wide guard on the capture's reply times in a run KickCAT completed: at most one reply
+#: in this many later than KickCAT's timeout (decision K7; the bench measures them exactly)
+LATE_GUARD = 200
 #: a host stall that can cost KickCAT a frame: half its link timeout, with the daemon's own
 #: reply time (tens of microseconds for one slave) and KickCAT's polling naps on top
 HOST_STALL_S = 0.001
@@ -83,9 +86,12 @@ class Trial:
     steal_s: float = 0.0
 
     def clean(self, expected: dict[str, Any]) -> bool:
-        """The run completed as expected and every request had its reply within KickCAT's
-        link timeout."""
-        return self.result == expected and self.replies["unpaired"] == 0 and not self.late
+        """The run completed as expected (KickCAT, with its stock 2 ms timeout, judged every
+        frame it waited for), every request had its reply, and at most one in
+        :data:`LATE_GUARD` came later than that timeout: a wide guard, as timing belongs to
+        the bench (decision K7)."""
+        guard = self.replies["frames"] // LATE_GUARD
+        return self.result == expected and self.replies["unpaired"] == 0 and len(self.late) <= guard
 
     def spoiled_by_the_host(self) -> bool:
         """The host stalled a CPU for :data:`HOST_STALL_S` or more, or ran it below 30 % of

@@ -142,3 +142,19 @@ def test_the_watch_counts_the_steal_time_of_its_run(monkeypatch: pytest.MonkeyPa
     with stallwatch.StallWatch() as w:
         assert w.steal_s == 0.0
     assert w.steal_s == 0.75
+
+
+def test_a_kickcat_run_is_clean_when_kickcat_completed_within_the_wide_guard() -> None:
+    """KickCAT judged each frame it waited for; the capture's late replies are a wide guard:
+    one in LATE_GUARD passes, one more fails, and so does an unanswered request or a result
+    other than the expected one."""
+    from tests.support.kickcat import LATE_GUARD, Trial
+
+    w = StallWatch()
+    done = {"ok": True, "stage": "done"}
+    frames = 2 * LATE_GUARD
+    two = [(k * MS, k * MS + 3 * MS) for k in range(2)]
+    assert Trial(done, {"frames": frames, "unpaired": 0}, two, w).clean(done)
+    assert not Trial(done, {"frames": frames, "unpaired": 0}, [*two, two[0]], w).clean(done)
+    assert not Trial(done, {"frames": frames, "unpaired": 1}, [], w).clean(done)
+    assert not Trial({"ok": False}, {"frames": frames, "unpaired": 0}, [], w).clean(done)
