@@ -31,8 +31,9 @@ class DcBench:
         t.apwr(0, 0x09A0, struct.pack("<I", MS))
         t.apwr(0, 0x0990, struct.pack("<Q", self.start))
         t.apwr(0, 0x0981, b"\x03")  # SYNC unit + SYNC0
-        self.t0 = self.seg.escs[0].dc.sync0_deadline()
-        assert self.t0 is not None
+        t0 = self.seg.escs[0].dc.sync0_deadline()
+        assert t0 is not None
+        self.t0: int = t0
 
     def lrw(self, target: int, rx_ns: int) -> int:
         """A cyclic LRW that arrived at ``rx_ns`` (handled whenever the clock says);

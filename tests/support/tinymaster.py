@@ -14,6 +14,8 @@ from ecatsim.clock import ManualClock
 from ecatsim.ethercat.assembly import build_segment
 from ecatsim.ethercat.segment import Segment
 from ecatsim.ethercat.segment_file import SegmentConfig, SlaveConfig
+from ecatsim.device.drive import Drive
+from ecatsim.slave.firmware import Firmware
 from ecatsim.wire import datagram as dg
 from ecatsim.wire.frame import ecat_offset, mark_processed
 
@@ -108,3 +110,22 @@ class TinyMaster:
 
     def u16(self, station: int, ado: int) -> int:
         return int(struct.unpack("<H", self.fprd(station, ado, 2).data)[0])
+
+
+def firmware_of(seg: Segment, k: int) -> Firmware:
+    """Slave ``k``'s firmware, ecatsim's own (a slave on the PDI socket has another)."""
+    fw = seg.firmware[k]
+    assert isinstance(fw, Firmware), fw
+    return fw
+
+
+def firmwares(seg: Segment) -> list[Firmware]:
+    """Every slave's firmware, each ecatsim's own (:func:`firmware_of`)."""
+    return [firmware_of(seg, k) for k in range(len(seg.firmware))]
+
+
+def drive_of(seg: Segment, k: int) -> Drive:
+    """Slave ``k``'s TMC8670 drive."""
+    drive = firmware_of(seg, k).device
+    assert isinstance(drive, Drive), drive
+    return drive

@@ -26,5 +26,6 @@ def test_ruff_format() -> None:
 
 
 def test_mypy_strict() -> None:
-    r = _run("mypy", "ecatsim")
+    """The package, the tests and the tools (``files`` in pyproject.toml)."""
+    r = _run("mypy")
     assert r.returncode == 0, r.stdout + r.stderr

@@ -6,6 +6,7 @@ the inputs an undelayed run gives (the same outputs, the same pulse time)."""
 from __future__ import annotations
 
 from tests.perf.hotpath import IN, MS, OUT, CspCycle
+from tests.support.tinymaster import drive_of, firmware_of, firmwares
 
 N = 4
 #: where the LRW's data starts in the frame: Ethernet 14, EtherCAT 2, datagram header 10
@@ -24,7 +25,7 @@ def without_inputs(reply: bytes) -> bytes:
 
 
 def latched(c: CspCycle) -> list[bool]:
-    return [fw.sync_ns >= 0 for fw in c.seg.firmware]
+    return [fw.sync_ns >= 0 for fw in firmwares(c.seg)]
 
 
 def twins() -> tuple[CspCycle, CspCycle, list[bool], list[bytes]]:
@@ -94,11 +95,11 @@ def test_a_pulse_that_comes_while_the_last_ones_work_waits_replaces_it() -> None
     assert s.sync0_merged == 3
     # then slave 0's latched work ran before the next look, which found the frame
     assert latched(c) == [False, True, True, True]
-    assert all(c.t + MS <= fw.sync_ns < c.t + MS + 20_000 for fw in c.seg.firmware[1:])
+    assert all(c.t + MS <= fw.sync_ns < c.t + MS + 20_000 for fw in firmwares(c.seg)[1:])
     waiting[0] = False
     c.seg.service_at(c.clock.t)
     assert latched(c) == [False] * N
-    assert [fw.device.state.name for fw in c.seg.firmware] == ["OPERATION_ENABLED"] * N
+    assert [drive_of(c.seg, k).state.name for k in range(N)] == ["OPERATION_ENABLED"] * N
 
 
 def test_without_the_daemons_link_the_work_is_never_deferred() -> None:
@@ -145,8 +146,9 @@ def test_an_emcy_the_latched_work_queues_behind_a_full_sm1_unmasks_the_sm1_event
     reply: its EMCY waits in the queue, and the firmware wants the SM1 event (the master's
     read of SM1) to send it then, as after a cycle run at once."""
     _, c, waiting, _ = twins()
-    fw = c.seg.firmware[3]
+    fw = firmware_of(c.seg, 3)
     esc = c.seg.escs[3]
+    assert fw.emergency is not None and fw.od is not None and fw.mbx is not None
     fw.emergency.clear()  # EMCY 0000h: SM1 full until the master reads it
     sm1_status, al_event_mask, ev_sm1 = 0x0805 + 8, 0x0204, 0x0200
     assert esc.mem[sm1_status] & 0x08
@@ -159,7 +161,7 @@ def test_an_emcy_the_latched_work_queues_behind_a_full_sm1_unmasks_the_sm1_event
     assert latched(c)[3]
     waiting[0] = False
     assert c.seg.schedule.run_deferred()
-    assert fw.device.state.name == "FAULT"
+    assert drive_of(c.seg, 3).state.name == "FAULT"
     assert fw.mbx.held is not None  # the following error's EMCY, behind the first
     assert int.from_bytes(esc.mem[al_event_mask : al_event_mask + 4], "little") & ev_sm1
 

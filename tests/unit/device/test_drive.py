@@ -92,6 +92,18 @@ def make(params: MotorParams | None = None) -> tuple[Drive, list[tuple[int, int,
     return d, emcys
 
 
+def statusword(d: Drive) -> int:
+    """6041h, an integer object."""
+    sw = d.od.value(0x6041)
+    assert isinstance(sw, int)
+    return sw
+
+
+def state_of(d: Drive) -> PdsState:
+    """The drive's PDS state, read anew (a call, not an attribute a type checker narrows)."""
+    return d.state
+
+
 def command(d: Drive, t: int, cw: int, **objs: int) -> None:
     for k, v in objs.items():
         d.od.set(int(k[1:], 16), 0, v)
@@ -102,11 +114,11 @@ def command(d: Drive, t: int, cw: int, **objs: int) -> None:
 
 def enable(d: Drive, mode: int, t: int = 0) -> int:
     command(d, t, 0x06, x6060=mode)
-    assert d.od.value(0x6041) & 0x6F == 0x21
+    assert statusword(d) & 0x6F == 0x21
     command(d, t + MS, 0x07)
-    assert d.od.value(0x6041) & 0x6F == 0x23
+    assert statusword(d) & 0x6F == 0x23
     command(d, t + 2 * MS, 0x0F)
-    assert d.od.value(0x6041) & 0x6F == 0x27
+    assert statusword(d) & 0x6F == 0x27
     return t + 2 * MS
 
 
@@ -119,7 +131,7 @@ def test_statusword_sequence_with_remote_and_voltage_bits() -> None:
     command(d, 2 * MS, 0x07)
     assert d.od.value(0x6041) == 0x0233
     command(d, 3 * MS, 0x0F, x6060=PV)
-    assert d.od.value(0x6041) & 0x02FF == 0x0237
+    assert statusword(d) & 0x02FF == 0x0237
 
 
 def test_cst_acceleration_is_torque_over_inertia() -> None:
@@ -155,7 +167,7 @@ def test_pv_reaches_velocity_on_the_ramp() -> None:
     reached_at = None
     for i in range(1, 2000):
         command(d, t + i * MS, 0x0F, x60FF=2000)
-        if reached_at is None and d.od.value(0x6041) & 0x0400:
+        if reached_at is None and statusword(d) & 0x0400:
             reached_at = i
             break
     assert reached_at is not None and 950 <= reached_at <= 1150  # 2000 rpm at 2000 rpm/s
@@ -166,12 +178,12 @@ def test_pp_move_and_quick_stop() -> None:
     t = enable(d, PP)
     command(d, t + MS, 0x0F, x607A=50_000, x6081=500, x6083=2000, x6084=2000)
     command(d, t + 2 * MS, 0x1F)  # new set point
-    assert d.od.value(0x6041) & 0x1000  # set-point acknowledge
+    assert statusword(d) & 0x1000  # set-point acknowledge
     peak = 0
     for i in range(3, 3000):
         command(d, t + i * MS, 0x1F)
         peak = max(peak, abs(int(d.od.value(0x606C))))
-        if d.od.value(0x6041) & 0x0400:
+        if statusword(d) & 0x0400:
             break
     assert abs(int(d.od.value(0x6064)) - 50_000) <= 20
     assert abs(peak - 500) <= 10
@@ -184,7 +196,7 @@ def test_pp_move_and_quick_stop() -> None:
     assert d.state == PdsState.QUICK_STOP_ACTIVE
     for i in range(1, 400):
         command(d, t + (4400 + i) * MS, 0x0B)
-        if d.state == PdsState.SWITCH_ON_DISABLED:
+        if state_of(d) == PdsState.SWITCH_ON_DISABLED:
             break
     assert 180 <= i <= 230  # 1000 rpm / 5000 rpm/s = 200 ms
 
@@ -195,7 +207,7 @@ def test_injected_overcurrent_faults_and_recovers() -> None:
     d.inject("overcurrent")
     command(d, t + 10 * MS, 0x0F)
     assert d.state == PdsState.FAULT
-    assert d.od.value(0x6041) & 0x4F == 0x08
+    assert statusword(d) & 0x4F == 0x08
     assert d.od.value(0x603F) == 0x2310
     assert emcys == [(0x2310, 0x02, b"")]
     command(d, t + 11 * MS, 0x8F)
@@ -203,7 +215,7 @@ def test_injected_overcurrent_faults_and_recovers() -> None:
     d.inject("overcurrent", False)
     command(d, t + 12 * MS, 0x0F)
     command(d, t + 13 * MS, 0x8F)  # rising edge of bit 7
-    assert d.state == PdsState.SWITCH_ON_DISABLED
+    assert state_of(d) == PdsState.SWITCH_ON_DISABLED
 
 
 def test_leaving_op_stops_the_motor() -> None:
@@ -213,7 +225,7 @@ def test_leaving_op_stops_the_motor() -> None:
         command(d, t + i * MS, 0x0F, x60FF=1000)
     assert d.servo.rpm > 100
     d.al_state_changed(AlState.SAFEOP, t + 300 * MS)
-    assert d.state == PdsState.SWITCH_ON_DISABLED
+    assert state_of(d) == PdsState.SWITCH_ON_DISABLED
     d.update_inputs(t + 2000 * MS)
     assert abs(d.servo.rpm) < 1.0
 
@@ -294,11 +306,11 @@ def test_a_drive_of_the_segment_names_its_slave_in_its_log_lines() -> None:
     """128 drives enabled together log 128 pds_state lines: each says which slave."""
     from structlog.testing import capture_logs
 
-    from tests.support.tinymaster import segment_of
+    from tests.support.tinymaster import drive_of, segment_of
 
     with capture_logs() as logs:
         seg, _ = segment_of(2, device="tmc8670")
-        drive = seg.firmware[1].app.device
+        drive = drive_of(seg, 1)
         drive._enter(PdsState.READY_TO_SWITCH_ON, "t2")
     assert logs[-1] == {
         "event": "pds_state",
