@@ -93,7 +93,7 @@ def test_write_only_bad_command_and_mailbox_errors() -> None:
     ]
     counter = 2
     for kw, code in cases:
-        send(m, SDO_REQ + bytes(8), counter, **kw)  # type: ignore[arg-type]
+        send(m, SDO_REQ + bytes(8), counter, **kw)
         counter += 1
         r = recv(m)
         assert r is not None and r[5] & 0x0F == 0 and struct.unpack_from("<HH", r, 6) == (1, code)

@@ -215,8 +215,9 @@ def test_global_parameter_tables_10(b: Bench) -> None:
     assert params.BANK0[65].default == 0  # 9600 baud
     assert params.BANK0[69].default == 8  # 1000 kBit/s
     assert params.BANK0[70].default == 2 and params.BANK0[71].default == 1
-    assert params.global_param(2, 55) is not None and params.global_param(2, 55).storable
-    assert not params.global_param(2, 56).storable  # type: ignore[union-attr]
+    p55, p56 = params.global_param(2, 55), params.global_param(2, 56)
+    assert p55 is not None and p55.storable
+    assert p56 is not None and not p56.storable
     assert sorted(params.BANK3) == [0, 1, 2, 27, 28, *range(39, 47)]
     assert sorted(INTERRUPTS) == [0, 1, 2, 3, 15, 21, 27, 28, *range(39, 47)]
     assert b.cmd(P.STGP, 56, 2) == (P.WRONG_TYPE, 0)

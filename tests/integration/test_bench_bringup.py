@@ -33,7 +33,7 @@ RESENDS = 2
 def _clean(r: dict[str, Any]) -> bool:
     """Every request answered, and the frames a stock master lost within the guard."""
     cyc, frames = r["cycles"], r["frames"]
-    return (
+    return bool(
         cyc["lost"] + cyc["wkc_errors"] <= cyc["cycles"] // CYCLE_GUARD
         and frames["resends"] <= RESENDS
         and frames["unanswered"] == 0

@@ -27,7 +27,7 @@ from ecatsim.lin.frame import SLAVE_RESPONSE, header
 from ecatsim.lin.frame import frame as lin_frame
 from ecatsim.lin.server import LinDoor
 from ecatsim.lin.tables import VMAX_SIXTEENTH, Cmd, RomPointer, State
-from tests.support.linmaster import LinMaster, make_door
+from tests.support.linmaster import LinMaster, make_door, node_state
 
 ROOT = Path(__file__).resolve().parents[2]
 LDF = ldfparser.parse_ldf(str(ROOT / "config" / "tmc211.ldf"))
@@ -114,7 +114,7 @@ def start(m: LinMaster, ad: int, params: codec.MotorParams = PARAMS) -> None:
 def test_activation_by_the_first_get_full_status(bus: tuple[LinDoor, LinMaster]) -> None:
     door, m = bus
     node = door.bus.nodes[0]
-    assert node.state == State.SHUTDOWN  # §5.1.10: power-on enters ShutDown
+    assert node_state(node) == State.SHUTDOWN  # §5.1.10: power-on enters ShutDown
     st = read(m, "GetStatus_left")
     assert st is not None and st["GS_left_AD"] == LEFT
     m.motor_param(LEFT, PARAMS)
@@ -127,7 +127,7 @@ def test_activation_by_the_first_get_full_status(bus: tuple[LinDoor, LinMaster])
     assert actpos(m, "left") == 0
     first, _second = m.full_status(LEFT)
     assert first is not None and first[4] == 0x80  # <VddReset> read once
-    assert node.state == State.STOPPED
+    assert node_state(node) == State.STOPPED
     first, _ = m.full_status(LEFT)
     assert first is not None and first[4] == 0x00
     set_position(m, "left", 1000)
@@ -205,15 +205,15 @@ def test_run_init_finds_the_stall(tmp_path: Path) -> None:
     # RunInit (§6.11.9): Vmax 5 Vmin 1, first motion to -20000 (into the stop), second to
     # -19800: 200 micro-steps back out of it at Vmin; then ActPos = 0 and SecPos
     m.app(Cmd.RUN_INIT, LEFT, bytes((0x51, *codec.u16(-20000), *codec.u16(-19800))))
-    assert node.state == State.RUNINIT
+    assert node_state(node) == State.RUNINIT
     m.wait(5.0)
-    assert node.state == State.RUNINIT  # first motion counts on, the rotor sits at the stop
+    assert node_state(node) == State.RUNINIT  # first motion counts on, the rotor sits at the stop
     assert node.motor.rotor == -3000
-    while node.state == State.RUNINIT:
+    while node_state(node) == State.RUNINIT:
         m.wait(0.002)
     assert node.motor.rotor == -2800
     # the reference is 200 micro-steps from the stop; then the secure position 512 follows
-    while node.state != State.STOPPED or actpos(m, "left") != 512:
+    while node_state(node) != State.STOPPED or actpos(m, "left") != 512:
         m.wait(0.2)
     assert node.motor.rotor == -2800 + 512
     set_position(m, "left", -200)
@@ -230,14 +230,14 @@ def test_run_init_deadlock_needs_hardstop_and_get_full_status(
     # §5.1.11: a first target equal to the actual position deadlocks the circuit
     m.app(Cmd.RUN_INIT, LEFT, bytes((0x51, 0, 0, *codec.u16(100))))
     m.wait(2.0)
-    assert node.state == State.RUNINIT
+    assert node_state(node) == State.RUNINIT
     set_position(m, "left", 500)  # no effect now
     gp2(m, "SoftStop", LEFT)  # RunInit is not interrupted by SoftStop
     m.wait(1.0)
-    assert node.state == State.RUNINIT and actpos(m, "left") == 0
+    assert node_state(node) == State.RUNINIT and actpos(m, "left") == 0
     gp2(m, "HardStop", LEFT)
     m.wait(0.1)
-    assert node.state == State.STOPPED
+    assert node_state(node) == State.STOPPED
     set_position(m, "left", 500)  # ignored: <StepLoss> until GetFullStatus
     m.wait(0.5)
     assert actpos(m, "left") == 0
@@ -391,13 +391,13 @@ def test_shutdown_on_a_fault_and_back_after_get_full_status(bus: tuple[LinDoor, 
     m.wait(0.5)
     door.ctl("cpfail", ["left", "on"])
     m.wait(0.1)
-    assert node.state == State.SHUTDOWN  # HardStop, Stopped, ShutDown (Table 8)
+    assert node_state(node) == State.SHUTDOWN  # HardStop, Stopped, ShutDown (Table 8)
     assert door.ctl("nodes", [])["nodes"][0]["current_ma"] == 0  # bridges in Hi-Z
     m.full_status(LEFT)
-    assert node.state == State.SHUTDOWN  # the condition is still there
+    assert node_state(node) == State.SHUTDOWN  # the condition is still there
     door.ctl("cpfail", ["left", "off"])
     m.full_status(LEFT)
-    assert node.state == State.STOPPED
+    assert node_state(node) == State.STOPPED
 
 
 def test_irun_to_ihold_after_a_motion(bus: tuple[LinDoor, LinMaster]) -> None:

@@ -147,8 +147,8 @@ def test_100k_fuzzed_eoe_mailboxes_keep_eoe_and_coe_working() -> None:
     c = c % 7 + 1
     eoe_send(m, VALID, c, mtype=3)
     for _ in range(40):
-        r = eoe_recv(m)
-        if r is not None and r[5] & 0x0F == 3 and r[8] == 0x43:
-            assert struct.unpack_from("<I", r, 12)[0] == 0x286
+        reply = eoe_recv(m)
+        if reply is not None and reply[5] & 0x0F == 3 and reply[8] == 0x43:
+            assert struct.unpack_from("<I", reply, 12)[0] == 0x286
             return
     raise AssertionError("CoE no longer answers after the EoE fuzzing")

@@ -10,7 +10,7 @@ import os
 import select
 import termios
 import tty
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Protocol
 
@@ -23,7 +23,7 @@ from ecatsim.lin.frame import frame as lin_frame
 from ecatsim.lin.frame import header as lin_header
 from ecatsim.lin.node import Node
 from ecatsim.lin.server import LinDoor
-from ecatsim.lin.tables import Cmd
+from ecatsim.lin.tables import Cmd, State
 
 #: a gap the master leaves after a frame: more than T_frame_max of an 8-byte frame
 GAP_NS = 20_000_000
@@ -113,9 +113,9 @@ class LinMaster:
     def motor_param(self, ad: int, m: codec.MotorParams, broad: bool = False) -> None:
         self.app(Cmd.SET_MOTOR_PARAM, ad, codec.encode_motor_params(m), broad)
 
-    def assign(self, ad: int, pairs: list[tuple[int, int]], broad: bool = False) -> None:
+    def assign(self, ad: int, pairs: Sequence[tuple[int, int]], broad: bool = False) -> None:
         """Dynamic identifiers through 0x3C (§6.8 Table 15)."""
-        self.app(Cmd.DYNAMIC_ID, ad, codec.pack_dynamic_ids(pairs), broad)
+        self.app(Cmd.DYNAMIC_ID, ad, codec.pack_dynamic_ids(list(pairs)), broad)
 
 
 class PtyPort:
@@ -176,3 +176,8 @@ def activate(m: LinMaster, ad: int = 0, params: codec.MotorParams | None = None)
 DEFAULT_PARAMS = codec.MotorParams(
     irun=0xF, ihold=0x3, vmax=5, vmin=1, secpos=0x400, acc=3, stepmode=3
 )
+
+
+def node_state(node: Node) -> State:
+    """The node's state, read anew at each call (Table 8)."""
+    return node.state

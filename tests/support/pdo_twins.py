@@ -72,7 +72,7 @@ def rx_twins() -> Iterator[RxTwins]:
     """For each RxPDO mapping the TMC8670 allows: the image with the layout (its plan's
     decoder has one) and its twin without, set to that mapping."""
     od_a, od_b = build_od(default_description()), build_od(default_description())
-    fast, full = PdoImage(od_a, Quiet()), PdoImage(od_b, Quiet())  # type: ignore[arg-type]
+    fast, full = PdoImage(od_a, Quiet()), PdoImage(od_b, Quiet())
     for mapping in every_mapping(od_a, True):
         set_mapping(od_a, 0x1600, mapping)
         set_mapping(od_b, 0x1600, mapping)

@@ -11,10 +11,10 @@ from dataclasses import dataclass
 from typing import Any
 
 from ecatsim.clock import ManualClock
+from ecatsim.device.drive import Drive
 from ecatsim.ethercat.assembly import build_segment
 from ecatsim.ethercat.segment import Segment
 from ecatsim.ethercat.segment_file import SegmentConfig, SlaveConfig
-from ecatsim.device.drive import Drive
 from ecatsim.slave.firmware import Firmware
 from ecatsim.wire import datagram as dg
 from ecatsim.wire.frame import ecat_offset, mark_processed

@@ -6,11 +6,11 @@ so pulses were handled in front of the next frame's reply (decision P1).
 
 from __future__ import annotations
 
+import select
 from typing import Any
 
 import pytest
 
-from ecatsim.ethercat import daemon as daemon_module
 from tests.perf.hotpath import MS, CspCycle
 
 
@@ -18,12 +18,12 @@ def sleeps(monkeypatch: pytest.MonkeyPatch, c: CspCycle) -> list[float]:
     """Run the real loop once; return the timeouts it slept with."""
     seen: list[float] = []
 
-    def fake_select(r: Any, w: Any, x: Any, timeout: float) -> tuple[list[int], list, list]:
+    def fake_select(r: Any, w: Any, x: Any, timeout: float) -> tuple[list[int], ...]:
         seen.append(timeout)
         c.daemon.stop()
         return [], [], []
 
-    monkeypatch.setattr(daemon_module.select, "select", fake_select)
+    monkeypatch.setattr(select, "select", fake_select)  # the module the daemon calls
     monkeypatch.setattr(c.link, "fileno", lambda: c.daemon._wake_r)  # something to watch
     c.daemon.run()
     return seen

@@ -127,7 +127,7 @@ def test_the_ethercat_daemon_serves_a_door_between_frames() -> None:
     """A door's descriptor ends the daemon's wait; its deadline is part of the loop's."""
     from ecatsim.ethercat.daemon import Daemon
     from ecatsim.link.loopback import LoopbackLink
-    from tests.perf.hotpath import segment_of
+    from tests.support.tinymaster import segment_of
 
     seg, _clock = segment_of(1)
     door = PipeDoor()

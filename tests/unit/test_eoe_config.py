@@ -67,7 +67,7 @@ def test_esi_export_declares_eoe_and_the_sii_built_from_it_too(tmp_path: Path) -
     mbx = ET.parse(str(xml)).getroot().find("Descriptions/Devices/Device/Mailbox")
     assert mbx is not None
     assert [c.tag for c in mbx] == ["EoE", "CoE", "FoE"]
-    assert mbx.find("EoE").get("IP") == "true"  # type: ignore[union-attr]
+    assert mbx.find("EoE").get("IP") == "true"
     assert "eoe" in read_esi(xml).mailbox.protocols
     r = CliRunner().invoke(cli, ["eeprom", "build", str(xml), "-o", str(img)])
     assert r.exit_code == 0, r.output

@@ -16,6 +16,7 @@ import structlog
 from ecatsim.clock import ManualClock
 from ecatsim.errors import UserError
 from ecatsim.ethercat.assembly import build_segment
+from ecatsim.ethercat.segment import Segment
 from ecatsim.ethercat.segment_file import parse_segment
 from ecatsim.generic.minimaster import BringUpError, MiniMaster
 from ecatsim.generic.model import from_esi
@@ -29,7 +30,7 @@ DATA = Path(__file__).resolve().parents[1] / "data" / "esi"
 ACME = DATA / "acme-io.xml"
 
 
-def segment(*slaves: dict[str, object]) -> tuple[object, ManualClock]:
+def segment(*slaves: dict[str, object]) -> tuple[Segment, ManualClock]:
     cfg = parse_segment({"slaves": list(slaves)}, "test.yaml", DATA)
     clock = ManualClock(1_000_000_000)
     return build_segment(cfg, clock), clock
@@ -84,7 +85,7 @@ def test_pdos_default_assigned_and_sii() -> None:
 def test_eeprom_too_small_gets_the_next_size_with_one_warning() -> None:
     with structlog.testing.capture_logs() as logs:
         seg, _ = segment({"esi": "acme-io.xml", "device_type": "ACME-IO8"})
-    img = parse_image(bytes(seg.escs[0].eeprom.image))  # type: ignore[attr-defined]
+    img = parse_image(bytes(seg.escs[0].eeprom.image))
     assert img.size_kbit == 8  # 256 bytes declared; the image needs more than 4 kbit
     raised = [e for e in logs if e["event"] == "eeprom_size_raised"]
     assert len(raised) == 1 and raised[0]["declared_bytes"] == 256
@@ -100,7 +101,7 @@ def fw_of(seg: object, i: int = 0) -> Firmware:
 
 def test_minimal_master_brings_it_to_op_with_the_assigned_sizes() -> None:
     seg, _ = segment({"esi": "acme-io.xml", "device_type": "ACME-IO8"})
-    m = MiniMaster(seg)  # type: ignore[arg-type]
+    m = MiniMaster(seg)
     assert m.to_op(0) == "OP, outputs 3 bytes, inputs 8 bytes"
     fw = fw_of(seg)
     # inputs by name and by index reach the image; outputs written by the master are read
@@ -128,7 +129,7 @@ def test_minimal_master_brings_it_to_op_with_the_assigned_sizes() -> None:
 
 def test_remap_and_reassign_where_the_esi_allows() -> None:
     seg, _ = segment({"esi": "acme-io.xml", "device_type": "ACME-IO8"})
-    m = MiniMaster(seg)  # type: ignore[arg-type]
+    m = MiniMaster(seg)
     station = 0x1001
     m.apwr(0, 0x0010, struct.pack("<H", station))
     for i, (start, ctrl) in enumerate(((0x1000, 0x26), (0x1080, 0x22))):
@@ -166,7 +167,7 @@ def test_esi_without_dictionary_gets_pdos_from_the_esi_alone() -> None:
     seg, _ = segment({"esi": "acme-io.xml", "device_type": "ACME-AO1"})
     fw = fw_of(seg)
     assert fw.od is not None and fw.od.value(0x1C12, 1) == 0x1600
-    assert MiniMaster(seg).to_op(0) == "OP, outputs 2 bytes, inputs 2 bytes"  # type: ignore[arg-type]
+    assert MiniMaster(seg).to_op(0) == "OP, outputs 2 bytes, inputs 2 bytes"
 
 
 def test_signals_run_on_the_slaves_time() -> None:
@@ -182,7 +183,7 @@ def test_signals_run_on_the_slaves_time() -> None:
             ],
         }
     )
-    m = MiniMaster(seg)  # type: ignore[arg-type]
+    m = MiniMaster(seg)
     m.to_op(0)
     m.lrw(0, bytes([0x01, 0, 0]))
     first, _ = m.lrw(0x8000, bytes(8))
@@ -204,7 +205,7 @@ def test_minimal_master_reports_the_failing_step() -> None:
     seg, _ = segment({"esi": "acme-io.xml", "device_type": "ACME-IO8"})
     fw_of(seg).refuse_next = 0x0011
     with pytest.raises(BringUpError, match="INIT->PREOP refused: AL status code 0x0011"):
-        MiniMaster(seg).to_op(0)  # type: ignore[arg-type]
+        MiniMaster(seg).to_op(0)
 
 
 def test_esi_check_over_a_folder_one_line_per_device(tmp_path: Path) -> None:
@@ -264,7 +265,7 @@ def test_mailbox_foe_and_dc_op_modes_from_the_esi() -> None:
     fw = fw_of(seg)
     assert fw.bootstrap_supported and fw.mbx is not None
     assert int(MbxType.FOE) in fw.mbx.handlers and int(MbxType.COE) in fw.mbx.handlers
-    img = parse_image(bytes(seg.escs[0].eeprom.image))  # type: ignore[attr-defined]
+    img = parse_image(bytes(seg.escs[0].eeprom.image))
     assert img.mailbox == (0x1000, 0x80, 0x1080, 0x80, 0x1000, 128, 0x1080, 128)
     assert img.protocols == 0x04 | 0x08 | 0x20  # CoE, FoE, VoE as the ESI declares
     assert [(d[4], d[3]) for d in img.dc] == [("FreeRun", 0x0000), ("DC", 0x0300)]
@@ -288,7 +289,7 @@ def test_odd_dictionary_constructs_are_warnings_not_crashes() -> None:
     assert od.value(0x2004) == -7 and od.entry(0x2000, 2).bits == 12
     assert m.desc.esc.pdi_control == 0x0C05  # device emulation cleared
     seg, _ = segment({"esi": "odd-dictionary.xml"})
-    assert MiniMaster(seg).to_op(0) == "OP, outputs 0 bytes, inputs 0 bytes"  # type: ignore[arg-type]
+    assert MiniMaster(seg).to_op(0) == "OP, outputs 0 bytes, inputs 0 bytes"
 
 
 def test_io_without_mailbox_runs_in_device_emulation_on_its_own_sms() -> None:
@@ -296,8 +297,8 @@ def test_io_without_mailbox_runs_in_device_emulation_on_its_own_sms() -> None:
         {"esi": "acme-io.xml", "device_type": "ACME-DI4",
          "signals": [{"input": "Input 2", "constant": 1}]}
     )  # fmt: skip
-    assert seg.escs[0].mem[0x0141] & 0x01  # type: ignore[attr-defined]
-    m = MiniMaster(seg)  # type: ignore[arg-type]
+    assert seg.escs[0].mem[0x0141] & 0x01
+    m = MiniMaster(seg)
     assert m.to_op(0) == "OP, outputs 0 bytes, inputs 1 bytes"
     pd_request(seg.firmware[0].app, {"entry": "0x6000:01", "value": 1})  # type: ignore[attr-defined]
     m.lrw(0x8000, bytes(1))

@@ -91,7 +91,7 @@ def test_a_failing_transfer_is_answered_with_zeros_and_the_next_frames_are_serve
     answers that frame with zeros and counts it; the frames after it are served."""
     _seg, _, host, path = setup(tmp_path)
     door = host.doors["pdi0"]
-    sock = door.socket  # type: ignore[attr-defined]
+    sock = door.socket
     real = sock._transfer
     calls: list[bytes] = []
     answers: list[bytes] = []

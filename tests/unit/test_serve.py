@@ -306,7 +306,7 @@ def test_daemon_run_serves_through_the_responder(srv: ModuleType, link: SocketLi
     # LRD with no FMMU: WKC 0, the processed bit set; BRD of the AL status: 0x0001, WKC 1
     processed = bytearray(lrd)
     processed[6] |= 0x02
-    assert replies[0] == processed and replies[2] == processed
+    assert replies[0] == bytes(processed) and replies[2] == bytes(processed)
     assert replies[1] is not None and replies[1][26:30] == b"\x01\x00\x01\x00"
     assert (d.replies, d.compiled_replies, d.failures) == (3, 3, 0)
 

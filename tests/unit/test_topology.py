@@ -364,6 +364,7 @@ def test_a_dl_control_write_that_keeps_the_loop_settings_keeps_the_routes() -> N
     are compiled again only when the loop settings (0x0101) change. Ref: TMC8460 §5.17."""
     seg = line(3)
     routes = seg.routes[0]
+    assert routes is not None
     got = send(seg, [dg.build(dg.Cmd.BWR, 0, 0x0100, bytes(2))])
     assert got is not None and got[0][0].wkc == 3
     send(seg, [dg.build(dg.Cmd.BRD, 0, 0x0130, bytes(2))])
@@ -372,4 +373,5 @@ def test_a_dl_control_write_that_keeps_the_loop_settings_keeps_the_routes() -> N
     # the last slave's port 1 closed (loop 0x0101 bits 2-3 = 2): compiled again, same order
     send(seg, [dg.build(dg.Cmd.APWR, (-2) & 0xFFFF, 0x0101, b"\x08")])
     send(seg, [dg.build(dg.Cmd.BRD, 0, 0x0130, bytes(2))])
-    assert seg.routes[0] is not routes and seg.routes[0].order == routes.order
+    again = seg.routes[0]
+    assert again is not None and again is not routes and again.order == routes.order

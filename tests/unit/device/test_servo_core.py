@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import random
+from typing import Any
 
 import pytest
 
@@ -34,7 +35,7 @@ def _require_compiled() -> None:
 def pair(rng: random.Random) -> tuple[Servo, Servo]:
     """A servo of the compiled core and one of the same source run as Python."""
     pure = source_twin(servo)
-    motor = dict(
+    motor: dict[str, Any] = dict(
         kt=rng.uniform(0.01, 0.2),
         inertia=rng.uniform(5e-6, 1e-4),
         viscous=rng.uniform(0.0, 5e-5),

@@ -18,7 +18,7 @@ from ecatsim.ethercat.segment_file import parse_segment
 from ecatsim.lin.frame import SLAVE_RESPONSE, frame, header
 from ecatsim.lin.server import LinDoor, door_from_config
 from ecatsim.lin.tables import State
-from tests.support.linmaster import make_door
+from tests.support.linmaster import make_door, node_state
 
 
 def test_segment_file_lin_key_builds_the_door(tmp_path: Path) -> None:
@@ -108,10 +108,10 @@ def test_node_sleeps_after_the_lin_timeout_and_wakes_on_a_header(tmp_path: Path)
         node = door.bus.nodes[0]
         assert door.bus.timeout_ns == 25000 * 1_000_000_000 // 9600  # 2.6 s at 9600 bit/s
         m.wait(2.5, keepalive=False)
-        assert node.state == State.SHUTDOWN
+        assert node_state(node) == State.SHUTDOWN
         m.wait(0.2, keepalive=False)
-        assert node.state == State.SLEEP
+        assert node_state(node) == State.SLEEP
         assert m.read(0x3E) is None
-        assert node.state == State.SHUTDOWN and node.power_ons == 2
+        assert node_state(node) == State.SHUTDOWN and node.power_ons == 2
     finally:
         door.close()

@@ -92,7 +92,7 @@ class ResponderLink(RawLink):
             assert code == srv.TIMEOUT, code
             return 0
         self.rx_ns = t_rx
-        return n
+        return int(n)
 
     def close(self) -> None:
         self._responder.close()

@@ -14,7 +14,7 @@ from tests.support.tinymaster import TinyMaster, segment_of
 
 STATES = [AlState.INIT, AlState.PREOP, AlState.BOOT, AlState.SAFEOP, AlState.OP]
 #: (from, request) -> (resulting AL status, AL status code)
-EXPECTED = {
+EXPECTED: dict[tuple[AlState, AlState], tuple[int, int]] = {
     (AlState.INIT, AlState.INIT): (0x01, 0),
     (AlState.INIT, AlState.PREOP): (0x02, 0),
     (AlState.INIT, AlState.BOOT): (0x03, 0),
@@ -62,7 +62,7 @@ def _goto(m: TinyMaster, state: AlState) -> None:
     assert _al(m) == (int(state), 0)
 
 
-@pytest.mark.parametrize(("start", "req"), sorted(EXPECTED, key=lambda k: (k[0], k[1])))
+@pytest.mark.parametrize(("start", "req"), sorted(EXPECTED))
 def test_transition(start: AlState, req: AlState) -> None:
     seg, _ = segment_of(1)
     m = TinyMaster(seg)

@@ -30,7 +30,7 @@ def slow(plan: Plan) -> Plan:
 
 def test_default_images_have_a_codec_and_it_matches_the_slow_path() -> None:
     od = build_od(default_description())
-    img = PdoImage(od, Quiet())  # type: ignore[arg-type]
+    img = PdoImage(od, Quiet())
     plan = img.plan
     assert plan.rx_codec is not None and plan.rx_codec.st.format == "<Hihi"
     assert plan.tx_codec is not None and plan.tx_codec.st.format == "<HbihiI"
@@ -74,6 +74,8 @@ class Calls:
     def update_inputs(self, now_ns: int) -> None:
         self.calls.append(("in", now_ns))
 
+    def al_state_changed(self, state: object, now_ns: int) -> None: ...
+
 
 class Recorder(Calls, CycleDevice):
     """A CycleDevice: the compiled process image calls its overrides in C (P32)."""
@@ -92,7 +94,7 @@ def test_the_cycle_reaches_a_cycle_device_and_a_plain_one_alike() -> None:
         """A device that is not a CycleDevice: called through Python."""
 
     plain = Plain()
-    img.device = plain  # type: ignore[assignment]  # replaced: the new one is called
+    img.device = plain  # replaced: the new one is called
     img.set_outputs(bytes(12), 9)
     img.get_inputs(11)
     assert plain.calls == [("out", 9), ("in", 11)] and rec.calls == [("out", 5), ("in", 7)]
@@ -106,7 +108,7 @@ def test_the_drive_is_a_cycle_device() -> None:
     assert not isinstance(Quiet(), CycleDevice)
 
 
-def _edges(bits: int, signed: bool) -> list[object]:
+def _edges(bits: int, signed: bool) -> list[int]:
     lo, hi = (-(1 << (bits - 1)), (1 << (bits - 1)) - 1) if signed else (0, (1 << bits) - 1)
     return [lo, hi, lo - 1, hi + 1, 0, -1, 1, 1 << 40, -(1 << 70), 1 << 64, True, 7]
 
@@ -118,7 +120,7 @@ def test_the_c_codec_is_the_struct_and_the_per_entry_path_for_every_mapping() ->
     struct and the per-entry path give the same values and bytes."""
     rnd = random.Random(33)
     od = build_od(default_description())
-    img = PdoImage(od, Quiet())  # type: ignore[arg-type]
+    img = PdoImage(od, Quiet())
     for rx in (True, False):
         for mapping in every_mapping(od, rx):
             set_mapping(od, 0x1600 if rx else 0x1A00, mapping)
@@ -164,7 +166,7 @@ def test_unsigned_outputs_with_the_top_bit_set_decode_as_the_struct_does() -> No
     positive in the C codec too: each byte is shifted as a C long long (P51; a byte shifted
     as a C int made bit 31 a sign). Ref: ETG.1000.6 Table 64."""
     od = build_od(default_description())
-    img = PdoImage(od, Quiet())  # type: ignore[arg-type]
+    img = PdoImage(od, Quiet())
     e = od.entry(0x60FD, 0)  # UNSIGNED32
     assert e.dtype == "UNSIGNED32"
     fields = (Field(0, 4, e),)

@@ -59,7 +59,7 @@ def test_inputs_at_the_fields_edges_are_the_struct_path() -> None:
     where one does not."""
     rnd = random.Random(95)
     od = build_od(default_description())
-    img = PdoImage(od, Quiet())  # type: ignore[arg-type]
+    img = PdoImage(od, Quiet())
     fills = declines = 0
     for mapping in every_mapping(od, False):
         set_mapping(od, 0x1A00, mapping)
@@ -119,7 +119,7 @@ def test_outputs_of_any_length_as_bytearray_are_those_as_bytes() -> None:
     values its bytes give, on the image with a layout and on its twin without one."""
     rnd = random.Random(97)
     ods = [build_od(default_description()) for _ in range(3)]
-    imgs = [PdoImage(od, Quiet()) for od in ods]  # type: ignore[arg-type]
+    imgs = [PdoImage(od, Quiet()) for od in ods]
     for mapping in every_mapping(ods[0], True)[:6]:
         for od in ods:
             set_mapping(od, 0x1600, mapping)

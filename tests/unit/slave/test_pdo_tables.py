@@ -78,7 +78,7 @@ def test_an_entry_written_to_the_decoded_value_as_a_bool_becomes_an_int() -> Non
     """The C decoder assigns every cycle: a bool True in the entry where the output
     decodes to 1 is replaced by the int, as a full decode does (P33, P89)."""
     od = build_od(default_description())
-    img = PdoImage(od, Quiet())  # type: ignore[arg-type]
+    img = PdoImage(od, Quiet())
     plan = img.plan
     assert plan.rx_codec is not None and plan.rx_codec.layout is not None
     first = plan.rx[0]

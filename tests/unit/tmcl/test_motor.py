@@ -6,6 +6,8 @@ Ref: TMCM-1311 TMCL firmware manual §6, §7, §8.1, §8.3, §9, §9.1.1.
 
 from __future__ import annotations
 
+from typing import Any, cast
+
 from ecatsim.tmcl import protocol as P
 from ecatsim.tmcl.module import ModuleConfig
 from ecatsim.tmcl.motor import DE_OT, DE_STALL, SW_I2T, SW_LEFT, SW_OVERT, Switches
@@ -13,7 +15,7 @@ from tests.unit.tmcl.conftest import Bench
 
 
 def bench_with(**switches: float) -> Bench:
-    return Bench([ModuleConfig(switches=Switches(**switches))])
+    return Bench([ModuleConfig(switches=Switches(**cast("dict[str, Any]", switches)))])
 
 
 def test_stop_switch_stops_motion_toward_it_unless_disabled() -> None:
