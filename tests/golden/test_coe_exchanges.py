@@ -10,7 +10,7 @@ import struct
 import pytest
 
 from ecatsim.slave.firmware import Firmware
-from tests.support.tinymaster import TinyMaster, segment_of
+from tests.support.tinymaster import TinyMaster, firmware_of, segment_of
 
 SDO_REQ = struct.pack("<H", 2 << 12)
 
@@ -22,8 +22,7 @@ def preop(tx_len: int = 128) -> tuple[TinyMaster, Firmware]:
     m.apwr(0, 0x0808, struct.pack("<HHBBBB", 0x1080, tx_len, 0x22, 0, 1, 0))
     m.apwr(0, 0x0120, b"\x02\x00")
     assert m.aprd(0, 0x0130, 1).data == b"\x02"
-    fw = seg.firmware[0]
-    assert isinstance(fw, Firmware)
+    fw = firmware_of(seg)
     return m, fw
 
 

@@ -112,7 +112,7 @@ class TinyMaster:
         return int(struct.unpack("<H", self.fprd(station, ado, 2).data)[0])
 
 
-def firmware_of(seg: Segment, k: int) -> Firmware:
+def firmware_of(seg: Segment, k: int = 0) -> Firmware:
     """Slave ``k``'s firmware, ecatsim's own (a slave on the PDI socket has another)."""
     fw = seg.firmware[k]
     assert isinstance(fw, Firmware), fw

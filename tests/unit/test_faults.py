@@ -18,7 +18,7 @@ from ecatsim.ethercat.segment_file import load_segment
 from ecatsim.faults.spec import FaultSpecError, parse_fault
 from ecatsim.link.loopback import LoopbackLink
 from ecatsim.wire import datagram as dg
-from tests.support.tinymaster import Reply, decode, segment_of
+from tests.support.tinymaster import Reply, decode, drive_of, segment_of
 
 SDO_REQ = struct.pack("<H", 2 << 12)
 MS = 1_000_000
@@ -323,7 +323,7 @@ def test_power_cycle_resets_registers_and_cuts_the_slave_off_meanwhile() -> None
 def test_drive_fault_is_held_until_cleared() -> None:
     m = LoopMaster(1, "tmc8670")
     fid = m.inject(kind="overcurrent")
-    drive = m.seg.firmware[0].device  # type: ignore[attr-defined]
+    drive = drive_of(m.seg, 0)
     assert "overcurrent" in drive.injected
     assert m.faults.status()[0]["kind"] == "overcurrent"
     assert m.faults.clear(fid, m.clock.now_ns()) == 1

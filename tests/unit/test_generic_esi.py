@@ -20,11 +20,12 @@ from ecatsim.ethercat.segment import Segment
 from ecatsim.ethercat.segment_file import parse_segment
 from ecatsim.generic.minimaster import BringUpError, MiniMaster
 from ecatsim.generic.model import from_esi
+from ecatsim.generic.pinio import PinIo
 from ecatsim.sii.image import parse_image
 from ecatsim.slave.al import AlState
-from ecatsim.slave.firmware import Firmware
 from ecatsim.slave.od import SdoAbort
 from ecatsim.slave.pd import request as pd_request
+from tests.support.tinymaster import firmware_of
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "esi"
 ACME = DATA / "acme-io.xml"
@@ -93,17 +94,11 @@ def test_eeprom_too_small_gets_the_next_size_with_one_warning() -> None:
     assert len(warned) == 1 and "<Slots>" in warned[0]["constructs"]
 
 
-def fw_of(seg: object, i: int = 0) -> Firmware:
-    fw = seg.firmware[i]  # type: ignore[attr-defined]
-    assert isinstance(fw, Firmware)
-    return fw
-
-
 def test_minimal_master_brings_it_to_op_with_the_assigned_sizes() -> None:
     seg, _ = segment({"esi": "acme-io.xml", "device_type": "ACME-IO8"})
     m = MiniMaster(seg)
     assert m.to_op(0) == "OP, outputs 3 bytes, inputs 8 bytes"
-    fw = fw_of(seg)
+    fw = firmware_of(seg)
     # inputs by name and by index reach the image; outputs written by the master are read
     pd_request(fw.app, {"entry": "Channel 1", "value": 1})
     pd_request(fw.app, {"entry": "0x6000:03", "value": 1})
@@ -135,7 +130,7 @@ def test_remap_and_reassign_where_the_esi_allows() -> None:
     for i, (start, ctrl) in enumerate(((0x1000, 0x26), (0x1080, 0x22))):
         m.fpwr(station, 0x0800 + 8 * i, struct.pack("<HHBBBB", start, 128, ctrl, 0, 1, 0))
     m.state(station, 2, "PREOP")
-    od = fw_of(seg).od
+    od = firmware_of(seg).od
     assert od is not None
     st = int(AlState.PREOP)
 
@@ -165,7 +160,7 @@ def test_remap_and_reassign_where_the_esi_allows() -> None:
 
 def test_esi_without_dictionary_gets_pdos_from_the_esi_alone() -> None:
     seg, _ = segment({"esi": "acme-io.xml", "device_type": "ACME-AO1"})
-    fw = fw_of(seg)
+    fw = firmware_of(seg)
     assert fw.od is not None and fw.od.value(0x1C12, 1) == 0x1600
     assert MiniMaster(seg).to_op(0) == "OP, outputs 2 bytes, inputs 2 bytes"
 
@@ -203,7 +198,7 @@ def test_bad_signal_is_one_line() -> None:
 
 def test_minimal_master_reports_the_failing_step() -> None:
     seg, _ = segment({"esi": "acme-io.xml", "device_type": "ACME-IO8"})
-    fw_of(seg).refuse_next = 0x0011
+    firmware_of(seg).refuse_next = 0x0011
     with pytest.raises(BringUpError, match="INIT->PREOP refused: AL status code 0x0011"):
         MiniMaster(seg).to_op(0)
 
@@ -252,7 +247,7 @@ def test_ctl_pd_table_for_people() -> None:
     from ecatsim.slave.pd import format_entries
 
     seg, _ = segment({"esi": "acme-io.xml", "device_type": "ACME-IO8"})
-    rows = format_entries(pd_request(fw_of(seg).app, {})["entries"]).splitlines()
+    rows = format_entries(pd_request(firmware_of(seg).app, {})["entries"]).splitlines()
     assert rows[0].split() == ["entry", "dir", "bits", "value", "name", "pdo"]
     assert rows[3].split() == ["0x7010:00", "out", "16", "256", "(0x100)", "Setpoint", "0x1601",
                                "Setpoint"]  # fmt: skip
@@ -262,7 +257,7 @@ def test_mailbox_foe_and_dc_op_modes_from_the_esi() -> None:
     from ecatsim.wire.mailbox import MbxType
 
     seg, _ = segment({"esi": "acme-io.xml", "device_type": "ACME-IO8"})
-    fw = fw_of(seg)
+    fw = firmware_of(seg)
     assert fw.bootstrap_supported and fw.mbx is not None
     assert int(MbxType.FOE) in fw.mbx.handlers and int(MbxType.COE) in fw.mbx.handlers
     img = parse_image(bytes(seg.escs[0].eeprom.image))
@@ -300,7 +295,9 @@ def test_io_without_mailbox_runs_in_device_emulation_on_its_own_sms() -> None:
     assert seg.escs[0].mem[0x0141] & 0x01
     m = MiniMaster(seg)
     assert m.to_op(0) == "OP, outputs 0 bytes, inputs 1 bytes"
-    pd_request(seg.firmware[0].app, {"entry": "0x6000:01", "value": 1})  # type: ignore[attr-defined]
+    pinio = seg.firmware[0]
+    assert isinstance(pinio, PinIo)  # a mailbox-less slave: its process image on its SMs
+    pd_request(pinio.app, {"entry": "0x6000:01", "value": 1})
     m.lrw(0x8000, bytes(1))
     data, wkc = m.lrw(0x8000, bytes(1))
     assert (data, wkc) == (b"\x03", 1)  # SM0 (0x1000) carries both inputs
@@ -329,13 +326,13 @@ def test_more_than_255_names_leave_the_rest_unnamed_in_the_sii() -> None:
 
 def test_ctl_pd_on_the_tmc8670_too() -> None:
     seg, _ = segment({"device": "tmc8670"})
-    got = pd_request(fw_of(seg).app, {})["entries"]
+    got = pd_request(firmware_of(seg).app, {})["entries"]
     assert [e["entry"] for e in got][:2] == ["0x6040:00", "0x607A:00"]
     assert got[4] == {
         "entry": "0x6041:00", "name": "Statusword", "pdo": "0x1A00",
         "pdo_name": "Transmit PDO mapping", "direction": "input", "bits": 16, "value": 0x40,
     }  # fmt: skip
-    assert pd_request(fw_of(seg).app, {"entry": "Statusword", "value": 0x37})["value"] == 0x37
+    assert pd_request(firmware_of(seg).app, {"entry": "Statusword", "value": 0x37})["value"] == 0x37
 
 
 def test_bit_string_types_keep_their_codes() -> None:
@@ -357,8 +354,8 @@ def test_an_esi_slave_with_eoe_serves_it_beside_coe() -> None:
     seg, _ = segment({"esi": "acme-io.xml", "device_type": "ACME-IO8", "eoe": {"tap": "e0"}})
     sii = parse_image(bytes(seg.escs[0].eeprom.image))
     assert sii.protocols & 0x06 == 0x06
-    fw = seg.firmware[0]
-    assert isinstance(fw, Firmware) and fw.mbx is not None
+    fw = firmware_of(seg)
+    assert fw.mbx is not None
     assert int(MbxType.EOE) in fw.mbx.handlers and fw.mbx.sources
 
 

@@ -11,7 +11,7 @@ from ecatsim.slave.eoe import EoeService, find_eoe
 from ecatsim.slave.eoe_frag import Fragmenter, Reassembler
 from ecatsim.slave.firmware import Firmware
 from ecatsim.wire.eoe import IpParams, decode_header
-from tests.support.tinymaster import TinyMaster, segment_of
+from tests.support.tinymaster import TinyMaster, firmware_of, segment_of
 
 EOE = 2
 IP = bytes([10, 77, 0, 2])
@@ -38,8 +38,7 @@ def setup() -> tuple[TinyMaster, Firmware, EoeService, FakeSide]:
     m.apwr(0, 0x0808, struct.pack("<HHBBBB", 0x1080, 128, 0x22, 0, 1, 0))
     m.apwr(0, 0x0120, b"\x02\x00")
     assert m.aprd(0, 0x0130, 1).data == b"\x02"
-    fw = seg.firmware[0]
-    assert isinstance(fw, Firmware)
+    fw = firmware_of(seg)
     svc = find_eoe(fw.mbx)
     assert svc is not None
     side = FakeSide()
