@@ -22,9 +22,9 @@ from ecatsim.ethercat.segment_file import parse_segment
 from ecatsim.generic.dictionary import num
 from ecatsim.generic.minimaster import MiniMaster
 from ecatsim.slave.al import AlState
-from ecatsim.slave.firmware import Firmware
 from ecatsim.wire import datagram as dg
 from tests.support.eni import coe_init_cmds
+from tests.support.tinymaster import firmware_of
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 PAIR = DATA / "eni" / "unknown-pair.xml"
@@ -68,8 +68,8 @@ def test_every_init_cmd_accepted_and_op() -> None:
             assert wkc == 1, c.findtext("Comment")
     preop = int(AlState.PREOP)
     for i, cmds in enumerate(coe_init_cmds(PAIR)):
-        fw = seg.firmware[i]
-        assert isinstance(fw, Firmware) and fw.od is not None
+        fw = firmware_of(seg, i)
+        assert fw.od is not None
         for index, sub, data, ca in cmds:
             if ca:
                 fw.od.write_complete(index, sub, data, preop)
@@ -78,8 +78,8 @@ def test_every_init_cmd_accepted_and_op() -> None:
         assert fw.od.value(0x1018, 1) == 0x00BEEF00
     assert m.to_op(0) == "OP, outputs 2 bytes, inputs 6 bytes"
     assert m.to_op(1) == "OP, outputs 0 bytes, inputs 3 bytes"
-    fw1 = seg.firmware[1]
-    assert isinstance(fw1, Firmware) and fw1.od is not None
+    fw1 = firmware_of(seg, 1)
+    assert fw1.od is not None
     assert [fw1.od.value(0x8010, s) for s in range(3)] == [2, 1, 2]
 
 
