@@ -57,6 +57,7 @@ CORE = (
     "ecatsim.ethercat.sequence",
     "ecatsim.device.cia402",
     "ecatsim.device.servo",
+    "ecatsim.device.drive_od",
     "ecatsim.device.drive",
 )
 

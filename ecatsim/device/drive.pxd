@@ -7,7 +7,7 @@ cimport cython
 from ecatsim.device.servo cimport Servo
 cimport ecatsim.device.cia402 as cia402
 from ecatsim.slave.od cimport Entry
-from ecatsim.slave.pdo cimport CycleDevice
+from ecatsim.device.drive_od cimport DriveOd
 
 
 # the statusword bits as C constants (drive.py uses them only within itself)
@@ -41,19 +41,7 @@ cdef inline bint _no_voltage(object st) noexcept
 cdef inline long long _int_of(Entry e) except? -1
 
 
-cdef class Drive(CycleDevice):
-    cdef public object od
-    cdef public dict _entries
-    cdef public object _published
-    cdef public object _snapshot_hits
-    cdef public object _control_hits
-    cdef bint _bound
-    cdef Entry _c_6040, _c_6060, _c_607a
-    cdef Entry _s_60ff, _s_6083, _s_6084, _s_607a, _s_60b0, _s_60b1, _s_6071, _s_60b2
-    cdef Entry _s_6065, _s_6085, _s_605a
-    cdef public bint _pub_c
-    # the published entries' ranges as C arrays, one per PUBLISHED index (P90)
-    cdef long long[10] _pub_lo, _pub_hi
+cdef class Drive(DriveOd):
     cdef public long long q_60ff, q_6083, q_6084, q_607a, q_60b0, q_60b1, q_6071, q_60b2
     cdef public long long q_6065, q_6085, q_605a
     cdef bint _snap_all
@@ -93,15 +81,6 @@ cdef class Drive(CycleDevice):
     cdef public object tracer
     cdef public object log
 
-    cpdef object _entry(self, int index, int sub)
-    cdef Entry _entry_only(self, int index)
-    @cython.locals(e=Entry)
-    cpdef object _v(self, int index, int sub=*)
-    @cython.locals(hits=tuple)
-    cpdef tuple _controls(self)
-    @cython.locals(c=tuple, hits=tuple)
-    cpdef _bind(self)
-
     @cython.locals(target=double, dt=double, now="long long", then="long long", prev=double,
                    ppr=double)
     cpdef outputs_applied(self, long long now_ns)
@@ -135,8 +114,6 @@ cdef class Drive(CycleDevice):
                    pos_c="long long", p_demand=double, err=double, v_demand=double,
                    iq=double, iq_ref=double, si="long long")
     cpdef _publish(self)
-    @cython.locals(hits=tuple, hit=tuple, e=Entry, k=Py_ssize_t)
-    cpdef pub_flush(self)
 
 
 # k unsigned: no test for a negative index per array read (decision P60)

@@ -24,9 +24,16 @@ def require_compiled(module: ModuleType) -> None:
     pytest.skip(msg)
 
 
+#: core modules whose classes derive from another core module's classes: their twins
+#: derive from that module's twin (a Python class reaches its compiled base's C fields only
+#: through the base's own methods, so a twin of the subclass alone cannot run)
+BASES: dict[str, tuple[str, ...]] = {"ecatsim.device.drive": ("ecatsim.device.drive_od",)}
+
+
 def source_twin(module: ModuleType) -> ModuleType:
     """``module`` executed from its .py under another name (``pure:`` prefix): the
-    reference the compiled module is compared with. Its own imports are the usual ones."""
+    reference the compiled module is compared with. Its own imports are the usual ones,
+    but for the modules of its base classes (``BASES``), whose twins it imports."""
     name = "pure:" + module.__name__
     if name in sys.modules:
         return sys.modules[name]
@@ -35,6 +42,13 @@ def source_twin(module: ModuleType) -> ModuleType:
     spec = importlib.util.spec_from_file_location(name, src)
     assert spec is not None and spec.loader is not None
     mod = importlib.util.module_from_spec(spec)
-    sys.modules[name] = mod  # dataclasses look their module up while the class is made
-    spec.loader.exec_module(mod)
+    bases = BASES.get(module.__name__, ())
+    saved = {b: sys.modules[b] for b in bases}
+    try:
+        for b in bases:
+            sys.modules[b] = source_twin(saved[b])
+        sys.modules[name] = mod  # dataclasses look their module up while the class is made
+        spec.loader.exec_module(mod)
+    finally:
+        sys.modules.update(saved)
     return mod
