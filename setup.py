@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import ast
 import hashlib
+import os
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -77,6 +78,9 @@ def core() -> list[Extension]:
             + hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:12],
             language_level=3,
             quiet=True,
+            # Cython's translations in parallel, one process per CPU (the C compiler's
+            # runs too: build_ext's parallel option below)
+            nthreads=os.cpu_count() or 1,
             shared_utility_qualified_name=SHARED,
             compiler_directives={
                 # the .py files' annotations are for mypy; Cython's types come from the
@@ -97,4 +101,4 @@ def core() -> list[Extension]:
 if __name__ == "__main__":  # setuptools runs setup.py as __main__; a test reads CORE
     from setuptools import setup
 
-    setup(ext_modules=core())
+    setup(ext_modules=core(), options={"build_ext": {"parallel": os.cpu_count() or 1}})
