@@ -44,6 +44,16 @@ SHARED = "ecatsim._cyutility"
 PYX = ["ecatsim.ethercat.responder"]
 
 
+def jobs() -> int:
+    """Processes for the build: one per CPU this process may use, at most 8 (a Cython
+    translation of one of the larger modules holds about 240 MB)."""
+    try:
+        n = len(os.sched_getaffinity(0))
+    except AttributeError:  # no sched_getaffinity on this platform
+        n = os.cpu_count() or 1
+    return max(1, min(n, 8))
+
+
 def core() -> list[Extension]:
     """The Cython-compiled core and the compiled-only modules (``PYX``), or nothing where
     Cython is not installed."""
@@ -78,9 +88,9 @@ def core() -> list[Extension]:
             + hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:12],
             language_level=3,
             quiet=True,
-            # Cython's translations in parallel, one process per CPU (the C compiler's
-            # runs too: build_ext's parallel option below)
-            nthreads=os.cpu_count() or 1,
+            # Cython's translations in parallel (the C compiler's runs too: build_ext's
+            # parallel option below)
+            nthreads=jobs(),
             shared_utility_qualified_name=SHARED,
             compiler_directives={
                 # the .py files' annotations are for mypy; Cython's types come from the
@@ -101,4 +111,4 @@ def core() -> list[Extension]:
 if __name__ == "__main__":  # setuptools runs setup.py as __main__; a test reads CORE
     from setuptools import setup
 
-    setup(ext_modules=core(), options={"build_ext": {"parallel": os.cpu_count() or 1}})
+    setup(ext_modules=core(), options={"build_ext": {"parallel": jobs()}})
