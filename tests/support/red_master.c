@@ -6,7 +6,8 @@
  * "ready SLAVES EXPECTED_WKC". Then reads commands from stdin, one per line:
  *   cycles N   N process-data cycles at 1 ms; prints "cycles N bad B late L op O" (B:
  *              cycles whose reply came with another WKC than the expected one, L: cycles
- *              with no reply within SOEM's 2 ms, O: 1 if every slave reads OP after)
+ *              with no reply within SOEM's frame timeout EC_TIMEOUTRET, O: 1 if every
+ *              slave reads OP after)
  *   quit
  * Built with SOEM's sources from pysoem's source distribution (tests/support/soem_build.py).
  */

@@ -16,6 +16,7 @@ __all__ = [
     "build_program",
     "build_sample",
     "eoe_bridge",
+    "frame_timeout_patch",
     "red_test",
     "soem_tree",
 ]
