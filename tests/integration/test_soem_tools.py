@@ -1,0 +1,114 @@
+"""SOEM's own tools, built from pysoem's source distribution, against the daemon over a
+veth pair: eepromtool reads a slave's whole SII EEPROM, writes it back changed and sets its
+alias; slaveinfo finds the slaves, brings them to SAFEOP and lists their PDO mapping from
+CoE. Each test runs its own daemon of two TMC8670 slaves.
+Ref: ETG.1000.6 §5.4 (SII), ETG.2010 (SII header and categories); TMC8460 §5.45-5.46."""
+
+from __future__ import annotations
+
+import subprocess
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from ecatsim.sii.crc import crc8
+from ecatsim.sii.image import parse_image
+from tests.integration.netns import NetnsPair
+from tests.integration.test_esc_master import PRODUCT, REVISION, VENDOR
+
+pytestmark = pytest.mark.integration
+
+TIMEOUT_S = 120
+
+
+def run_tool(pair: NetnsPair, exe: Path, *args: str) -> str:
+    """A SOEM tool in the master's namespace on its end of the veth; its stdout."""
+    cmd = ["ip", "netns", "exec", pair.master_ns, str(exe), pair.master_if, *args]
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=TIMEOUT_S, check=False)
+    assert r.returncode == 0, r.stdout + r.stderr
+    return r.stdout
+
+
+def test_eepromtool_reads_writes_and_sets_the_alias(
+    netns_pair: NetnsPair, daemon_factory: Any, tmp_path: Path
+) -> None:
+    from tests.support.soem_build import build_sample
+
+    exe = build_sample("eepromtool")
+    daemon_factory("--slaves", "2")
+    image = tmp_path / "slave2.bin"
+    out = run_tool(netns_pair, exe, "2", "-r", str(image))
+    assert "2 slaves found." in out, out
+    assert f" Vendor ID        : {VENDOR:08X}\n" in out, out
+    assert f" Product Code     : {PRODUCT:08X}\n" in out, out
+    assert f" Revision Number  : {REVISION:08X}\n" in out, out
+    data = image.read_bytes()
+    sii = parse_image(data)  # the whole image, as eepromtool read it: a valid SII
+    assert sii.crc_ok and (sii.vendor_id, sii.product_code) == (VENDOR, PRODUCT)
+    assert len(data) == sii.size_kbit * 128
+    assert sii.name.startswith("TMC8670"), sii.name
+
+    # the image written back with another alias and its checksum, then read again
+    changed = bytearray(data)
+    changed[8:10] = (0x0BEE).to_bytes(2, "little")
+    changed[14] = crc8(bytes(changed[0:14]))
+    (tmp_path / "changed.bin").write_bytes(changed)
+    run_tool(netns_pair, exe, "2", "-w", str(tmp_path / "changed.bin"))
+    run_tool(netns_pair, exe, "2", "-r", str(tmp_path / "again.bin"))
+    assert (tmp_path / "again.bin").read_bytes() == bytes(changed)
+
+    # eepromtool's own alias command: word 4 and the checksum, nothing else
+    out = run_tool(netns_pair, exe, "2", "-walias", "4660")
+    assert "Alias 1234 written successfully to slave 2" in out, out
+    out = run_tool(netns_pair, exe, "2", "-i")
+    assert " Config Alias     : 1234\n" in out, out
+    crc = crc8(bytes(changed[0:8]) + b"\x34\x12" + bytes(changed[10:14]))
+    assert f" Checksum         : {crc:04X}\n   calculated     : {crc:04X}\n" in out, out
+    out = run_tool(netns_pair, exe, "1", "-i")  # the other slave's EEPROM is its own
+    assert " Config Alias     : 0000\n" in out, out
+
+
+def test_slaveinfo_finds_the_slaves_and_lists_their_pdo_mapping(
+    netns_pair: NetnsPair, daemon_factory: Any
+) -> None:
+    from tests.support.soem_build import build_sample
+
+    exe = build_sample("slaveinfo")
+    daemon_factory("--slaves", "2")
+    out = run_tool(netns_pair, exe, "-map")
+    assert "2 slaves found and configured." in out, out
+    assert out.count(f"Man: {VENDOR:08x} ID: {PRODUCT:08x} Rev: {REVISION:08x}") == 2, out
+    assert out.count(" Name:TMC8670\n Output size: 96bits\n Input size: 136bits\n State: 4\n") == 2
+    # the SMs and FMMUs as SOEM configured them from the SII, slave 1's and slave 2's
+    for line in (
+        " SM0 A:1000 L: 128 F:00010026 Type:1",
+        " SM1 A:1080 L: 128 F:00010022 Type:2",
+        " SM2 A:1100 L:  12 F:00010064 Type:3",
+        " SM3 A:1200 L:  17 F:00010020 Type:4",
+        " MBX length wr: 128 rd: 128 MBX protocols : 0c",
+        " CoE details: 2f FoE details: 01 EoE details: 00 SoE details: 00",
+    ):
+        assert out.count(line + "\n") == 2, (line, out)
+    assert " FMMU0 Ls:00000000 Ll:  12 Lsb:0 Leb:7 Ps:1100 Psb:0 Ty:02 Act:01\n" in out, out
+    assert " FMMU1 Ls:00000029 Ll:  17 Lsb:0 Leb:7 Ps:1200 Psb:0 Ty:01 Act:01\n" in out, out
+    # slave 1's PDO mapping as SOEM reads it over CoE (1C12h/1C13h, 16xxh/1Axxh) with each
+    # entry's name and type from the SDO information service (default PDOs, decision C1)
+    assert (
+        "PDO mapping according to CoE :\n"
+        "  SM2 outputs\n"
+        "     addr b   index: sub bitl data_type    name\n"
+        "  [0x0000.0] 0x6040:0x00 0x10 UNSIGNED16   Controlword\n"
+        "  [0x0002.0] 0x607A:0x00 0x20 INTEGER32    Target position\n"
+        "  [0x0006.0] 0x6071:0x00 0x10 INTEGER32    Target torque\n"
+        "  [0x0008.0] 0x60FF:0x00 0x20 INTEGER32    Target velocity\n"
+        "  SM3 inputs\n"
+        "     addr b   index: sub bitl data_type    name\n"
+        "  [0x0018.0] 0x6041:0x00 0x10 UNSIGNED16   Statusword\n"
+        "  [0x001A.0] 0x6061:0x00 0x08 INTEGER8     Modes of operation display\n"
+        "  [0x001B.0] 0x6064:0x00 0x20 INTEGER32    Position actual value\n"
+        "  [0x001F.0] 0x6077:0x00 0x10 INTEGER32    Torque actual value\n"
+        "  [0x0021.0] 0x606C:0x00 0x20 INTEGER32    Velocity actual value\n"
+        "  [0x0025.0] 0x60FD:0x00 0x20 UNSIGNED32   Digital inputs\n"
+    ) in out, out
+    assert out.endswith("End slaveinfo, close socket\nEnd program\n"), out
