@@ -1,7 +1,8 @@
 """SOEM's own tools, built from pysoem's source distribution, against the daemon over a
 veth pair: eepromtool reads a slave's whole SII EEPROM, writes it back changed and sets its
 alias; slaveinfo finds the slaves, brings them to SAFEOP and lists their PDO mapping from
-CoE. Each test runs its own daemon of two TMC8670 slaves.
+CoE and their object dictionary through SDO information. Each test runs its own daemon of
+two TMC8670 slaves.
 Ref: ETG.1000.6 §5.4 (SII), ETG.2010 (SII header and categories); TMC8460 §5.45-5.46."""
 
 from __future__ import annotations
@@ -112,3 +113,26 @@ def test_slaveinfo_finds_the_slaves_and_lists_their_pdo_mapping(
         "  [0x0025.0] 0x60FD:0x00 0x20 UNSIGNED32   Digital inputs\n"
     ) in out, out
     assert out.endswith("End slaveinfo, close socket\nEnd program\n"), out
+
+    # -sdo: the object dictionary through SDO information (the list, each object's and
+    # entry's description) and every value by SDO upload
+    out = run_tool(netns_pair, exe, "-sdo")
+    assert out.count(" CoE Object Description found, 67 entries.\n") == 2, out
+    assert sum(line.startswith("0x") for line in out.splitlines()) == 2 * 67, out
+    identity = (
+        '0x1018      "Identity object"                             [RECORD  maxsub(0x03 / 3)]\n'
+        '    0x00      "Number of entries"                           [UNSIGNED8        R_R_R_]'
+        "      0x03 / 3\n"
+        '    0x01      "Vendor ID"                                   [UNSIGNED32       R_R_R_]'
+        f"      0x{VENDOR:08x} / {VENDOR}\n"
+        '    0x02      "Product code"                                [UNSIGNED32       R_R_R_]'
+        f"      0x{PRODUCT:08x} / {PRODUCT}\n"
+        '    0x03      "Revision number"                             [UNSIGNED32       R_R_R_]'
+        f"      0x{REVISION:08x} / {REVISION}\n"
+    )
+    assert out.count(identity) == 2, out
+    name = (
+        '    0x00      "Manufacturer device name"                    [VISIBLE_STR(56)  R_R_R_]'
+        '      "TMC8670"\n'
+    )
+    assert out.count(name) == 2, out
