@@ -188,11 +188,9 @@ def test_redundancy_ring_with_a_soem_c_master(
     500 broken between slaves 1 and 2, 500 healed; every slave in OP throughout. A test of
     function, not of time: the master waits 50 ms for a frame (decision K11), so every
     cycle of every phase must come back whole."""
-    from tests.support.soem_build import FUNCTIONAL_TIMEOUT_US, build_program, frame_timeout_patch
+    from tests.support.soem_build import red_master
 
-    source = Path(__file__).parents[1] / "support" / "red_master.c"
-    exe = build_program("red_master", [source],
-                        patches=[frame_timeout_patch(FUNCTIONAL_TIMEOUT_US)])  # fmt: skip
+    exe = red_master()
     red_m, red_s = add_veth(netns_pair.master_ns, netns_pair.slave_ns)
     sock = tmp_path / "ctl.sock"
     d = Daemon(netns_pair, ["--slaves", "4", "--out-iface", red_s, "--ctl", str(sock)],

@@ -2,7 +2,8 @@
 veth pair: eepromtool reads a slave's whole SII EEPROM, writes it back changed and sets its
 alias; slaveinfo finds the slaves, brings them to SAFEOP and lists their PDO mapping from
 CoE and their object dictionary through SDO information. Each test runs its own daemon of
-two TMC8670 slaves.
+two TMC8670 slaves. Tests of function, not of time: the tools wait 50 ms for a frame
+(decision K11).
 Ref: ETG.1000.6 §5.4 (SII), ETG.2010 (SII header and categories); TMC8460 §5.45-5.46."""
 
 from __future__ import annotations
@@ -34,9 +35,9 @@ def run_tool(pair: NetnsPair, exe: Path, *args: str) -> str:
 def test_eepromtool_reads_writes_and_sets_the_alias(
     netns_pair: NetnsPair, daemon_factory: Any, tmp_path: Path
 ) -> None:
-    from tests.support.soem_build import build_sample
+    from tests.support.soem_build import functional_sample
 
-    exe = build_sample("eepromtool")
+    exe = functional_sample("eepromtool")
     daemon_factory("--slaves", "2")
     image = tmp_path / "slave2.bin"
     out = run_tool(netns_pair, exe, "2", "-r", str(image))
@@ -73,9 +74,9 @@ def test_eepromtool_reads_writes_and_sets_the_alias(
 def test_slaveinfo_finds_the_slaves_and_lists_their_pdo_mapping(
     netns_pair: NetnsPair, daemon_factory: Any
 ) -> None:
-    from tests.support.soem_build import build_sample
+    from tests.support.soem_build import functional_sample
 
-    exe = build_sample("slaveinfo")
+    exe = functional_sample("slaveinfo")
     daemon_factory("--slaves", "2")
     out = run_tool(netns_pair, exe, "-map")
     assert "2 slaves found and configured." in out, out

@@ -43,7 +43,6 @@ def test_a_write_is_clamped_to_the_entrys_range_and_an_absent_entry_reads_zero()
 def test_the_controls_are_the_ods_own_entries() -> None:
     d, od = view()
     assert d._controls() == tuple(od.entry(i, 0) for i in CONTROLS)
-    d._bind()
     od.entry(0x6040, 0).value = 0x0F  # an RxPDO or SDO write: the next read sees it
     cw = d._controls()[0]
     assert cw is not None and cw.value == 0x0F
