@@ -1,14 +1,16 @@
 """SOEM's own tools, built from pysoem's source distribution, against the daemon over a
 veth pair: eepromtool reads a slave's whole SII EEPROM, writes it back changed and sets its
 alias; slaveinfo finds the slaves, brings them to SAFEOP and lists their PDO mapping from
-CoE and their object dictionary through SDO information. Each test runs its own daemon of
-two TMC8670 slaves. Tests of function, not of time: the tools wait 50 ms for a frame
-(decision K11).
+CoE and their object dictionary through SDO information; simple_test brings a drive and an
+MFCIO slave to OP and runs cycles of process data. Each test runs its own daemon of two
+slaves. Tests of function, not of time: the tools wait 50 ms for a frame (decision K11).
 Ref: ETG.1000.6 §5.4 (SII), ETG.2010 (SII header and categories); TMC8460 §5.45-5.46."""
 
 from __future__ import annotations
 
+import re
 import subprocess
+from itertools import pairwise
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +24,7 @@ from tests.integration.test_esc_master import PRODUCT, REVISION, VENDOR
 pytestmark = pytest.mark.integration
 
 TIMEOUT_S = 120
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def run_tool(pair: NetnsPair, exe: Path, *args: str) -> str:
@@ -137,3 +140,47 @@ def test_slaveinfo_finds_the_slaves_and_lists_their_pdo_mapping(
         '      "TMC8670"\n'
     )
     assert out.count(name) == 2, out
+
+
+#: simple_test's cycles, 5 ms apart (the sample's own 10 000 take 50 s)
+SIMPLE_CYCLES = 200
+#: one of simple_test's cycle lines (each ends in a carriage return, a newline in text mode)
+CYCLE = re.compile(
+    r"Processdata cycle +(?P<i>\d+), WKC (?P<wkc>\d+) , O:(?P<o>( [0-9a-f]{2})*)"
+    r" I:(?P<i_>( [0-9a-f]{2})*) T:(?P<t>\d+)"
+)
+
+
+def test_simple_test_brings_a_drive_and_an_mfcio_slave_to_op(
+    netns_pair: NetnsPair, daemon_factory: Any
+) -> None:
+    """SOEM's first sample, as a user runs it first: config_init, config_map, configdc,
+    SAFEOP, OP, then cycles of process data at the calculated WKC, its check thread
+    watching every cycle's WKC and every slave's state. The segment: a TMC8670 and,
+    behind it, a TMC8460 MFCIO slave (config/tmc8460-beside-tmc8670.yaml)."""
+    from tests.support.soem_build import FUNCTIONAL, build_sample
+
+    cycles = ("simple_test.c", "i <= 10000;", f"i <= {SIMPLE_CYCLES};")
+    exe = build_sample("simple_test", patches=(*FUNCTIONAL, cycles))
+    daemon_factory("--config", str(ROOT / "config/tmc8460-beside-tmc8670.yaml"))
+    out = run_tool(netns_pair, exe)
+    assert "2 slaves found and configured.\n" in out, out
+    # one LRW segment: the drive's 12 + 17 bytes and the MFCIO slave's 132
+    assert "segments : 1 : 161 0 0 0\n" in out, out
+    assert "Calculated workcounter 6\n" in out, out  # 2 x 2 output WKC + 2 input WKC
+    assert "Operational state reached for all slaves.\n" in out, out
+    seen = [CYCLE.fullmatch(c) for c in out.splitlines() if c.startswith("Processdata")]
+    assert [m and int(m["i"]) for m in seen] == list(range(1, SIMPLE_CYCLES + 1)), out
+    for m in seen:
+        assert m is not None
+        # the outputs as simple_test leaves them (zero); the inputs' first 8 bytes, the
+        # drive's: statusword 0240h (switch on disabled, remote), mode display 0, position 0
+        assert (m["wkc"], m["o"], m["i_"]) == ("6", " 00" * 8, " 40 02" + " 00" * 6), m[0]
+    # the reference clock's system time (the FRMW in each cycle's frame), 5 ms of sleep
+    # or more between two cycles (at most 1 s: a wide guard)
+    times = [int(m["t"]) for m in seen if m is not None]
+    assert all(5_000_000 <= b - a < 1_000_000_000 for a, b in pairwise(times)), times
+    for alarm in ("ERROR", "WARNING", "MESSAGE", "OK : all slaves resumed", "Not all slaves"):
+        assert alarm not in out, out
+    assert out.endswith("Request init state for all slaves\nEnd simple test, close socket\n"
+                        "End program\n"), out  # fmt: skip
