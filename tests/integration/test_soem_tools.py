@@ -2,9 +2,11 @@
 veth pair: eepromtool reads a slave's whole SII EEPROM, writes it back changed and sets its
 alias; slaveinfo finds the slaves, brings them to SAFEOP and lists their PDO mapping from
 CoE and their object dictionary through SDO information; simple_test brings a drive and an
-MFCIO slave to OP and runs cycles of process data. Each test runs its own daemon of two
-slaves. Tests of function, not of time: the tools wait 50 ms for a frame (decision K11).
-Ref: ETG.1000.6 §5.4 (SII), ETG.2010 (SII header and categories); TMC8460 §5.45-5.46."""
+MFCIO slave to OP and runs cycles of process data; firm_update writes a file over FoE in
+BOOT. Each test runs its own daemon of two slaves. Tests of function, not of time: the
+tools wait 50 ms for a frame (decision K11).
+Ref: ETG.1000.6 §5.4 (SII), §5.8 (FoE); ETG.2010 (SII header and categories); TMC8460
+§5.45-5.46."""
 
 from __future__ import annotations
 
@@ -27,10 +29,10 @@ TIMEOUT_S = 120
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def run_tool(pair: NetnsPair, exe: Path, *args: str) -> str:
+def run_tool(pair: NetnsPair, exe: Path, *args: str, cwd: Path | None = None) -> str:
     """A SOEM tool in the master's namespace on its end of the veth; its stdout."""
     cmd = ["ip", "netns", "exec", pair.master_ns, str(exe), pair.master_if, *args]
-    r = subprocess.run(cmd, capture_output=True, text=True, timeout=TIMEOUT_S, check=False)
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=TIMEOUT_S, check=False, cwd=cwd)
     assert r.returncode == 0, r.stdout + r.stderr
     return r.stdout
 
@@ -184,3 +186,31 @@ def test_simple_test_brings_a_drive_and_an_mfcio_slave_to_op(
         assert alarm not in out, out
     assert out.endswith("Request init state for all slaves\nEnd simple test, close socket\n"
                         "End program\n"), out  # fmt: skip
+
+
+def test_firm_update_writes_a_file_over_foe_in_boot(
+    netns_pair: NetnsPair, daemon_factory: Any, tmp_path: Path
+) -> None:
+    """SOEM's firmware update sample: slave 2 to INIT, its SM0/SM1 set to the bootstrap
+    mailbox read from its SII, BOOT, the file written over FoE, INIT again. The file lands
+    whole in the slave's FoE directory; slave 1 is left alone.
+    Ref: ETG.1000.6 §5.8 (FoE); TMC8670 §2.3 (firmware update in bootstrap)."""
+    from tests.support.soem_build import functional_sample
+
+    exe = functional_sample("firm_update")
+    fw = tmp_path / "fw"
+    cfg = tmp_path / "segment.yaml"
+    cfg.write_text(f"slaves:\n  - device: tmc8670\n    count: 2\n    foe_dir: {fw}\n")
+    daemon_factory("--config", str(cfg))
+    image = bytes(range(256)) * 40 + b"end"  # 10243 bytes: many mailbox fragments
+    (tmp_path / "app.bin").write_bytes(image)
+    out = run_tool(netns_pair, exe, "2", "app.bin", cwd=tmp_path)
+    assert "2 slaves found and configured.\n" in out, out
+    assert "Slave 2 state to INIT.\n" in out, out
+    # the bootstrap mailbox from the SII (words 0x14-0x17), the flags SOEM set for SM0/SM1
+    assert " SM0 A:1000 L: 128 F:00010026\n SM1 A:1080 L: 128 F:00010022\n" in out, out
+    assert "Slave 2 state to BOOT.\n" in out, out
+    assert f"File read OK, {len(image)} bytes.\nFoE write....result 1.\n" in out, out
+    assert out.endswith("End firmware update example, close socket\nEnd program\n"), out
+    assert (fw / "slave1" / "app.bin").read_bytes() == image
+    assert not (fw / "slave0").exists() or not any((fw / "slave0").iterdir())
