@@ -32,8 +32,8 @@ PULSE_HINT_MARGIN_NS = 200_000
 #: "no deadline" in the comparisons of deadlines
 NO_DEADLINE = 1 << 62
 #: the work after a reply looks whether a frame is waiting (``Schedule.frame_waiting``)
-#: once per this many ns of firmware work, and leaves the rest for after that frame
-#: (decision P19)
+#: after its first slave and then once per this many ns of firmware work, and leaves the
+#: rest for after that frame (decisions P19, P98)
 PROBE_NS = 50_000
 
 
@@ -135,7 +135,10 @@ class Schedule:
         ctx = self.ctx
         if (ctx.n_raised or self.awake) and self.firmware:
             probe = self.frame_waiting
-            look = time.monotonic_ns() + self.probe_ns if probe is not None else NO_DEADLINE
+            # the first look after the first slave: frames that came while the work before ran
+            # (a master's burst of frames, the frames of one cycle) wait for one slave's work,
+            # not for PROBE_NS of it (decision P98)
+            look = time.monotonic_ns() if probe is not None else NO_DEADLINE
             order = sorted(ctx.pending | self.awake)
             first = self.resume_pos
             if first:  # where the last round stopped: every slave gets its turn (P19)
@@ -183,7 +186,11 @@ class Schedule:
         nxt = NO_DEADLINE
         probe = self.frame_waiting
         defer = False
-        look = time.monotonic_ns() + self.probe_ns if probe is not None else NO_DEADLINE
+        # the first look: before a frame, after PROBE_NS of work (the pulses move on however
+        # many frames come); from the timers, after the first slave (P98)
+        look = NO_DEADLINE
+        if probe is not None:
+            look = time.monotonic_ns() + self.probe_ns if frame_first else time.monotonic_ns()
         for esc in self.sync_escs:
             dc = esc.dc
             fw = self.firmware[esc.position] if self.firmware else None
@@ -231,13 +238,14 @@ class Schedule:
 
     def run_deferred(self) -> bool:
         """Run the pulses' work latched for after a frame (``deferred``, in pulse order),
-        each at its pulse's time, looking every ``probe_ns`` whether a frame waits and
-        whether SYNC pulses fell due meanwhile (they fire then, at their own time, not
-        when the next frame comes). False if it stopped for a frame (the rest stays
-        latched). Decision P30."""
+        each at its pulse's time, looking after the first slave's work and then every
+        ``probe_ns`` whether a frame waits and whether SYNC pulses fell due meanwhile
+        (they fire then, at their own time, not when the next frame comes). False if it
+        stopped for a frame (the rest stays latched). Decisions P30, P98."""
         lst = self.deferred
         probe = self.frame_waiting
-        look = time.monotonic_ns() + self.probe_ns if probe is not None else NO_DEADLINE
+        # the first look after the first slave's work (P98)
+        look = time.monotonic_ns() if probe is not None else NO_DEADLINE
         ctx = self.ctx
         i = 0
         while i < len(lst):  # pulses that fall due meanwhile may add to it

@@ -166,11 +166,11 @@ def test_an_emcy_the_latched_work_queues_behind_a_full_sm1_unmasks_the_sm1_event
     assert int.from_bytes(esc.mem[al_event_mask : al_event_mask + 4], "little") & ev_sm1
 
 
-def test_a_frame_waits_for_probe_ns_of_work_by_the_monotonic_clock() -> None:
+def test_before_a_frame_the_looks_come_every_probe_ns_by_the_monotonic_clock() -> None:
     """The looks read the host's monotonic clock in nanoseconds (one C call when compiled,
-    decision P67): with a probe time of 10 s no look falls due within a pulse's work, so
-    a waiting frame defers nothing and is never asked about; with 0 it is asked after the
-    first slave's work, and the slaves after the next one only latch."""
+    decision P67): with a probe time of 10 s no look falls due within the pulses' work due
+    before a frame, so a frame that waits behind it defers nothing and is never asked
+    about."""
     ref, c, waiting, _ = twins()
     asked = [0]
 
@@ -183,14 +183,33 @@ def test_a_frame_waits_for_probe_ns_of_work_by_the_monotonic_clock() -> None:
     s.probe_ns = 10_000_000_000
     waiting[0] = True
     for _ in range(5):
+        assert ref.exchange() == c.exchange()  # no timer ran: the pulse came before the walk
+        assert latched(c) == [False] * N
+    assert (s.sync0_deferred, asked[0]) == (0, 0)
+
+
+def test_from_the_timers_the_first_look_comes_after_the_first_slave() -> None:
+    """A pulse served by the timers looks whether a frame waits after its first slave's work,
+    whatever the probe time: the frames of a cycle sent just after SYNC0 wait for one
+    slave's work, not for probe_ns of it (decision P98); after that look, every probe_ns."""
+    ref, c, waiting, _ = twins()
+    asked = [0]
+
+    def frame_waits() -> bool:
+        asked[0] += 1
+        return waiting[0]
+
+    s = c.seg.schedule
+    s.frame_waiting = frame_waits
+    s.probe_ns = 10_000_000_000
+    for k in range(5):
         ref.pulse()
         c.pulse()
+        assert asked[0] == k + 1  # one look, after the first slave; none due after it
         assert latched(c) == [False] * N
         assert ref.exchange() == c.exchange()
     assert s.sync0_deferred == 0
-    assert asked[0] == 0
-    s.probe_ns = 0
+    waiting[0] = True
     c.pulse()
-    assert asked[0] > 0  # after the first slave's work, as in the tests above
-    assert latched(c) == [False, False, True, True]
+    assert latched(c) == [False, False, True, True]  # as in the first test, probe_ns 0
     assert s.sync0_deferred == 3
