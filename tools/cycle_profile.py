@@ -9,6 +9,7 @@ loopback link with a manual clock.
     tools/icount.sh 64 --hold --responder  # drives holding still (decision P81)
     tools/icount.sh 1 --responder  # the frame through the compiled responder
     tools/icount.sh 1 --cold       # code and data lines a frame misses in a cold L2
+    tools/icount.sh 64 --footprint --hold   # the lines a whole cycle reads from memory
 
 Ref: docs/performance.md.
 """
@@ -17,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import cProfile
+import ctypes
 import pstats
 import sys
 import time
@@ -54,10 +56,28 @@ def main() -> int:
         help="before each frame, read MB megabytes a byte per cache line, so the frame finds "
         "the caches cold, as after the master's own work on a shared CPU",
     )
+    ap.add_argument(
+        "--cold-cycle",
+        type=int,
+        default=0,
+        metavar="MB",
+        help="before each whole cycle (the SYNC0 pulse and the frame), write MB megabytes "
+        "(memset, C), so the cycle finds every cache cold, as a daemon that slept while "
+        "the master and the host ran (tools/icount.sh --footprint)",
+    )
     args = ap.parse_args()
     c = CspCycle(args.drives, args.device, enable=not args.idle, responder=args.responder)
     if args.hold:
         c.amplitude = 0
+    if args.cold_cycle:
+        junk = ctypes.create_string_buffer(args.cold_cycle << 20)
+        step = c.step
+
+        def cold_step(cw: int | None = None) -> bytes:
+            ctypes.memset(junk, 1, len(junk))
+            return step(cw)
+
+        c.step = cold_step  # type: ignore[method-assign]
     if args.evict:
         evict = memoryview(bytearray(b"\1" * (args.evict << 20)))[::64]
         deliver = c.deliver

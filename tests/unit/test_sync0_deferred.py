@@ -166,11 +166,8 @@ def test_an_emcy_the_latched_work_queues_behind_a_full_sm1_unmasks_the_sm1_event
     assert int.from_bytes(esc.mem[al_event_mask : al_event_mask + 4], "little") & ev_sm1
 
 
-def test_before_a_frame_the_looks_come_every_probe_ns_by_the_monotonic_clock() -> None:
-    """The looks read the host's monotonic clock in nanoseconds (one C call when compiled,
-    decision P67): with a probe time of 10 s no look falls due within the pulses' work due
-    before a frame, so a frame that waits behind it defers nothing and is never asked
-    about."""
+def slow_looks() -> tuple[CspCycle, CspCycle, list[bool], list[int]]:
+    """twins() with looks due every 10 s, each look counted (``asked[0]``)."""
     ref, c, waiting, _ = twins()
     asked = [0]
 
@@ -178,9 +175,18 @@ def test_before_a_frame_the_looks_come_every_probe_ns_by_the_monotonic_clock() -
         asked[0] += 1
         return waiting[0]
 
+    c.seg.schedule.frame_waiting = frame_waits
+    c.seg.schedule.probe_ns = 10_000_000_000
+    return ref, c, waiting, asked
+
+
+def test_before_a_frame_the_looks_come_every_probe_ns_by_the_monotonic_clock() -> None:
+    """The looks read the host's monotonic clock in nanoseconds (one C call when compiled,
+    decision P67): with a probe time of 10 s no look falls due within the pulses' work due
+    before a frame, so a frame that waits behind it defers nothing and is never asked
+    about."""
+    ref, c, waiting, asked = slow_looks()
     s = c.seg.schedule
-    s.frame_waiting = frame_waits
-    s.probe_ns = 10_000_000_000
     waiting[0] = True
     for _ in range(5):
         assert ref.exchange() == c.exchange()  # no timer ran: the pulse came before the walk
@@ -192,16 +198,8 @@ def test_from_the_timers_the_first_look_comes_after_the_first_slave() -> None:
     """A pulse served by the timers looks whether a frame waits after its first slave's work,
     whatever the probe time: the frames of a cycle sent just after SYNC0 wait for one
     slave's work, not for probe_ns of it (decision P98); after that look, every probe_ns."""
-    ref, c, waiting, _ = twins()
-    asked = [0]
-
-    def frame_waits() -> bool:
-        asked[0] += 1
-        return waiting[0]
-
+    ref, c, waiting, asked = slow_looks()
     s = c.seg.schedule
-    s.frame_waiting = frame_waits
-    s.probe_ns = 10_000_000_000
     for k in range(5):
         ref.pulse()
         c.pulse()
