@@ -62,6 +62,30 @@ def test_without_a_waiting_frame_the_work_runs_to_its_end() -> None:
     assert m.seg.schedule.yielded == 0
 
 
+def test_the_first_look_comes_after_the_first_slave_whatever_probe_ns() -> None:
+    """The frames a master sends back to back wait for one slave's work, not for probe_ns
+    of it (decision P98): a look after the first slave, then every probe_ns (10 s here:
+    none more)."""
+    m, _, _ = op_segment(4)
+    seg = m.seg
+    waiting, asked = [False], [0]
+
+    def frame_waits() -> bool:
+        asked[0] += 1
+        return waiting[0]
+
+    seg.schedule.frame_waiting = frame_waits
+    seg.schedule.probe_ns = 10_000_000_000
+    assert bwr_only(m, 0x0120, b"\x02\x00") == 4  # PREOP
+    seg.service()  # no frame waits: one look, after the first slave; the rest runs on
+    assert (asked[0], seg.schedule.yielded, al_status(m, 4)) == (1, 0, [2, 2, 2, 2])
+    waiting[0] = True
+    assert bwr_only(m, 0x0120, b"\x04\x00") == 4  # SAFEOP
+    seg.service()  # a frame waits: found at the look after the first slave
+    assert (asked[0], seg.schedule.yielded) == (2, 1)
+    assert al_status(m, 4) == [4, 2, 2, 2]
+
+
 def test_clearing_the_fmmus_by_broadcast_clears_the_maps() -> None:
     m, _, _ = op_segment(3)
     assert all(len(e.fmmus) == 2 for e in m.seg.escs)
