@@ -9,8 +9,9 @@ period with every drive enabled and moving. A packet socket on the master's inte
 (:meth:`ecatsim.bench.capture.Capture.master_end`) stamps every request and reply; each
 is paired and timed, per phase and overall: p50, p99.9, max, how many over 1 ms and over
 2 ms (SOEM's, pysoem's and KickCAT's default timeout), resends, unanswered frames and the
-slowest frames by command and address. The cycles add lost frames and cycles whose WKC
-fell short of the expected one. Results: a summary on stdout and bringup-<N>-<time>.json
+slowest frames by command and address. The cycles add lost frames, cycles whose WKC
+fell short of the expected one, and the reply times of each of a cycle's frames by its
+logical address (:func:`ecatsim.bench.capture.cycle_frames`). Results: a summary on stdout and bringup-<N>-<time>.json
 in the results directory.
 
 With ``--master soem`` SOEM's own DC sample red_test is the master instead
@@ -35,7 +36,14 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from ecatsim.bench import redtest, results, soem, steadiness
-from ecatsim.bench.capture import Capture, Frame, analyse, late_replies, process_cycles
+from ecatsim.bench.capture import (
+    Capture,
+    Frame,
+    analyse,
+    cycle_frames,
+    late_replies,
+    process_cycles,
+)
 from ecatsim.bench.master import CSP, cpu_seconds, cycles, request_op
 from ecatsim.bench.netns import Daemon, ExtraNetns, NetnsPair, Port, SlaveEnd, in_netns
 from ecatsim.bench.options import BenchOptions
@@ -256,6 +264,9 @@ def run_bringup(n: int, cycles_k: int, period_us: int, overlap: bool,
         raise SystemExit(gave_up(failure, found, watch))
     frames = analyse(found, cap.marks)
     frames.get("phases", {}).pop("end", None)
+    at = dict((name, t) for t, name in cap.marks)
+    if "cycles" in at:
+        frames["cycle_frames"] = cycle_frames(found, at["cycles"], at.get("end", time.time_ns()))
     kept = {k: cyc[k] for k in ("cycles", "lost", "wkc_errors", "expected_wkc", "wkc_error_seen",
                                 "cpu_percent", "rtt_us", "fell_behind", "lost_master_stalled",
                                 "drives_enabled", "steal_s")}  # fmt: skip
@@ -333,6 +344,7 @@ def run_bringup_soem(n: int, cycles_k: int, period_us: int, overlap: bool,
     start = marks["cycles"] if rt.all_op else marks["op"]
     cyc = process_cycles(found, start, marks.get("end", time.time_ns()), rt.expected_wkc,
                          redtest.timeout_ns(period_us))  # fmt: skip
+    frames["cycle_frames"] = cycle_frames(found, start, marks.get("end", time.time_ns()))
     wall_s = rt.cycles_wall_ns / 1e9
     each = [round(c / wall_s * 100, 1) for c in rt.cycles_cpu_s] if wall_s else []
     cyc.update(cpu_percent=each[0] if each else None, daemon_cpu_percent=each,
@@ -387,6 +399,10 @@ def summary(r: dict[str, Any]) -> str:
     for k, d in enumerate(r.get("daemons", [])):
         lines.append(f"  daemon {k}: " + ", ".join(f"{key} {d[key]}" for key in DAEMON_SUMMARY
                                                    if key in d))  # fmt: skip
+    if f.get("cycle_frames"):
+        lines.append("  a cycle's frames: " + ", ".join(
+            f"{g['cmd']} {g['logical']} p50 {g['p50_us']} p99.9 {g['p999_us']} us"
+            for g in f["cycle_frames"]))  # fmt: skip
     for s in f["slowest"][:5]:
         lines.append(f"  slowest: {s['us']} us {s['cmd']} adp {s['adp']} ado {s['ado']} "
                      f"len {s['length']}")  # fmt: skip

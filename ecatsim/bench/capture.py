@@ -271,6 +271,32 @@ def process_cycles(frames: Sequence[Frame], start_ns: int, end_ns: int, expected
             "wkc_error_seen": short[:keep]}  # fmt: skip
 
 
+def cycle_frames(frames: Sequence[Frame], start_ns: int, end_ns: int, least: float = 0.5
+                 ) -> list[dict[str, Any]]:  # fmt: skip
+    """The reply times of a cycle's frames, each by its place in the cycle: the logical
+    requests sent between ``start_ns`` and ``end_ns`` grouped by their logical address (a
+    master splits its process image over frames by address, the same each cycle), in
+    address order; a group with fewer than ``least`` of the largest group's requests (a
+    stray frame) is left out. Each: command and logical address of its first request,
+    frames, p50, p99.9 and max (us). Where a cycle's frames wait behind each other or
+    behind the SYNC0 work, the later ones show it (decision P98)."""
+    groups: dict[int, list[tuple[float, Frame]]] = {}
+    for us, r in pair(frames, 0).times:
+        if r.cmd in LOGICAL and start_ns <= r.t_ns < end_ns:
+            groups.setdefault(r.adp | r.ado << 16, []).append((us, r))
+    most = max((len(v) for v in groups.values()), default=0)
+    out = []
+    for lad in sorted(groups):
+        times = groups[lad]
+        if len(times) < least * most:
+            continue
+        f = _figures(times, 0)
+        out.append({"cmd": _name(times[0][1].cmd), "logical": f"0x{lad:08X}",
+                    "frames": f["frames"], "p50_us": f["p50_us"], "p999_us": f["p999_us"],
+                    "max_us": f["max_us"]})  # fmt: skip
+    return out
+
+
 def _name(cmd: int) -> str:
     return CMD_NAMES[cmd] if cmd < len(CMD_NAMES) else f"0x{cmd:02X}"
 

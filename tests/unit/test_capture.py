@@ -6,7 +6,14 @@ from __future__ import annotations
 
 import struct
 
-from ecatsim.bench.capture import Frame, analyse, first_wkc, parse, process_cycles
+from ecatsim.bench.capture import (
+    Frame,
+    analyse,
+    cycle_frames,
+    first_wkc,
+    parse,
+    process_cycles,
+)
 from ecatsim.wire import datagram as dg
 
 MS = 1_000_000
@@ -130,3 +137,26 @@ def test_cycles_are_summed_off_the_wire_lost_and_late_frames_add_nothing() -> No
     c = process_cycles(frames, 500_000, 5 * MS, 156, 3 * MS)
     assert (c["cycles"], c["frames"], c["lost"], c["late"]) == (4, 8, 2, 1)
     assert (c["wkc_errors"], c["wkc_error_seen"], c["expected_wkc"]) == (3, [141, 141, 155], 156)
+
+
+def test_a_cycles_frames_are_timed_each_by_its_logical_address() -> None:
+    """Each frame of a cycle by its place (its logical address), in address order: the
+    second frame of each cycle waits behind the first; a stray frame and the frames sent
+    outside the window are left out."""
+    frames = [lrw(0, 1, 0x0), lrw(40_000, 1, 0x0, True)]  # before the window
+    for k in range(1, 5):
+        t = k * MS
+        frames += [
+            lrw(t, 2 * k, 0x0), lrw(t + 5_000, 2 * k + 1, 0x5C0),
+            lrw(t + 100_000 + k * 1000, 2 * k, 0x0, True),
+            lrw(t + 300_000 + k * 1000, 2 * k + 1, 0x5C0, True),
+        ]  # fmt: skip
+    frames += [lrw(5 * MS, 20, 0x900), lrw(5 * MS + 50_000, 20, 0x900, True)]  # stray
+    got = cycle_frames(frames, 500_000, 6 * MS)
+    assert got == [
+        {"cmd": "LRW", "logical": "0x00000000", "frames": 4, "p50_us": 102.0,
+         "p999_us": 104.0, "max_us": 104.0},
+        {"cmd": "LRW", "logical": "0x000005C0", "frames": 4, "p50_us": 297.0,
+         "p999_us": 299.0, "max_us": 299.0},
+    ]  # fmt: skip
+    assert cycle_frames(frames, 7 * MS, 8 * MS) == []
