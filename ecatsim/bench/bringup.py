@@ -11,8 +11,8 @@ is paired and timed, per phase and overall: p50, p99.9, max, how many over 1 ms 
 2 ms (SOEM's, pysoem's and KickCAT's default timeout), resends, unanswered frames and the
 slowest frames by command and address. The cycles add lost frames, cycles whose WKC
 fell short of the expected one, and the reply times of each of a cycle's frames by its
-logical address (:func:`ecatsim.bench.capture.cycle_frames`). Results: a summary on stdout and bringup-<N>-<time>.json
-in the results directory.
+logical address (:func:`ecatsim.bench.capture.cycle_frames`). Results: a summary on
+stdout and bringup-<N>-<time>.json in the results directory.
 
 With ``--master soem`` SOEM's own DC sample red_test is the master instead
 (:mod:`ecatsim.bench.redtest`): up to 1023 slaves and a 64 KiB IO map, the cycles' lost
