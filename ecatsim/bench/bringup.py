@@ -264,9 +264,10 @@ def run_bringup(n: int, cycles_k: int, period_us: int, overlap: bool,
         raise SystemExit(gave_up(failure, found, watch))
     frames = analyse(found, cap.marks)
     frames.get("phases", {}).pop("end", None)
-    at = dict((name, t) for t, name in cap.marks)
-    if "cycles" in at:
-        frames["cycle_frames"] = cycle_frames(found, at["cycles"], at.get("end", time.time_ns()))
+    marks = dict((name, t) for t, name in cap.marks)
+    if "cycles" in marks:
+        end = marks.get("end", time.time_ns())
+        frames["cycle_frames"] = cycle_frames(found, marks["cycles"], end)
     kept = {k: cyc[k] for k in ("cycles", "lost", "wkc_errors", "expected_wkc", "wkc_error_seen",
                                 "cpu_percent", "rtt_us", "fell_behind", "lost_master_stalled",
                                 "drives_enabled", "steal_s")}  # fmt: skip
@@ -342,9 +343,9 @@ def run_bringup_soem(n: int, cycles_k: int, period_us: int, overlap: bool,
     frames.get("phases", {}).pop("end", None)
     # without OP the cycles are the ones red_test ran while it waited for OP
     start = marks["cycles"] if rt.all_op else marks["op"]
-    cyc = process_cycles(found, start, marks.get("end", time.time_ns()), rt.expected_wkc,
-                         redtest.timeout_ns(period_us))  # fmt: skip
-    frames["cycle_frames"] = cycle_frames(found, start, marks.get("end", time.time_ns()))
+    end = marks.get("end", time.time_ns())
+    cyc = process_cycles(found, start, end, rt.expected_wkc, redtest.timeout_ns(period_us))
+    frames["cycle_frames"] = cycle_frames(found, start, end)
     wall_s = rt.cycles_wall_ns / 1e9
     each = [round(c / wall_s * 100, 1) for c in rt.cycles_cpu_s] if wall_s else []
     cyc.update(cpu_percent=each[0] if each else None, daemon_cpu_percent=each,

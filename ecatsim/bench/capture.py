@@ -291,9 +291,10 @@ def cycle_frames(frames: Sequence[Frame], start_ns: int, end_ns: int, least: flo
         if len(times) < least * most:
             continue
         f = _figures(times, 0)
-        out.append({"cmd": _name(times[0][1].cmd), "logical": f"0x{lad:08X}",
-                    "frames": f["frames"], "p50_us": f["p50_us"], "p999_us": f["p999_us"],
-                    "max_us": f["max_us"]})  # fmt: skip
+        out.append(
+            {"cmd": _name(times[0][1].cmd), "logical": f"0x{lad:08X}"}
+            | {k: f[k] for k in ("frames", "p50_us", "p999_us", "max_us")}
+        )
     return out
 
 
