@@ -147,9 +147,11 @@ def stopped_counts(d: Daemon) -> dict[str, Any]:
 
 def observed(watch: StallWatch, found: list[Frame], ds: list[Daemon]) -> dict[str, Any]:
     """What a run records besides the master's figures (decision B8): the host during the
-    run against the replies later than :data:`LATE_US` (``host_stalls``), and each
-    daemon's :func:`stopped_counts` (``daemons``)."""
-    return {"host_stalls": watch.report(late_replies(found, LATE_US)),
+    run against the replies later than :data:`LATE_US` and those later than 1 ms
+    (``host_stalls``), and each daemon's :func:`stopped_counts` (``daemons``)."""
+    over_1ms = late_replies(found, 1000)
+    late = [(a, b) for a, b in over_1ms if b - a >= LATE_US * 1000]
+    return {"host_stalls": watch.report(late, over_1ms=over_1ms),
             "daemons": [stopped_counts(d) for d in ds]}  # fmt: skip
 
 

@@ -104,16 +104,30 @@ class StallWatch:
         """The host stalled (``least_s`` or more) or slowed a CPU during the interval."""
         return self.overlaps(start_ns, end_ns, least_s) or self.slowed(start_ns, end_ns)
 
-    def report(self, late: list[tuple[int, int]], least_s: float = 0.001) -> dict[str, float]:
+    def report(
+        self,
+        late: list[tuple[int, int]],
+        least_s: float = 0.001,
+        over_1ms: list[tuple[int, int]] | None = None,
+    ) -> dict[str, float]:
         """For the JSON: how many stalls of ``least_s`` or more, the longest stall (ms),
         the slow spots, and how many of the ``late`` replies (request to reply,
-        CLOCK_REALTIME ns) a stall or a slow spot overlapped."""
+        CLOCK_REALTIME ns) a stall or a slow spot overlapped. With ``over_1ms`` (the
+        replies 1 ms or more late), the same for them against every recorded stall
+        (:data:`RECORDED_NS` or more): what the 99.9 %-within-1-ms count owes the host."""
         long = sum(e - s >= least_s * 1e9 for s, e in self.stalls)
-        return {"least_ms": least_s * 1e3, "stalls": long,
-                "longest_ms": round(self.worst_s * 1e3, 2), "slow_spots": len(self.slow),
-                "late_replies": len(late),
-                "late_in_a_stall": sum(self.overlaps(a, b, least_s) for a, b in late),
-                "late_when_slowed": sum(self.explains(a, b, least_s) for a, b in late)}  # fmt: skip
+        r = {"least_ms": least_s * 1e3, "stalls": long,
+             "longest_ms": round(self.worst_s * 1e3, 2), "slow_spots": len(self.slow),
+             "late_replies": len(late),
+             "late_in_a_stall": sum(self.overlaps(a, b, least_s) for a, b in late),
+             "late_when_slowed": sum(self.explains(a, b, least_s) for a, b in late)}  # fmt: skip
+        if over_1ms is not None:
+            least = RECORDED_NS / 1e9
+            r.update(over_1ms=len(over_1ms),
+                     over_1ms_in_a_stall=sum(self.overlaps(a, b, least) for a, b in over_1ms),
+                     over_1ms_when_slowed=sum(self.explains(a, b, least)
+                                              for a, b in over_1ms))  # fmt: skip
+        return r
 
     @staticmethod
     def text(r: dict[str, float]) -> str:
@@ -121,4 +135,8 @@ class StallWatch:
         return (f"host during the run: {r['stalls']} stalls of {r['least_ms']:g} ms or more "
                 f"(longest {r['longest_ms']} ms), {r['slow_spots']} slow spots; replies over "
                 f"2 ms: {r['late_replies']}, {r['late_in_a_stall']} during a stall, "
-                f"{r['late_when_slowed']} during a stall or a slow spot")  # fmt: skip
+                f"{r['late_when_slowed']} during a stall or a slow spot"
+                + (f"; over 1 ms: {r['over_1ms']}, {r['over_1ms_in_a_stall']} during a "
+                   f"stall of {RECORDED_NS / 1e6:g} ms or more, "
+                   f"{r['over_1ms_when_slowed']} during one or a slow spot"
+                   if "over_1ms" in r else ""))  # fmt: skip
