@@ -1,7 +1,8 @@
 """One DC cycle in process, for profilers: N enabled TMC8670 drives in csp, SYNC0 every 1 ms,
-one cyclic frame (LRW over the process image + FRMW of the DC system time, as SOEM sends)
-mid-way between pulses, served by the daemon loop (`Daemon.handle_one` and its timers) on a
-loopback link with a manual clock.
+the cycle's frames mid-way between pulses (the process image in LRWs of at most 1486 bytes,
+cut as SOEM cuts it, one frame up to 50 drives; the FRMW of the DC system time in the
+first), served by the daemon loop (`Daemon.handle_one` and its timers) on a loopback link
+with a manual clock.
 
     .venv/bin/python tools/cycle_profile.py --drives 1 --cycles 2000          # us per cycle
     .venv/bin/python tools/cycle_profile.py --drives 16 --profile | head -40  # cProfile

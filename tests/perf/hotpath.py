@@ -104,10 +104,34 @@ def frame_cost(n_slaves: int, iterations: int = 2000) -> float:
 MS = 1_000_000
 OUT, IN = 12, 17  # TMC8670 default PDOs (config/tmc8670.yaml)
 CSP = 8
+#: the most process data one LRW carries in a frame of 1514 bytes (Ethernet header, EtherCAT
+#: header, datagram header and WKC off), and what the first frame gives up for the FRMW of
+#: the DC system time behind its LRW (a datagram header, 8 bytes, a WKC). ETG.1000.4 §5.2;
+#: SOEM's EC_MAXLRWDATA and EC_FIRSTDCDATAGRAM.
+MAX_LRW = 1486
+FRMW_BYTES = 20
+
+
+def segments(n: int) -> list[tuple[int, int]]:
+    """The cyclic LRWs' byte ranges of the process image of ``n`` drives (the outputs of
+    every drive, then the inputs): each frame as full as it goes, cut between two drives'
+    blocks, the first leaving room for the FRMW, as SOEM's config_map segments its IO map."""
+    cuts = [k * OUT for k in range(1, n + 1)] + [n * OUT + k * IN for k in range(1, n + 1)]
+    out: list[tuple[int, int]] = []
+    start = prev = 0
+    room = MAX_LRW - FRMW_BYTES
+    for c in cuts:
+        if c - start > room:
+            out.append((start, prev))
+            start, room = prev, MAX_LRW
+        prev = c
+    out.append((start, prev))
+    return out
 
 
 class CspCycle:
-    """N drives in OP, enabled in csp, SYNC0 at 1 ms; ``step()`` runs one cycle."""
+    """N drives in OP, enabled in csp, SYNC0 at 1 ms; ``step()`` runs one cycle: the pulse,
+    then the cycle's frames (:meth:`frames`) mid-cycle."""
 
     def __init__(
         self,
@@ -124,6 +148,9 @@ class CspCycle:
         self.responder = responder
         #: ``clock``: the segment's clock (default: a manual clock the cycles move)
         self.seg, self.clock = segment_of(drives, device=device, clock=clock)
+        #: the LRWs' byte ranges of the process image, and the FRMW behind the first
+        self.cuts = segments(drives)
+        self.frmw = dg.build(dg.Cmd.FRMW, 0x1000, 0x0910, bytes(8))
         self.seg.compiled = compiled  # the responder may serve the segment (decision P9)
         t = self.master = TinyMaster(self.seg)
         configure_to_op(t, drives, ecat_irq)
@@ -154,15 +181,23 @@ class CspCycle:
             self.step(cw)  # shutdown, switch on, enable operation
 
     def frame(self, cw: int) -> bytes:
+        """The cycle's first frame (the only one up to 50 drives): see :meth:`frames`."""
+        return self.frames(cw)[0]
+
+    def frames(self, cw: int) -> list[bytes]:
+        """The cycle's frames as a master sends them: the process image in LRWs of at most
+        :data:`MAX_LRW` bytes (:func:`segments`), the FRMW of the DC system time in the
+        first frame behind its LRW."""
         # every drive gets the same outputs: one copy repeated (the master's side of the
         # cycle stays a few C calls, outside the daemon's measured cost)
-        out = struct.pack("<HiHi", cw, self.target, 0, 0) * self.n
-        return dg.ethernet_frame(
-            [
-                dg.build_logical(dg.Cmd.LRW, 0, out + bytes(IN * self.n), more=True),
-                dg.build(dg.Cmd.FRMW, 0x1000, 0x0910, bytes(8)),
-            ]
-        )
+        image = struct.pack("<HiHi", cw, self.target, 0, 0) * self.n + bytes(IN * self.n)
+        (a, b), *rest = self.cuts
+        out = [
+            dg.ethernet_frame([dg.build_logical(dg.Cmd.LRW, a, image[a:b], more=True), self.frmw])
+        ]
+        for a, b in rest:
+            out.append(dg.ethernet_frame([dg.build_logical(dg.Cmd.LRW, a, image[a:b])]))
+        return out
 
     def step(self, cw: int | None = None) -> bytes:
         self.pulse()
@@ -174,14 +209,18 @@ class CspCycle:
         self.daemon._service_timers()
 
     def exchange(self, cw: int | None = None) -> bytes:
-        """The cyclic frame, mid-cycle; returns the reply."""
+        """The cycle's frames, mid-cycle, one after the other's reply; returns the replies,
+        joined (one frame up to 50 drives)."""
         self.clock.t = self.t + MS // 2
         self.target = int(self.amplitude * (1 - math.cos(self.k * 2e-3 * math.pi)))
-        reply = self.deliver(self.frame(self.cw if cw is None else cw))
-        assert reply is not None
+        replies = []
+        for f in self.frames(self.cw if cw is None else cw):
+            reply = self.deliver(f)
+            assert reply is not None
+            replies.append(reply)
         self.t += MS
         self.k += 1
-        return bytes(reply)
+        return b"".join(replies)
 
     def deliver(self, raw: bytes) -> bytes | None:
         """One frame through the daemon, arriving now; its reply (None: none)."""
