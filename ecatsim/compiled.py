@@ -51,6 +51,7 @@ CORE = (
     "ecatsim.slave.firmware",
     "ecatsim.wire.frame",
     "ecatsim.ethercat.recorder",
+    "ecatsim.ethercat.logical_index",
     "ecatsim.ethercat.schedule",
     "ecatsim.ethercat.segment",
     "ecatsim.ethercat.prefetch",

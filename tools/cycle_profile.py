@@ -80,9 +80,13 @@ def main() -> int:
         "the master and the host ran (tools/icount.sh --footprint)",
     )
     args = ap.parse_args()
-    c = CspCycle(args.drives, args.device, enable=not args.idle, responder=args.responder)
-    if args.hold:
-        c.amplitude = 0
+    c = CspCycle(
+        args.drives,
+        args.device,
+        enable=not args.idle,
+        responder=args.responder,
+        amplitude=0 if args.hold else 20_000,
+    )
     if args.cold_cycle:  # written in C: the memset's own lines are known (icount.sh)
         junk = ctypes.create_string_buffer(args.cold_cycle << 20)
         before(c, "step", lambda: ctypes.memset(junk, 1, len(junk)))

@@ -6,7 +6,7 @@ cimport cython
 from ecatsim.esc.context cimport FrameContext
 from ecatsim.esc.core cimport Esc
 from ecatsim.esc.dc cimport DcUnit
-from ecatsim.esc.fmmu cimport logical_at
+from ecatsim.ethercat.logical_index cimport LogicalIndex
 from ecatsim.ethercat.schedule cimport Schedule
 
 
@@ -23,6 +23,7 @@ cdef class Segment:
     cdef public bint compiled
     cdef public FrameContext ctx
     cdef public list escs, firmware, logical
+    cdef public LogicalIndex logical_index
     cdef public Schedule schedule
     cdef bytearray _frame
     cdef public long long _frmw_adp, _frmw_reader
@@ -50,7 +51,7 @@ cdef class Segment:
                    lf="long long", dlen="long long", d0="long long", w="long long",
                    mv="unsigned char[:]", data="unsigned char[:]", inc="long long",
                    adp="long long",
-                   ado="long long", lad="long long", esc=Esc,
+                   ado="long long", esc=Esc,
                    k="long long", i="long long", irq="long long", wkc="long long",
                    readers=tuple, src=bytes, incoming=bytes)
     cpdef void _walk(self, bytearray buf, long long p) except *

@@ -17,9 +17,9 @@ from ecatsim.clock import Clock
 from ecatsim.esc import regs
 from ecatsim.esc.context import FrameContext
 from ecatsim.esc.core import Esc
-from ecatsim.esc.fmmu import logical_at
 from ecatsim.esc.regs import DC_SYSTEM_TIME as _DC_SYSTEM_TIME  # compiled: a C constant
 from ecatsim.ethercat import topology
+from ecatsim.ethercat.logical_index import LogicalIndex
 from ecatsim.ethercat.schedule import Schedule, Serviceable
 from ecatsim.wire.datagram import (  # compiled: C constants (segment.pxd)
     APRD,
@@ -71,6 +71,7 @@ class Segment:
         "frames",
         "irq",
         "logical",
+        "logical_index",
         "out_up",
         "port0_closed",
         "processed",
@@ -110,6 +111,9 @@ class Segment:
         #: the first of them (the reference clock), -1 if none
         self._frmw_reader = -1
         self.logical: list[Esc] = []
+        #: the FMMUs of ``logical`` by logical address: a logical datagram reaches only the
+        #: ESCs whose FMMUs its range overlaps (decision P99)
+        self.logical_index = LogicalIndex()
         #: the daemon's compiled responder may serve this segment's frames (decision P9);
         #: tests compare it with the Python path
         self.compiled = True
@@ -183,6 +187,7 @@ class Segment:
         if ctx.logical_dirty:
             ctx.logical_dirty = False
             self.logical = [e for e in self.chain if e.fmmus]
+            self.logical_index.build(self.logical)
         if ctx.irq_dirty:
             ctx.irq_dirty = False
             irq = 0
@@ -416,10 +421,8 @@ class Segment:
             adp = buf[p + 2] | (buf[p + 3] << 8)
             ado = buf[p + 4] | (buf[p + 5] << 8)
             if cmd in (LRW, LRD, LWR):
-                lad = adp | (ado << 16)
-                for esc in self.logical:
-                    # C calls, pointers into buf (P61)
-                    inc += logical_at(esc, esc.fmmus, cmd, lad, buf, d0, dlen)
+                # C calls, pointers into buf (P61), to the ESCs the range reaches (P99)
+                inc += self.logical_index.walk(cmd, adp | (ado << 16), buf, d0, dlen)
             elif cmd in (FPRD, FPWR, FPRW):
                 for i in self.addr_map.get(adp, ()):
                     inc += _physical(escs[i], cmd - FPRD, ado, data)

@@ -142,7 +142,11 @@ class CspCycle:
         ecat_irq: bool = False,
         responder: bool = False,
         clock: Any = None,
+        amplitude: int = 20_000,
     ) -> None:
+        """``amplitude``: the targets follow a cosine of this many counts from the first
+        enabled cycle on (0: the drives hold the position they were enabled at, never
+        moved, as SOEM's red_test leaves them)."""
         self.n = drives
         #: frames go through the compiled responder (decision P9) over a socket pair
         self.responder = responder
@@ -175,7 +179,7 @@ class CspCycle:
         self.t = t0
         self.k = 0
         self.target = 0
-        self.amplitude = 20_000  # counts; the target follows a cosine of this amplitude
+        self.amplitude = amplitude
         self.cw = 0x0F if enable else 0x00
         for cw in (0x06, 0x07, 0x0F, 0x0F, 0x0F) if enable else ():
             self.step(cw)  # shutdown, switch on, enable operation
