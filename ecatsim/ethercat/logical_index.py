@@ -1,3 +1,4 @@
+# cython: boundscheck=False, wraparound=False
 """The logical datagrams' way through a segment: only the ESCs whose FMMUs the datagram's
 logical range reaches, in wire order.
 
