@@ -238,3 +238,16 @@ def test_64_slaves_reach_op(daemon_factory: Any, master_factory: Any) -> None:
         master.send_processdata()
         # a wide timeout: this checks function at 64 slaves; speed is the benchmark's job
         assert master.receive_processdata(50_000) == 3 * 64
+    # the image is two frames (SOEM cuts it at 1486 bytes of LRW): every drive's outputs
+    # go in the first, the inputs of drives 41-63 come back in the second. Controlword 6
+    # (shutdown) to each: each statusword reads "ready to switch on" (CiA 402-2 Figure 5)
+    for s in master.slaves:
+        s.output = struct.pack("<H", 0x0006) + bytes(len(s.output) - 2)
+    states: list[int] = []
+    for _ in range(50):
+        master.send_processdata()
+        assert master.receive_processdata(50_000) == 3 * 64
+        states = [struct.unpack_from("<H", bytes(s.input))[0] & 0x6F for s in master.slaves]
+        if states == [0x21] * 64:
+            break
+    assert states == [0x21] * 64, [hex(v) for v in states]
