@@ -12,8 +12,9 @@ cdef long long INDEX_MIN
 cdef class LogicalIndex:
     cdef public list escs
     cdef long long[:] _start, _stop, _k
-    cdef public long long _reach, _first, _last
-    cdef bytearray _mark
+    cdef public long long _reach, _last
+    # a view of the bytearray, made once per build
+    cdef unsigned char[:] _mark
     cdef public bint on
     cdef public long long visits
 

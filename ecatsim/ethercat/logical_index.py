@@ -32,7 +32,6 @@ class LogicalIndex:
 
     #: fixed attributes (the compiled core declares them in logical_index.pxd)
     __slots__ = (
-        "_first",
         "_k",
         "_last",
         "_mark",
@@ -55,8 +54,7 @@ class LogicalIndex:
         #: the longest FMMU (bytes): one that starts this far before a datagram or more
         #: ends before it
         self._reach = 0
-        #: the lowest start and the highest stop of all FMMUs
-        self._first = 0
+        #: the highest stop of all FMMUs (the lowest start is ``_start[0]``)
         self._last = 0
         #: per ESC: reached by the datagram being walked (cleared as the walk goes)
         self._mark = bytearray()
@@ -74,7 +72,6 @@ class LogicalIndex:
         self._stop = array("q", [s[1] for s in spans])
         self._k = array("q", [s[2] for s in spans])
         self._reach = max((b - a for a, b, _ in spans), default=0)
-        self._first = min((a for a, _, _ in spans), default=0)
         self._last = max((b for _, b, _ in spans), default=0)
         self._mark = bytearray(len(escs))
 
@@ -85,7 +82,8 @@ class LogicalIndex:
         escs = self.escs
         inc = 0
         end = lad + dlen
-        if not self.on or len(escs) < INDEX_MIN or (lad <= self._first and end >= self._last):
+        # (32 or more ESCs with FMMUs: ``_start`` is not empty)
+        if not self.on or len(escs) < INDEX_MIN or (lad <= self._start[0] and end >= self._last):
             for esc in escs:
                 inc += logical_at(esc, esc.fmmus, cmd, lad, buf, d0, dlen)
             self.visits += len(escs)
