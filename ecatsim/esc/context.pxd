@@ -6,7 +6,7 @@ cimport cython
 @cython.final
 cdef class FrameContext:
     cdef public long long frame_no
-    cdef public long long t_ns, pdi_ns
+    cdef public long long t_ns, pdi_ns, wd_next
     cdef public bint irq_dirty, addr_dirty, logical_dirty, topology_dirty, timers_dirty
     cdef public bint latch_wait
     cdef public bytearray raised

@@ -5,6 +5,9 @@ the raised PDI interrupt lines). Ref: ETG.1000.4 §5.3 (a frame passes every sla
 
 from __future__ import annotations
 
+#: "no deadline" in the comparisons of host times (later than any)
+NO_DEADLINE = 1 << 62
+
 
 class FrameContext:
     """Per-segment state shared by all ESCs: the frame being processed and dirty flags."""
@@ -22,6 +25,7 @@ class FrameContext:
         "t_ns",
         "timers_dirty",
         "topology_dirty",
+        "wd_next",
     )
 
     def __init__(self) -> None:
@@ -38,6 +42,10 @@ class FrameContext:
         #: latch its receive time (DcUnit.latch_wait)
         self.latch_wait = False
         self.timers_dirty = True
+        #: no process-data watchdog of the segment expires before this host time: lowered
+        #: by every ``Watchdog.trigger`` that sets an earlier deadline, made exact again by
+        #: the schedule's scan of the watchdogs once it falls due (decision P100)
+        self.wd_next = NO_DEADLINE
         #: ESCs whose PDI interrupt line (AL event & mask) is raised: a byte per position
         #: and their number, C fields kept by ``Esc._pdi_irq`` (P43); ``pending``: the set
         self.raised = bytearray()

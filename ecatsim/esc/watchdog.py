@@ -28,10 +28,11 @@ class Watchdog:
     """Process-data watchdog state (the registers live in ESC memory), and the hooks of
     the watchdog registers 0x0400-0x0443 (the ESC ``esc`` gives the AL event register)."""
 
-    __slots__ = ("deadline_ns", "esc", "increment_ns", "mem", "timeout_ns")
+    __slots__ = ("ctx", "deadline_ns", "esc", "increment_ns", "mem", "timeout_ns")
 
     def __init__(self, esc: Esc) -> None:
         self.esc = esc
+        self.ctx = esc.ctx  # its earliest deadline the segment's (``wd_next``, P100)
         self.mem = esc.mem
         self.deadline_ns = 0  # 0: not running
         self.increment_ns = 0
@@ -55,7 +56,11 @@ class Watchdog:
     def trigger(self, now_ns: int) -> None:
         """Restart on an SM write. Ref: TMC8460 §5.41 Table 55."""
         if self.timeout_ns:
-            self.deadline_ns = now_ns + self.timeout_ns
+            d = now_ns + self.timeout_ns
+            self.deadline_ns = d
+            ctx = self.ctx
+            if d < ctx.wd_next:  # earlier than any the schedule knows of (P100)
+                ctx.wd_next = d
         p = self.mem  # compiled: a C pointer (a register of the ESC's memory): no raise
         p[WD_STATUS_PD] |= 0x01
 

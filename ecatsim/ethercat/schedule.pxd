@@ -41,5 +41,7 @@ cdef class Schedule:
     cpdef void pulses_meanwhile(self) except *
     @cython.locals(best="long long")
     cpdef object next_deadline(self)
-    @cython.locals(best="long long", d="long long", e=Esc)
+    @cython.locals(best="long long", w="long long")
     cpdef long long next_deadline_ns(self) except? -1
+    @cython.locals(w="long long", d="long long", e=Esc)
+    cdef long long _wd_scan(self) noexcept

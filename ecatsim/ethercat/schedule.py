@@ -19,7 +19,7 @@ import time
 from collections.abc import Callable, Sequence, Sized
 from typing import Protocol
 
-from ecatsim.esc.context import FrameContext
+from ecatsim.esc.context import NO_DEADLINE, FrameContext
 from ecatsim.esc.core import Esc
 from ecatsim.slave.firmware import Firmware
 
@@ -29,8 +29,6 @@ MAX_SYNC0_CATCHUP = 64
 #: frames arriving this long before the earliest SYNC deadline skip the per-slave check;
 #: larger than any clock correction that does not mark the timers dirty (dc.MOVE_NS)
 PULSE_HINT_MARGIN_NS = 200_000
-#: "no deadline" in the comparisons of deadlines
-NO_DEADLINE = 1 << 62
 #: the work after a reply looks whether a frame is waiting (``Schedule.frame_waiting``)
 #: after its first slave and then once per this many ns of firmware work, and leaves the
 #: rest for after that frame (decisions P19, P98)
@@ -124,15 +122,17 @@ class Schedule:
         """Fire the SYNC0 pulses due by host time ``t``, run the timers due, the firmware
         of every slave with a raised PDI interrupt (stopping for a waiting frame), then
         persist the EEPROM images that changed. Never called between receive and reply."""
-        if t >= self._pulse_hint or self.ctx.timers_dirty:
+        ctx = self.ctx
+        if t >= self._pulse_hint or ctx.timers_dirty:
             self.sync_until(t, False)  # first: each pulse is handled at its own time
-        for esc in self.escs:
-            d = esc.wd.deadline_ns
-            if d and t >= d:  # due (the running watchdogs of a cyclic bus are not)
-                esc.check_timers(t)
+        if t >= ctx.wd_next:  # a watchdog may be due: each one looked at (decision P100)
+            for esc in self.escs:
+                d = esc.wd.deadline_ns
+                if d and t >= d:  # due (the running watchdogs of a cyclic bus are not)
+                    esc.check_timers(t)
+            self._wd_scan()
         if self.deferred and not self.run_deferred():
             return  # a frame waits: the rest after its reply (decision P30)
-        ctx = self.ctx
         if (ctx.n_raised or self.awake) and self.firmware:
             probe = self.frame_waiting
             # the first look after the first slave: frames that came while the work before ran
@@ -310,12 +310,25 @@ class Schedule:
 
     def next_deadline_ns(self) -> int:
         """:meth:`next_deadline` as an integer, ``NO_DEADLINE`` if there is none (the
-        compiled responder's call after each frame: a C integer)."""
+        compiled responder's call after each frame: a C integer). The watchdogs are looked
+        at only where their bound (``FrameContext.wd_next``) comes before the SYNC pulses:
+        on a cyclic bus the triggers keep their deadlines far off (decision P100)."""
         if self.ctx.timers_dirty:
             self._refresh_next_sync()
         best = self._next_sync
+        if self.ctx.wd_next < best:
+            w = self._wd_scan()
+            if w < best:
+                best = w
+        return best
+
+    def _wd_scan(self) -> int:
+        """The earliest deadline of a running process-data watchdog (``NO_DEADLINE``:
+        none runs), kept as the segment's bound ``FrameContext.wd_next`` (P100)."""
+        w = NO_DEADLINE
         for e in self.escs:
             d = e.wd.deadline_ns
-            if d and d < best:
-                best = d
-        return best
+            if d and d < w:
+                w = d
+        self.ctx.wd_next = w
+        return w
