@@ -1,7 +1,8 @@
+# The compiled core's declarations for watchdog.py (Cython, pure-Python mode). P2, P13.
 cimport cython
 
 from ecatsim.esc.context cimport FrameContext
-# The compiled core's declarations for watchdog.py (Cython, pure-Python mode). P2, P13.
+
 # the registers, imported from regs.py: C constants here
 cdef long long EV_WATCHDOG_PD, WD_COUNTER_PD, WD_COUNTER_PDI, WD_DIVIDER, WD_STATUS_PD, WD_TIME_PD
 
