@@ -32,7 +32,7 @@ cdef class Schedule:
     cpdef void pulses_due(self, long long t) except *
     @cython.locals(ctx=FrameContext, esc=Esc, dc=DcUnit, k="long long", nxt="long long",
                    d="long long", d1="long long", cfw=Firmware, defer=bint, look="long long",
-                   waiting=bint)
+                   waiting=bint, ran=bint, link=bint)
     cpdef void sync_until(self, long long t, bint frame_first=*) except *
     @cython.locals(lst=list, fw=Firmware, look="long long", ctx=FrameContext, now="long long",
                    i=Py_ssize_t)

@@ -4,11 +4,11 @@ PDI of each slave with a raised interrupt, then the EEPROM images to persist.
 The silicon answers a frame at once and its firmware reacts later, over the PDI, to the
 events the frame latched (decision P19). The segment's walk (ecatsim/ethercat/segment.py)
 only latches; this schedule runs the reactions, at most every ``probe_ns`` of work looking
-whether a frame waits, and stopping for it. SYNC0 pulses due before a frame's arrival run
-before its walk, each at its own time (decision DC2); where the SYNC0 work of many slaves
-would hold a waiting frame up, each slave's firmware takes its outputs at the pulse and the
-rest of its work (the drive's cycle, the inputs as of the pulse) runs after that frame's
-reply (decision P30).
+whether a frame waits, and stopping for it. SYNC0 pulses due before a frame's arrival fire
+before its walk, each at its own time (decision DC2). On the daemon's link each slave's
+firmware takes its outputs at the pulse, every slave's first, and the rest of its work (the
+drive's cycle, the inputs as of the pulse) runs after, stopping for a waiting frame and
+going on after its reply (decisions P30, P101).
 Ref: TMC8460 §5.50.4 (SYNC0 generation), §5.42 (process-data watchdog); ETG.1000.6 §5.3
 (DC synchronous mode), §6.4 (AL state machine run by the firmware).
 """
@@ -110,7 +110,8 @@ class Schedule:
         #: firmware whose pulse's work was latched for after a waiting frame, in pulse
         #: order (one whose ``sync_ns`` is back to -1 has run it already; decision P30)
         self.deferred: list[Firmware] = []
-        #: pulses whose work waited for a frame; pulses that replaced one still waiting
+        #: pulses latched with their work after (on the daemon's link, every one: P101);
+        #: pulses that replaced one whose work still waited for a frame
         self.sync0_deferred = 0
         self.sync0_merged = 0
         #: host time before which no SYNC pulse can be due (recomputed by sync_until)
@@ -156,6 +157,8 @@ class Schedule:
                     self.pulses_meanwhile()
                     look = time.monotonic_ns() + self.probe_ns
             self.resume_pos = 0
+            if self.deferred and not self.run_deferred():
+                return  # pulses latched meanwhile (P101); a frame waits: after its reply
         if ctx.flush and self.persist is not None:
             for pos in sorted(ctx.flush):
                 self.persist(pos)
@@ -175,22 +178,24 @@ class Schedule:
         captured as of that instant, however late the host gets to it. Called before a
         frame that arrived at ``t`` is processed (``frame_first``), and from the timers.
 
-        On the daemon's link (``frame_waiting`` set), a frame is not held up by more than
-        ``probe_ns`` of this work: once it waits (``frame_first``: once that much work is
-        done; else when ``frame_waiting()`` says so), each further pulse only latches its
-        outputs (``Firmware.sync0_latch``) and its work runs after the frame's reply, from
-        ``service_at`` (``run_deferred``). Decision P30.
+        On the daemon's link (``frame_waiting`` set) each pulse only latches its outputs
+        here (``Firmware.sync0_latch``), every slave's first, and the work runs after, from
+        ``service_at`` (``run_deferred``, which stops for a waiting frame): a frame that
+        comes meanwhile waits for the latches, not for the drives' work (decision P101).
+        A further pulse of the same slave due by ``t`` (the host was late: DC2) runs the
+        last one's work and its own at once, looking whether a frame waits after the first
+        such slave and then every ``probe_ns``; once one waits (always before a frame,
+        ``frame_first``), it replaces the latched one instead (P30, P98).
         Ref: TMC8460 §5.50.4 (SYNC0 generation); ETG.1000.6 §5.3 (DC synchronous mode).
         """
         ctx = self.ctx
         nxt = NO_DEADLINE
         probe = self.frame_waiting
-        defer = False
-        # the first look: before a frame, after PROBE_NS of work (the pulses move on however
-        # many frames come); from the timers, after the first slave (P98)
-        look = NO_DEADLINE
-        if probe is not None:
-            look = time.monotonic_ns() + self.probe_ns if frame_first else time.monotonic_ns()
+        link = probe is not None
+        # a frame waits: a further pulse replaces the latched one (P30)
+        defer = frame_first and link
+        # the first look after the first slave's work (P98)
+        look = time.monotonic_ns() if link else NO_DEADLINE
         for esc in self.sync_escs:
             dc = esc.dc
             fw = self.firmware[esc.position] if self.firmware else None
@@ -215,21 +220,31 @@ class Schedule:
                     ctx.pdi_ns = d
                     if cfw is None:
                         fw.service(d)
-                    elif defer:
+                        continue
+                    ran = True  # a slave's work ran: a look follows if one is due (P98)
+                    if defer or (link and k == 0):  # latched, the work after (P101)
                         waiting = cfw.sync_ns >= 0
+                        ran = waiting and not defer
+                        if ran:
+                            # no frame waits: the last pulse's work first, at its time (it
+                            # stays in ``deferred``, where the new pulse's work will run)
+                            ctx.pdi_ns = cfw.sync_ns
+                            cfw.run_latched()
+                            ctx.pdi_ns = d
                         if cfw.sync0_latch(d):
                             self.sync0_deferred += 1
-                            if waiting:
-                                self.sync0_merged += 1  # the slave's cycle overran
-                            else:
+                            if not waiting:
                                 self.deferred.append(cfw)
+                            elif not ran:
+                                self.sync0_merged += 1  # the slave's cycle overran
                     else:
-                        cfw.service(d)  # runs a pulse's work still latched first
-                        if look != NO_DEADLINE and time.monotonic_ns() >= look:
-                            if frame_first or (probe is not None and probe()):
-                                defer = True  # the frame first (decision P30)
-                            else:
-                                look = time.monotonic_ns() + self.probe_ns
+                        cfw.service(d)  # a further pulse: the last one's work first (DC2)
+                    # off the link ``look`` is NO_DEADLINE, never reached
+                    if ran and time.monotonic_ns() >= look:
+                        if probe is not None and probe():
+                            defer = True  # the frame first (decision P30)
+                        else:
+                            look = time.monotonic_ns() + self.probe_ns
             else:
                 d = dc.sync0_deadline_or(NO_DEADLINE)
                 d1 = dc.sync1_deadline_or(NO_DEADLINE)

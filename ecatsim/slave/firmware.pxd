@@ -52,7 +52,7 @@ cdef class Firmware:
     # object only for an Application called through Python; decision P60)
     @cython.locals(pdo=PdoImage, now_ns="long long", has_out=bint)
     cpdef void sync0_run(self) except *
-    @cython.locals(now_ns="long long", mbx=MailboxEngine)
+    @cython.locals(now_ns="long long", mbx=MailboxEngine, p=Pdi, masked=bint)
     cpdef void run_latched(self) except *
     @cython.locals(pdo=PdoImage)
     cdef int _apply_outputs(self, object out, long long now_ns) except -1

@@ -264,12 +264,21 @@ class Firmware:
         self._write_inputs(now_ns)
 
     def run_latched(self) -> None:
-        """``sync0_run`` after a frame (decision P30), then what the full service does when
-        the cycle queued a reply behind a full SM1 (an EMCY): the SM1 event unmasked."""
+        """``sync0_run`` after the latch (decisions P30, P101), then what ``service`` does
+        after a pulse's work: the process-data events masked once the pulses run, the OP
+        request that waited too long for outputs failed (F5), and the event mask set again
+        where that or the cycle changed it (an EMCY queued behind a full SM1: the SM1 event
+        unmasked). Other events of the slave keep its interrupt raised for ``service``."""
         now_ns = self.sync_ns
         self.sync0_run()
+        p = self.pdi
+        masked = (p.u8(DC_ACTIVATION) & 0x03) == 0x03 and not p.u8(DC_ACTIVATION_STATUS) & 0x01
+        if self.op_requested_ns and now_ns - self.op_requested_ns >= OP_WAIT_NS:
+            self.op_requested_ns = 0  # no outputs in time: SAFEOP with 0x001B (decision F5)
+            self.fail(AlState.SAFEOP, al.CODE_SM_WATCHDOG, now_ns)
         mbx = self.mbx
-        if mbx is not None and mbx.queued():
+        if masked != self.pd_masked or (mbx is not None and mbx.queued()):
+            self.pd_masked = masked
             self.service_mailbox(0, now_ns)
 
     def _apply_outputs(self, out: bytes | bytearray, now_ns: int) -> None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 import struct
 import time
+from collections.abc import Callable
 from typing import Any
 
 from ecatsim.ethercat.daemon import Daemon
@@ -143,15 +144,18 @@ class CspCycle:
         responder: bool = False,
         clock: Any = None,
         amplitude: int = 20_000,
+        frame_waiting: Callable[[], bool] | None = None,
     ) -> None:
         """``amplitude``: the targets follow a cosine of this many counts from the first
         enabled cycle on (0: the drives hold the position they were enabled at, never
-        moved, as SOEM's red_test leaves them)."""
+        moved, as SOEM's red_test leaves them). ``frame_waiting``: the schedule's look for
+        a waiting frame from power-up on, as on the daemon's link (decision P30)."""
         self.n = drives
         #: frames go through the compiled responder (decision P9) over a socket pair
         self.responder = responder
         #: ``clock``: the segment's clock (default: a manual clock the cycles move)
         self.seg, self.clock = segment_of(drives, device=device, clock=clock)
+        self.seg.schedule.frame_waiting = frame_waiting
         #: the LRWs' byte ranges of the process image, and the FRMW behind the first
         self.cuts = segments(drives)
         self.frmw = dg.build(dg.Cmd.FRMW, 0x1000, 0x0910, bytes(8))

@@ -1,7 +1,8 @@
-"""The SYNC0 work behind a waiting frame (decision P30): each slave's firmware takes its
-outputs at the pulse, and where a frame waits, the rest of its work runs after that frame's
-reply. The frame reads the inputs the slave last wrote; the work, once run, gives exactly
-the inputs an undelayed run gives (the same outputs, the same pulse time)."""
+"""The SYNC0 work on the daemon's link (decisions P30, P101): each slave's firmware takes
+its outputs at the pulse, every slave's first, and the rest of its work runs after; where a
+frame waits, after that frame's reply. The frame reads the inputs the slave last wrote; the
+work, once run, gives exactly the inputs an undelayed run gives (the same outputs, the same
+pulse time)."""
 
 from __future__ import annotations
 
@@ -9,6 +10,9 @@ from tests.perf.hotpath import IN, MS, OUT, CspCycle
 from tests.support.tinymaster import drive_of, firmware_of, firmwares
 
 N = 4
+#: how long an OP request waits for outputs (decision F5; a C constant of the compiled
+#: firmware, not visible from Python)
+OP_WAIT_NS = 9_000_000_000
 #: where the LRW's data starts in the frame: Ethernet 14, EtherCAT 2, datagram header 10
 DATA = 26
 
@@ -48,16 +52,15 @@ def test_a_frame_that_waits_reads_the_inputs_written_before_and_the_work_goes_on
         ref.pulse()
         waiting[0] = True  # a frame arrives while the pulses' work runs
         c.pulse()
-        # slave 0 was served before the look; the look found the frame, the other pulses
-        # only latched; one more slave's work ran before the next look
-        assert latched(c) == [False, False, True, True]
-        assert c.seg.schedule.sync0_deferred == 3 * (k + 1)
+        # every pulse latched first (P101); slave 0's work ran before the look, which
+        # found the frame
+        assert latched(c) == [False, True, True, True]
+        assert c.seg.schedule.sync0_deferred == N * (k + 1)
         waiting[0] = False
         want, got = ref.exchange(), c.exchange()
         assert without_inputs(got) == without_inputs(want)  # WKCs, system time, outputs
-        for i in (0, 1):
-            assert inputs(got, i) == inputs(want, i)
-        for i in (2, 3):  # the inputs of the last pulse their firmware finished
+        assert inputs(got, 0) == inputs(want, 0)
+        for i in (1, 2, 3):  # the inputs of the last pulse their firmware finished
             assert inputs(got, i) == last[i]
         assert latched(c) == [False] * N  # run after the reply, with the pulse's outputs
         assert c.seg.schedule.deferred == []
@@ -68,19 +71,18 @@ def test_a_frame_that_waits_reads_the_inputs_written_before_and_the_work_goes_on
     assert c.seg.schedule.yielded == 40
 
 
-def test_the_pulses_due_before_a_frame_hold_it_up_for_at_most_probe_ns_of_work() -> None:
+def test_the_pulses_due_before_a_frame_only_latch_before_it() -> None:
     ref, c, _, last = twins()  # no frame waits behind it: the work after it runs to its end
     for _ in range(20):
-        # no timer ran: the pulse is due when the frame arrives and comes before its walk;
-        # after probe_ns (0 here) of that work, the frame first
+        # no timer ran: the pulse is due when the frame arrives and comes before its walk,
+        # which waits for the latches only (P101)
         want, got = ref.exchange(), c.exchange()
         assert without_inputs(got) == without_inputs(want)
-        assert inputs(got, 0) == inputs(want, 0)  # served before the walk
-        for i in (1, 2, 3):
+        for i in range(N):
             assert inputs(got, i) == last[i]  # their work ran after the reply
         assert latched(c) == [False] * N
         last = [inputs(want, i) for i in range(N)]
-    assert c.seg.schedule.sync0_deferred == 3 * 20
+    assert c.seg.schedule.sync0_deferred == N * 20
 
 
 def test_a_pulse_that_comes_while_the_last_ones_work_waits_replaces_it() -> None:
@@ -89,13 +91,14 @@ def test_a_pulse_that_comes_while_the_last_ones_work_waits_replaces_it() -> None
     c.clock.t = c.t + MS + 20_000  # two pulses due: the host got to them late
     c.daemon._service_timers()
     s = c.seg.schedule
-    # slave 0: the first pulse served, the second latched; slaves 1-3: the first latched
-    # and replaced by the second (their cycle overran), no work run for it
-    assert s.sync0_deferred == 1 + 3 + 3
+    # every slave's first pulse latched (P101); slave 0's second ran the first's work
+    # and its own, then the look found the frame: slaves 1-3's second pulse latched and
+    # replaced the first (their cycle overran), no work run for it
+    assert s.sync0_deferred == N + 3
     assert s.sync0_merged == 3
-    # then slave 0's latched work ran before the next look, which found the frame
-    assert latched(c) == [False, True, True, True]
-    assert all(c.t + MS <= fw.sync_ns < c.t + MS + 20_000 for fw in firmwares(c.seg)[1:])
+    # then slave 1's latched work ran before the next look, which found the frame
+    assert latched(c) == [False, False, True, True]
+    assert all(c.t + MS <= fw.sync_ns < c.t + MS + 20_000 for fw in firmwares(c.seg)[2:])
     waiting[0] = False
     c.seg.service_at(c.clock.t)
     assert latched(c) == [False] * N
@@ -118,7 +121,7 @@ def test_pulses_that_fall_due_while_the_latched_work_runs_fire_at_their_time() -
     s = c.seg.schedule
     waiting[0] = True
     c.pulse()
-    assert latched(c) == [False, False, True, True]
+    assert latched(c) == [False, True, True, True]
     waiting[0] = False
     ticks = s.sync0_ticks
     c.clock.t = c.t + MS + 20_000  # the next pulse falls due while the work runs
@@ -129,16 +132,39 @@ def test_pulses_that_fall_due_while_the_latched_work_runs_fire_at_their_time() -
     c.pulse()  # the timer: that pulse, and a frame waits again
     waiting[0] = False
     ticks = s.sync0_ticks
-    assert latched(c) == [False, False, True, True]
+    assert latched(c) == [False, True, True, True]
     c.seg.schedule.now_ns = lambda: c.clock.t
     c.clock.t = c.t + MS + 20_000
     assert s.run_deferred()
-    # slave 2's latched work ran, then the look found the pulse due: every slave's, at
-    # its time (slave 3's latched work first), none replaced
+    # slave 1's latched work ran, then the look found the pulse due: every slave's, at
+    # its time (slaves 2 and 3's latched work first, P101), none replaced
     assert s.sync0_ticks == ticks + N
     assert latched(c) == [False] * N
     assert s.deferred == []
     assert s.sync0_merged == 0
+
+
+def test_a_pulse_on_latched_work_runs_it_first_and_looks_for_a_frame() -> None:
+    """A pulse that finds a slave's last work still latched runs that work first when no
+    frame waits, then looks, as after any slave's work (P98, P101): once a frame waits,
+    the other slaves' new pulses replace their latched ones (P30)."""
+    _, c, waiting, _ = twins()
+    s = c.seg.schedule
+    waiting[0] = True
+    c.pulse()
+    assert latched(c) == [False, True, True, True]
+    assert (s.sync0_deferred, s.sync0_merged) == (N, 0)
+    c.t += MS
+    c.pulse()  # the frame still waits
+    # slave 0: latched anew; slave 1: its last work, then the new latch, then the look
+    # found the frame; slaves 2, 3: replaced; then slave 1's new work before the look
+    assert (s.sync0_deferred, s.sync0_merged) == (2 * N, 2)
+    assert latched(c) == [True, False, True, True]
+    assert all(c.t <= fw.sync_ns < c.t + 20_000 for fw in firmwares(c.seg)[2:])
+    waiting[0] = False
+    assert s.run_deferred()
+    assert latched(c) == [False] * N
+    assert [drive_of(c.seg, k).state.name for k in range(N)] == ["OPERATION_ENABLED"] * N
 
 
 def test_an_emcy_the_latched_work_queues_behind_a_full_sm1_unmasks_the_sm1_event() -> None:
@@ -180,18 +206,25 @@ def slow_looks() -> tuple[CspCycle, CspCycle, list[bool], list[int]]:
     return ref, c, waiting, asked
 
 
-def test_before_a_frame_the_looks_come_every_probe_ns_by_the_monotonic_clock() -> None:
-    """The looks read the host's monotonic clock in nanoseconds (one C call when compiled,
-    decision P67): with a probe time of 10 s no look falls due within the pulses' work due
-    before a frame, so a frame that waits behind it defers nothing and is never asked
-    about."""
-    ref, c, waiting, asked = slow_looks()
+def test_before_a_frame_the_pulses_latch_without_a_look() -> None:
+    """The pulses due before a frame only latch, whatever the probe time (10 s here): the
+    frame is known to wait, so no look is asked for (decision P101). After the reply the
+    latched work looks after its first slave (P98), finds no other frame and runs to its
+    end, the looks reading the host's monotonic clock (P67)."""
+    ref, c, _, asked = slow_looks()
     s = c.seg.schedule
-    waiting[0] = True
-    for _ in range(5):
-        assert ref.exchange() == c.exchange()  # no timer ran: the pulse came before the walk
+    first = ref.exchange()
+    c.exchange()
+    last = [inputs(first, i) for i in range(N)]
+    for k in range(1, 6):
+        want, got = ref.exchange(), c.exchange()  # no timer ran: the pulse came first
+        assert without_inputs(got) == without_inputs(want)
+        for i in range(N):
+            assert inputs(got, i) == last[i]  # latched, their work after the reply
         assert latched(c) == [False] * N
-    assert (s.sync0_deferred, asked[0]) == (0, 0)
+        assert (s.sync0_deferred, asked[0]) == (N * (k + 1), k + 1)
+        last = [inputs(want, i) for i in range(N)]
+    assert s.sync0_merged == 0
 
 
 def test_from_the_timers_the_first_look_comes_after_the_first_slave() -> None:
@@ -206,8 +239,46 @@ def test_from_the_timers_the_first_look_comes_after_the_first_slave() -> None:
         assert asked[0] == k + 1  # one look, after the first slave; none due after it
         assert latched(c) == [False] * N
         assert ref.exchange() == c.exchange()
-    assert s.sync0_deferred == 0
+    assert s.sync0_deferred == 5 * N  # every pulse latched first (P101)
     waiting[0] = True
     c.pulse()
-    assert latched(c) == [False, False, True, True]  # as in the first test, probe_ns 0
-    assert s.sync0_deferred == 3
+    assert latched(c) == [False, True, True, True]  # as in the first test, probe_ns 0
+    assert s.sync0_deferred == 6 * N
+
+
+def same_escs(a: CspCycle, b: CspCycle) -> None:
+    """Every ESC's whole memory alike: registers (AL status and code, the event mask the
+    firmware sets, SM and DC state) and process data."""
+    for x, y in zip(a.seg.escs, b.seg.escs, strict=True):
+        assert x.mem == y.mem
+
+
+def test_on_the_link_from_power_up_every_slave_is_as_in_process() -> None:
+    """Every pulse latched first and its work run after (P101), from the first pulse on
+    (after which the firmware masks the process-data events), through the drives'
+    enabling and 30 cycles: ESC memories after each pulse and replies as in process,
+    where each pulse's work runs at once."""
+    ref = CspCycle(N, enable=False)
+    c = CspCycle(N, enable=False, frame_waiting=lambda: False)
+    for cw in (0x06, 0x07, 0x0F, 0x0F) + (0x0F,) * 30:
+        ref.pulse()
+        c.pulse()
+        same_escs(ref, c)
+        assert ref.exchange(cw) == c.exchange(cw)
+    assert ref.seg.schedule.sync0_deferred == 0
+    assert c.seg.schedule.sync0_deferred == c.seg.schedule.sync0_ticks == N * 34
+    assert all(fw.pd_masked for fw in firmwares(c.seg))
+    assert [drive_of(c.seg, k).state.name for k in range(N)] == ["OPERATION_ENABLED"] * N
+
+
+def test_an_op_request_that_waited_too_long_fails_in_the_latched_work_too() -> None:
+    """The OP request that waits for outputs fails with 0x001B after OP_WAIT_NS (decision
+    F5) when the pulse's work was latched, as when it runs at once."""
+    ref = CspCycle(N)
+    c = CspCycle(N, frame_waiting=lambda: False)
+    for cyc in (ref, c):
+        firmware_of(cyc.seg, 2).op_requested_ns = cyc.t - OP_WAIT_NS
+        cyc.pulse()
+        mem = cyc.seg.escs[2].mem
+        assert (mem[0x0130], bytes(mem[0x0134:0x0136])) == (0x14, b"\x1b\x00")  # SAFEOP + error
+    same_escs(ref, c)
