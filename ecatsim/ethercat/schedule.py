@@ -319,23 +319,26 @@ class Schedule:
         """The earliest timer deadline (ns), for the daemon's poll timeout, None if there
         is none. SYNC deadlines are those computed when the pulses last ran or a DC
         register last changed; the time loop moves them by less than the ESC's MOVE_NS
-        until it marks them stale."""
+        until it marks them stale. The watchdogs are looked at only where their bound
+        (``FrameContext.wd_next``) comes before the SYNC pulses: on a cyclic bus the
+        triggers keep their deadlines far off (decision P100)."""
         best = self.next_deadline_ns()
+        if self.ctx.wd_next == best:  # the bound may be early: the watchdogs' own
+            best = min(self._wd_scan(), self._next_sync)
         return None if best == NO_DEADLINE else best
 
     def next_deadline_ns(self) -> int:
-        """:meth:`next_deadline` as an integer, ``NO_DEADLINE`` if there is none (the
-        compiled responder's call after each frame: a C integer). The watchdogs are looked
-        at only where their bound (``FrameContext.wd_next``) comes before the SYNC pulses:
-        on a cyclic bus the triggers keep their deadlines far off (decision P100)."""
+        """When to look at the timers again, ``NO_DEADLINE`` if never (the compiled
+        responder's call after each frame: a C integer): the earliest SYNC pulse, or the
+        watchdogs' bound where it comes first. The bound is never late and may be early (a
+        watchdog triggered again since); waking at it, ``service_at`` looks at every
+        watchdog and makes it exact, so a segment without SYNC pulses looks at them once
+        per expiry or bound, not after every frame (decision P102)."""
         if self.ctx.timers_dirty:
             self._refresh_next_sync()
         best = self._next_sync
-        if self.ctx.wd_next < best:
-            w = self._wd_scan()
-            if w < best:
-                best = w
-        return best
+        w = self.ctx.wd_next
+        return w if w < best else best
 
     def _wd_scan(self) -> int:
         """The earliest deadline of a running process-data watchdog (``NO_DEADLINE``:

@@ -1,6 +1,7 @@
-"""The segment's bound on its process-data watchdogs (decision P100): the schedule looks
-at each watchdog only once the earliest deadline any trigger set can be due, and still
-expires every one at its own deadline, as the per-frame look at every ESC did.
+"""The segment's bound on its process-data watchdogs (decisions P100, P102): the schedule
+looks at each watchdog only once the earliest deadline any trigger set can be due, and
+still expires every one at its own deadline, as the per-frame look at every ESC did; the
+timers' next look is that bound, never later than a deadline.
 Ref: TMC8460 §5.39-5.43 Tables 53-57."""
 
 from __future__ import annotations
@@ -8,6 +9,7 @@ from __future__ import annotations
 import random
 import struct
 
+from ecatsim.esc.context import NO_DEADLINE
 from tests.support.tinymaster import TinyMaster, segment_of
 
 N = 4
@@ -73,8 +75,35 @@ def test_every_watchdog_expires_at_its_deadline_and_the_next_deadline_is_exact()
                     expired[k] += 1
                     status[k] = 0
         running = [d for d in deadline if d]
+        assert seg.schedule.next_deadline_ns() <= min(running, default=NO_DEADLINE), step
         assert seg.schedule.next_deadline() == (min(running) if running else None), step
         for k in range(N):
             assert m.aprd(k, 0x0442, 1).data == bytes([min(expired[k], 0xFF)]), (step, k)
             assert m.aprd(k, 0x0440, 1).data[0] & 1 == status[k], (step, k)
     assert sum(expired) > 10  # the walk did expire watchdogs, not only restart them
+
+
+def test_the_timers_look_at_the_bound_then_at_the_exact_deadline() -> None:
+    """On a segment without SYNC pulses (P102) a watchdog triggered again leaves the timers'
+    next look at the first deadline, early; looking then expires nothing and makes the next
+    look exact, and the watchdog expires at its own deadline."""
+    seg, clock = segment_of(1)
+    m = TinyMaster(seg, clock)
+    _to_safeop(m, 0)
+    s = seg.schedule
+    m.apwr(0, 0x1100, bytes(12))
+    first = clock.now_ns() + 1000 * INC_NS
+    clock.advance(40_000_000)
+    m.apwr(0, 0x1100, bytes(12))  # triggered again: the deadline moves out
+    second = clock.now_ns() + 1000 * INC_NS
+    assert s.next_deadline_ns() == first  # the bound, no watchdog looked at
+    clock.advance(first - clock.now_ns())
+    seg.service()  # the timers' look at the bound
+    assert m.aprd(0, 0x0442, 1).data == b"\x00"  # nothing expired
+    assert s.next_deadline_ns() == second == s.next_deadline()
+    clock.advance(second - clock.now_ns())
+    seg.service()
+    assert m.aprd(0, 0x0442, 1).data == b"\x01"
+    assert m.aprd(0, 0x0440, 1).data[0] & 1 == 0  # expired
+    assert s.next_deadline_ns() == NO_DEADLINE
+    assert s.next_deadline() is None
