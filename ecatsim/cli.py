@@ -89,6 +89,14 @@ def cli(ctx: click.Context, debug: bool) -> None:
     help="Real-time on a raw interface without --cpu: run on the CPU the master's frames "
     "come from, so the reply is there before the master first looks for it.",
 )
+@click.option(
+    "--hold-cpu-latency/--no-hold-cpu-latency",
+    default=True,
+    show_default=True,
+    help="Real-time: keep every CPU out of its idle states while serving (a CPU latency "
+    "request of 0 us on /dev/cpu_dma_latency, as cyclictest does), so a frame never waits "
+    "for a CPU to wake up.",
+)
 @click.option("--trace", "trace", type=click.Path(path_type=Path), help="Per-cycle drive CSV.")
 @click.option(
     "--ctl",
@@ -116,6 +124,7 @@ def run(
     rt_priority: int | None,
     no_rt: bool,
     follow_master_cpu: bool,
+    hold_cpu_latency: bool,
     trace: Path | None,
     ctl: Path | None,
     user: str | None,
@@ -138,6 +147,7 @@ def run(
         rt_priority=rt_priority,
         no_rt=no_rt,
         follow_master_cpu=follow_master_cpu,
+        hold_cpu_latency=hold_cpu_latency,
         trace=trace,
         ctl=ctl,
         user=user,

@@ -72,6 +72,11 @@ NO_PYSOEM = "ecatsim bench needs pysoem: pip install 'ecatsim[bench]'"
     help="Run the daemon with --no-follow-master-cpu (it stays where the scheduler puts it).",
 )
 @click.option(
+    "--no-hold-cpu-latency",
+    is_flag=True,
+    help="Run the daemon with --no-hold-cpu-latency (the CPUs may enter their idle states).",
+)
+@click.option(
     "--master-spin", is_flag=True, help="The master spins between cycles instead of sleeping."
 )
 @click.option(

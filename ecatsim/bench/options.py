@@ -42,10 +42,13 @@ class BenchOptions:
     #: --bringup (pysoem): time a second master's bring-up against the running segment
     restart: bool = False
     results: Path = DEFAULT_DIR
+    #: --no-hold-cpu-latency for the daemon (decision K12)
+    no_hold_cpu_latency: bool = False
 
     def scheduling_flags(self) -> tuple[str, ...]:
         """The daemon's scheduling options: ``--no-rt`` or ``--rt-priority N``, and
-        ``--no-follow-master-cpu`` (its CPU is the placement's, added by the caller)."""
+        ``--no-follow-master-cpu`` and ``--no-hold-cpu-latency`` (its CPU is the
+        placement's, added by the caller)."""
         flags: tuple[str, ...] = ()
         if self.no_rt:
             flags = ("--no-rt",)
@@ -53,4 +56,6 @@ class BenchOptions:
             flags = ("--rt-priority", str(self.rt_priority))
         if self.no_follow_master_cpu:
             flags = (*flags, "--no-follow-master-cpu")
+        if self.no_hold_cpu_latency:
+            flags = (*flags, "--no-hold-cpu-latency")
         return flags

@@ -6,6 +6,13 @@ The blocking daemon therefore takes ``SCHED_FIFO`` at a modest priority by defau
 the kernel's threaded interrupts at 50 and below a real-time master), and locks the memory
 it has built so a reply never waits for a page to come back. ``--rt-priority N`` picks the
 priority; ``--no-rt`` keeps the ordinary scheduler. See docs/decisions.md K1.
+
+A real-time daemon also asks the kernel to keep every CPU out of its idle states (a CPU
+latency request of 0 us on ``/dev/cpu_dma_latency``, held while the daemon runs, as
+cyclictest does): a frame arriving on another CPU wakes the daemon through an interrupt to
+its CPU, and a CPU that has to come out of an idle state first (on a virtual machine, a
+virtual CPU the host has descheduled) answers late. ``--no-hold-cpu-latency`` leaves the
+idle states alone. See docs/decisions.md K12.
 """
 
 from __future__ import annotations
@@ -14,6 +21,7 @@ import ctypes
 import ctypes.util
 import errno
 import os
+import struct
 
 import structlog
 
@@ -26,6 +34,10 @@ DEFAULT_PRIORITY = 20
 
 #: mlockall(2) flags (linux/mman.h)
 MCL_CURRENT = 1
+
+#: the PM QoS CPU latency request: a 32-bit value in us, in force while the file is open.
+#: Ref: the kernel's Documentation/power/pm_qos_interface.rst
+CPU_LATENCY_PATH = "/dev/cpu_dma_latency"
 
 
 def choose_priority(
@@ -92,3 +104,29 @@ def apply(priority: int | None, explicit: bool) -> bool:
         return False
     lock_memory()
     return True
+
+
+def hold_cpu_latency(path: str = CPU_LATENCY_PATH) -> int | None:
+    """Ask for a CPU wake-up latency of 0 us (no CPU enters an idle state it would be slow
+    to leave) for as long as the returned file descriptor stays open; close it to give the
+    request back (the kernel does so when the process ends). Without the file or the
+    permission: one warning line and None."""
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_CLOEXEC)
+    except OSError as exc:
+        log.warning(
+            "cpu_latency_not_held",
+            path=path,
+            reason=exc.strerror,
+            hint="wake-ups may wait for CPUs to leave their idle states; "
+            "--no-hold-cpu-latency silences this",
+        )
+        return None
+    try:
+        os.write(fd, struct.pack("=i", 0))
+    except OSError as exc:
+        os.close(fd)
+        log.warning("cpu_latency_not_held", path=path, reason=exc.strerror)
+        return None
+    log.info("cpu_latency_held", us=0, path=path, off_switch="--no-hold-cpu-latency")
+    return fd

@@ -59,6 +59,8 @@ class RunOptions:
     rt_priority: int | None = None
     no_rt: bool = False
     follow_master_cpu: bool = True
+    #: real-time: hold a CPU latency request of 0 us while serving (decision K12)
+    hold_cpu_latency: bool = True
     trace: Path | None = None
     ctl: Path | None = None
     user: str | None = None
@@ -242,8 +244,11 @@ def serve(opts: RunOptions, cfg: SegmentConfig) -> None:
     # collector so a full collection cannot stall a reply by milliseconds.
     gc.collect()
     gc.freeze()
+    latency_fd: int | None = None
     if realtime.apply(priority, explicit=opts.rt_priority is not None):
         daemon.follower = follow_master(opts, link)
+        if opts.hold_cpu_latency:
+            latency_fd = realtime.hold_cpu_latency()
     compiled.say_if_pure()  # one warning line where the pure-Python core serves
     # sockets and files are open: keep CAP_NET_RAW only (and CAP_NET_ADMIN for EoE)
     drop_privileges(opts.user, net_admin=any(sc.eoe is not None for sc in cfg.slaves))
@@ -263,6 +268,8 @@ def serve(opts: RunOptions, cfg: SegmentConfig) -> None:
         with pauses:
             daemon.run()
     finally:
+        if latency_fd is not None:
+            os.close(latency_fd)  # the CPUs may idle again
         daemon.close()
         ctl.close()
         if doors is not None:

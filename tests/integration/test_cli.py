@@ -181,3 +181,26 @@ def test_default_control_socket_under_the_run_directory(
     assert d.alive()
     d.stop()
     assert not sock.exists()
+
+
+def _open_files(pid: int) -> list[str]:
+    fds = Path(f"/proc/{pid}/fd")
+    return [os.readlink(fds / n) for n in os.listdir(fds)]
+
+
+def test_a_realtime_daemon_holds_the_cpus_out_of_their_idle_states(daemon_factory: Any) -> None:
+    """K12: while the real-time daemon serves it holds /dev/cpu_dma_latency open with a
+    request of 0 us (the kernel's aggregate reads back 0); with --no-hold-cpu-latency it
+    does not, and a stopped daemon gives the request back."""
+    import struct
+
+    assert Path("/dev/cpu_dma_latency").exists(), "the kernel's PM QoS device is missing"
+    d = daemon_factory()
+    assert "/dev/cpu_dma_latency" in _open_files(d.pid)
+    with open("/dev/cpu_dma_latency", "rb") as f:
+        assert struct.unpack("=i", f.read(4))[0] == 0
+    assert '"cpu_latency_held"' in d.log.read_text()
+    assert d.stop() == 0
+    d2 = daemon_factory("--no-hold-cpu-latency")
+    assert "/dev/cpu_dma_latency" not in _open_files(d2.pid)
+    assert "cpu_latency" not in d2.log.read_text()

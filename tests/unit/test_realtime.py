@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 import pytest
 
@@ -65,3 +66,25 @@ def test_fifo_taken_where_allowed() -> None:
         os._exit(0 if good and realtime.lock_memory() else 1)
     _, status = os.waitpid(pid, 0)
     assert os.waitstatus_to_exitcode(status) == 0
+
+
+def test_the_cpu_latency_request_is_written_and_held(tmp_path: Path) -> None:
+    """K12: 0 us as the kernel's 32-bit value, the file kept open by the caller."""
+    f = tmp_path / "cpu_dma_latency"
+    f.write_bytes(b"")
+    fd = realtime.hold_cpu_latency(str(f))
+    assert fd is not None
+    try:
+        assert f.read_bytes() == b"\x00\x00\x00\x00"
+        os.fstat(fd)  # still open
+    finally:
+        os.close(fd)
+
+
+def test_without_the_latency_file_one_warning_and_none(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert realtime.hold_cpu_latency(str(tmp_path / "absent")) is None
+    out = capsys.readouterr().out
+    assert "cpu_latency_not_held" in out
+    assert "--no-hold-cpu-latency" in out
