@@ -54,6 +54,7 @@ cdef class Firmware:
     cpdef void sync0_run(self) except *
     @cython.locals(now_ns="long long", mbx=MailboxEngine, p=Pdi, masked=bint)
     cpdef void run_latched(self) except *
+    cdef int _op_wait(self, long long now_ns) except -1
     @cython.locals(pdo=PdoImage)
     cdef int _apply_outputs(self, object out, long long now_ns) except -1
     @cython.locals(want="long long", pending=bint, mbx=MailboxEngine)

@@ -219,9 +219,7 @@ class Firmware:
             if pd_events:
                 self._write_inputs(now_ns)
         self.pd_masked = dc and not p.u8(DC_ACTIVATION_STATUS) & 0x01
-        if self.op_requested_ns and now_ns - self.op_requested_ns >= OP_WAIT_NS:
-            self.op_requested_ns = 0  # no outputs in time: SAFEOP with 0x001B (decision F5)
-            self.fail(AlState.SAFEOP, al.CODE_SM_WATCHDOG, now_ns)
+        self._op_wait(now_ns)
         self.service_mailbox(ev, now_ns)
 
     def sync0_latch(self, now_ns: int) -> bool:
@@ -273,13 +271,18 @@ class Firmware:
         self.sync0_run()
         p = self.pdi
         masked = (p.u8(DC_ACTIVATION) & 0x03) == 0x03 and not p.u8(DC_ACTIVATION_STATUS) & 0x01
-        if self.op_requested_ns and now_ns - self.op_requested_ns >= OP_WAIT_NS:
-            self.op_requested_ns = 0  # no outputs in time: SAFEOP with 0x001B (decision F5)
-            self.fail(AlState.SAFEOP, al.CODE_SM_WATCHDOG, now_ns)
+        self._op_wait(now_ns)
         mbx = self.mbx
         if masked != self.pd_masked or (mbx is not None and mbx.queued()):
             self.pd_masked = masked
             self.service_mailbox(0, now_ns)
+
+    def _op_wait(self, now_ns: int) -> None:
+        """An OP request still waiting for outputs OP_WAIT_NS after it fails: SAFEOP with
+        0x001B (decision F5)."""
+        if self.op_requested_ns and now_ns - self.op_requested_ns >= OP_WAIT_NS:
+            self.op_requested_ns = 0
+            self.fail(AlState.SAFEOP, al.CODE_SM_WATCHDOG, now_ns)
 
     def _apply_outputs(self, out: bytes | bytearray, now_ns: int) -> None:
         """Outputs taken from SM2: valid from now on (F5), applied in OP. The process
