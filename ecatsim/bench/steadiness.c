@@ -4,7 +4,8 @@
  * Usage: steadiness CPU MILLISECONDS
  * Pinned to CPU at SCHED_FIFO priority 30 (above ecatsim's daemon at 20), it repeats a
  * fixed integer computation (CHUNK iterations) and counts how many repetitions finish in
- * each 10 ms window. It runs in bursts of at most 400 ms with 100 ms pauses, so the
+ * each 10 ms window, the windows a fixed grid from the burst's start: a stall that covers
+ * a window leaves it at 0 rather than stretching it. It runs in bursts of at most 400 ms with 100 ms pauses, so the
  * kernel's real-time throttling (950 ms in every 1 s) never stops it. It prints one line:
  *   cpu N chunk_ns P10 window_ns 10000000 counts C1 C2 ...
  * P10 is the 10th percentile of the repetitions' durations: the speed the CPU reaches
@@ -77,10 +78,10 @@ int main(int argc, char *argv[])
          if (nchunk < cap)
             durations[nchunk++] = (uint32_t)(t - a);
          counts[win]++;
-         if (t - wstart >= WINDOW_NS)
+         while (t - wstart >= WINDOW_NS && win < nwin)
          {
-            win++;
-            wstart = t;
+            win++; /* windows a stall covered keep their count of 0 */
+            wstart += WINDOW_NS;
          }
       }
       measured += t - burst0;
