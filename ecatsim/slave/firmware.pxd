@@ -19,6 +19,9 @@ cdef long long EV_SM1, PD_EVENTS, EVENT_MASK, OP_WAIT_NS
 cdef object _INIT, _SAFEOP, _OP
 
 
+cdef bint _dc_synchronous(Pdi p) except -1
+
+
 @cython.final
 cdef class Firmware:
     cdef public Pdi pdi

@@ -199,7 +199,7 @@ class Firmware:
             if self.state is _OP:
                 self.fail(AlState.SAFEOP, al.CODE_SM_WATCHDOG, now_ns)
         pd_events = ev & PD_EVENTS
-        dc = (p.u8(DC_ACTIVATION) & 0x03) == 0x03
+        dc = _dc_synchronous(p)
         if dc:
             # DC synchronous: the newest outputs are taken and applied at SYNC0 and the inputs
             # captured there; frames do not wake the firmware (SM2/SM3 events are masked once
@@ -236,7 +236,7 @@ class Firmware:
         if not p.operational():
             return False
         ev = p.al_event()
-        if not ev & EV_SYNC0 or (p.u8(DC_ACTIVATION) & 0x03) != 0x03:
+        if not ev & EV_SYNC0 or not _dc_synchronous(p):
             return False
         self._latch(p, ev, now_ns)
         return True
@@ -270,7 +270,7 @@ class Firmware:
         now_ns = self.sync_ns
         self.sync0_run()
         p = self.pdi
-        masked = (p.u8(DC_ACTIVATION) & 0x03) == 0x03 and not p.u8(DC_ACTIVATION_STATUS) & 0x01
+        masked = _dc_synchronous(p) and not p.u8(DC_ACTIVATION_STATUS) & 0x01
         self._op_wait(now_ns)
         mbx = self.mbx
         if masked != self.pd_masked or (mbx is not None and mbx.queued()):
@@ -501,6 +501,12 @@ class Firmware:
         if to == AlState.INIT:
             p.sm_deactivate(SM_MBX_OUT, True)
             p.sm_deactivate(SM_MBX_IN, True)
+
+
+def _dc_synchronous(p: Pdi) -> bool:
+    """DC synchronous mode: the SYNC unit's activation 0x0981 has the cyclic unit and SYNC0
+    on. Ref: TMC8460 §5.50.4 Table 105; ETG.1000.6 §5.3."""
+    return (p.u8(DC_ACTIVATION) & 0x03) == 0x03
 
 
 def _mbx_ok(s: SmSettings, offset: int, size: int, ctrl: int) -> bool:

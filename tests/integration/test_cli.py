@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import struct
 import subprocess
 import sys
 import time
@@ -192,8 +193,6 @@ def test_a_realtime_daemon_holds_the_cpus_out_of_their_idle_states(daemon_factor
     """K12: while the real-time daemon serves it holds /dev/cpu_dma_latency open with a
     request of 0 us (the kernel's aggregate reads back 0); with --no-hold-cpu-latency it
     does not, and a stopped daemon gives the request back."""
-    import struct
-
     assert Path("/dev/cpu_dma_latency").exists(), "the kernel's PM QoS device is missing"
     d = daemon_factory()
     assert "/dev/cpu_dma_latency" in _open_files(d.pid)
