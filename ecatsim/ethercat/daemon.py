@@ -326,10 +326,11 @@ class Daemon:
                 logs.drain()
 
     def _write_logs(self) -> None:
-        """Write the held log lines, stopping for a frame that waits (decision P37)."""
+        """Write the held log lines, stopping for a frame that waits and firing the SYNC
+        pulses that fall due meanwhile (decision P37)."""
         logs = self.logs
         if logs is not None and logs.held:
-            logs.drain(self.segment.schedule.frame_waiting)
+            self.segment.schedule.write_held_logs()
 
     def responder_applies(self) -> bool:
         """The compiled responder can serve this link: it was built, the link is a raw

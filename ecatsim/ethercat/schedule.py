@@ -164,7 +164,34 @@ class Schedule:
                 self.persist(pos)
             ctx.flush.clear()
         if self.held_logs and self.write_logs is not None:
-            self.write_logs(self.frame_waiting)  # the lines held meanwhile (decision P37)
+            self.write_held_logs()  # the lines held meanwhile (decision P37)
+
+    def write_held_logs(self) -> None:
+        """Write the log lines held while frames were served (decision P37), stopping for
+        a frame that waits. A SYNC pulse that falls due meanwhile stops them too: it fires
+        at its own time and its work runs first (P101), then the lines go on. Nothing
+        while ``write_logs`` is not set (the daemon sets it while it serves)."""
+        write = self.write_logs
+        if write is None:
+            return
+        probe = self.frame_waiting
+        idle = 0  # rounds in a row that wrote no line (a pulse that never fires: stop)
+        while self.held_logs and idle < 2:
+            idle = idle + 1 if write(self._logs_stop) == 0 else 0
+            if not self.held_logs or (probe is not None and probe()):
+                return
+            self.pulses_meanwhile()
+            if self.deferred and not self.run_deferred():
+                return  # a frame waits: the rest after its reply
+
+    def _logs_stop(self) -> bool:
+        """Asked before each held log line: a frame waits, or a SYNC pulse is due (only
+        where the segment's time is known: ``now_ns``, the daemon's link)."""
+        probe = self.frame_waiting
+        if probe is not None and probe():
+            return True
+        clock = self.now_ns
+        return clock is not None and (clock() >= self._next_sync or self.ctx.timers_dirty)
 
     def pulses_due(self, t: int) -> None:
         """The pulses due before a frame that arrived at ``t``: sync_until(t, True), unless

@@ -6,6 +6,7 @@ pulse time)."""
 
 from __future__ import annotations
 
+from ecatsim.logqueue import LogQueue
 from tests.perf.hotpath import IN, MS, OUT, CspCycle
 from tests.support.tinymaster import drive_of, firmware_of, firmwares
 
@@ -282,3 +283,55 @@ def test_an_op_request_that_waited_too_long_fails_in_the_latched_work_too() -> N
         mem = cyc.seg.escs[2].mem
         assert (mem[0x0130], bytes(mem[0x0134:0x0136])) == (0x14, b"\x1b\x00")  # SAFEOP + error
     same_escs(ref, c)
+
+
+def test_pulses_that_fall_due_while_held_log_lines_are_written_fire_at_their_time() -> None:
+    """The log lines held while frames were served are written after the work (P37). A
+    SYNC pulse that falls due while they are written fires at its time, and its work
+    runs, before the next line: slow lines never hold the slaves' cycle back."""
+    _, c, _, _ = twins()
+    s = c.seg.schedule
+    s.now_ns = lambda: c.clock.t
+    queue = LogQueue()
+    ticks = s.sync0_ticks
+    written: list[tuple[str, int]] = []
+
+    def render(logger: object, event: str, **kw: object) -> None:
+        written.append((event, (s.sync0_ticks - ticks) // N))
+        c.clock.t += 350_000  # one line: 0.35 ms of the host's time
+
+    queue.write["info"] = render
+    queue.held.extend((None, "info", f"line {i}", {}) for i in range(10))
+    s.held_logs, s.write_logs = queue.held, queue.drain
+    c.clock.t = c.t - 500_000  # mid-cycle: the next pulses at c.t, c.t + 1 ms, + 2 ms
+    assert s.sync0_late_ns < 100_000
+    s.service_at(c.clock.t)
+    # the clock after line k is c.t - 0.5 ms + (k + 1) x 0.35 ms: each pulse fired
+    # before the first line that started after it, 0.2, 0.25 and 0.3 ms late
+    assert written == [(f"line {k}", p) for k, p in enumerate((0, 0, 1, 1, 1, 2, 2, 2, 3, 3))]
+    assert s.sync0_ticks == ticks + 3 * N
+    assert abs(s.sync0_late_ns - 300_000) < 10_000
+    assert latched(c) == [False] * N  # every pulse's work ran
+    assert len(queue.held) == 0 and s.sync0_merged == 0
+
+
+def test_a_frame_that_waits_stops_the_held_log_lines() -> None:
+    _, c, waiting, _ = twins()
+    s = c.seg.schedule
+    s.now_ns = lambda: c.clock.t
+    queue = LogQueue()
+    written: list[str] = []
+
+    def render(logger: object, event: str, **kw: object) -> None:
+        written.append(event)
+        waiting[0] = event == "line 0"  # a frame comes while the first line is written
+
+    queue.write["info"] = render
+    queue.held.extend((None, "info", f"line {i}", {}) for i in range(3))
+    s.held_logs, s.write_logs = queue.held, queue.drain
+    c.clock.t = c.t - 500_000
+    s.service_at(c.clock.t)
+    assert written == ["line 0"]  # then the frame first
+    waiting[0] = False
+    s.service_at(c.clock.t)
+    assert written == ["line 0", "line 1", "line 2"] and len(queue.held) == 0
