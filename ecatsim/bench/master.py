@@ -40,9 +40,21 @@ def stats(rtts: list[float]) -> dict[str, float]:
 
 
 def cpu_seconds(pid: int) -> float:
-    """User + system CPU time of process ``pid``. Ref: proc(5) /proc/PID/stat."""
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    """CPU time of process ``pid``, every thread's: the nanoseconds each ran
+    (``/proc/PID/task/TID/schedstat``, first field), or, where the kernel keeps no
+    schedstat, user + system time in clock ticks (``/proc/PID/stat``, 10 ms: a daemon of a
+    few drives runs less than one tick in a short run). Ref: proc(5)."""
+    proc = Path(f"/proc/{pid}")
+    if not (proc / "schedstat").exists():
+        fields = (proc / "stat").read_text().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    ns = 0
+    for task in (proc / "task").iterdir():
+        try:
+            ns += int((task / "schedstat").read_text().split()[0])
+        except FileNotFoundError:
+            pass  # the thread ended meanwhile
+    return ns / 1e9
 
 
 def steal_seconds() -> list[float]:
