@@ -121,8 +121,10 @@ class Schedule:
 
     def service_at(self, t: int) -> None:
         """Fire the SYNC0 pulses due by host time ``t``, run the timers due, the firmware
-        of every slave with a raised PDI interrupt (stopping for a waiting frame), then
-        persist the EEPROM images that changed. Never called between receive and reply."""
+        of every slave with a raised PDI interrupt (stopping for a waiting frame; the
+        pulses that fall due meanwhile fire at their time and their work runs before the
+        next slave's: P30, P101), then persist the EEPROM images that changed. Never called
+        between receive and reply."""
         ctx = self.ctx
         if t >= self._pulse_hint or ctx.timers_dirty:
             self.sync_until(t, False)  # first: each pulse is handled at its own time
@@ -155,6 +157,11 @@ class Schedule:
                         self.resume_pos = pos + 1
                         return
                     self.pulses_meanwhile()
+                    # their work before the other slaves' (a slave's SYNC0 interrupt comes
+                    # before its main loop): not merged into the next pulse's (P30)
+                    if self.deferred and not self.run_deferred():
+                        self.resume_pos = pos + 1
+                        return  # a frame waits (run_deferred's look)
                     look = time.monotonic_ns() + self.probe_ns
             self.resume_pos = 0
             if self.deferred and not self.run_deferred():

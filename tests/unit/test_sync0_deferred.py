@@ -6,6 +6,8 @@ pulse time)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from ecatsim.logqueue import LogQueue
 from tests.perf.hotpath import IN, MS, OUT, CspCycle
 from tests.support.tinymaster import drive_of, firmware_of, firmwares
@@ -335,3 +337,45 @@ def test_a_frame_that_waits_stops_the_held_log_lines() -> None:
     waiting[0] = False
     s.service_at(c.clock.t)
     assert written == ["line 0", "line 1", "line 2"] and len(queue.held) == 0
+
+
+class SlowRound:
+    """Another slave's firmware work that takes ``ns`` of the host's time (an AL
+    transition, a PDO map's compilation); ``then`` runs at its end."""
+
+    def __init__(self, c: CspCycle, ns: int, then: Callable[[], None] | None = None) -> None:
+        self.c, self.ns, self.then = c, ns, then
+
+    def service(self, t: int) -> None:
+        self.c.clock.t += self.ns
+        if self.then is not None:
+            self.then()
+
+
+def test_pulses_that_fall_due_in_a_long_firmware_round_run_before_the_next_slave() -> None:
+    """A long round of other slaves' firmware (512 AL transitions take about 10 ms): a
+    pulse that falls due meanwhile fires at its time and its work runs before the next
+    slave's, as a slave's SYNC0 interrupt comes before its main loop. A frame that comes
+    later finds that work done, and its own pulse replaces nothing (P30)."""
+    _, c, waiting, _ = twins()
+    s = c.seg.schedule
+    s.now_ns = lambda: c.clock.t
+
+    def frame_comes() -> None:
+        waiting[0] = True
+
+    s.firmware = [*s.firmware, SlowRound(c, 1_200_000), SlowRound(c, 1_200_000, frame_comes)]
+    s.awake = frozenset({N, N + 1})
+    c.clock.t = c.t - 500_000  # the next pulses at c.t and c.t + 1 ms
+    ticks = s.sync0_ticks
+    s.service_at(c.clock.t)
+    # the first round: the pulse at c.t fell due in it, fired at the look after it and
+    # its work ran; the second: the pulse at c.t + 1 ms fell due and a frame came, first
+    assert s.sync0_ticks == ticks + N
+    assert [firmware_of(c.seg, k).sync_ns >= 0 for k in range(N)] == [False] * N
+    s.awake = frozenset()
+    waiting[0] = False
+    assert c.deliver(c.frames(c.cw)[0]) is not None
+    assert s.sync0_ticks == ticks + 2 * N  # the second pulse, before the frame
+    assert s.sync0_merged == 0  # each pulse's work ran: none replaced
+    assert [firmware_of(c.seg, k).sync_ns >= 0 for k in range(N)] == [False] * N
