@@ -39,6 +39,7 @@ cdef class Schedule:
     cpdef bint run_deferred(self) except *
     @cython.locals(now="long long")
     cpdef void pulses_meanwhile(self) except *
+    cpdef bint pulses_and_their_work(self) except *
     @cython.locals(best="long long")
     cpdef object next_deadline(self)
     @cython.locals(best="long long", w="long long")

@@ -156,10 +156,9 @@ class Schedule:
                         self.yielded += 1
                         self.resume_pos = pos + 1
                         return
-                    self.pulses_meanwhile()
                     # their work before the other slaves' (a slave's SYNC0 interrupt comes
                     # before its main loop): not merged into the next pulse's (P30)
-                    if self.deferred and not self.run_deferred():
+                    if not self.pulses_and_their_work():
                         self.resume_pos = pos + 1
                         return  # a frame waits (run_deferred's look)
                     look = time.monotonic_ns() + self.probe_ns
@@ -187,9 +186,14 @@ class Schedule:
             idle = idle + 1 if write(self._logs_stop) == 0 else 0
             if not self.held_logs or (probe is not None and probe()):
                 return
-            self.pulses_meanwhile()
-            if self.deferred and not self.run_deferred():
+            if not self.pulses_and_their_work():
                 return  # a frame waits: the rest after its reply
+
+    def pulses_and_their_work(self) -> bool:
+        """The SYNC pulses that fell due meanwhile (``pulses_meanwhile``), then the work
+        latched for them (``run_deferred``, P101). False if it stopped for a waiting frame."""
+        self.pulses_meanwhile()
+        return not self.deferred or self.run_deferred()
 
     def _logs_stop(self) -> bool:
         """Asked before each held log line: a frame waits, or a SYNC pulse is due (only
